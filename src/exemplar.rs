@@ -1,0 +1,171 @@
+//! Exemplars: the small 2D RGB images a solid texture is synthesized from.
+//!
+//! One exemplar may serve all three planes (xy, yz, zx) or each plane gets
+//! its own; all three must then have equal size.
+
+use crate::error::{Error, Result};
+use std::io::Cursor;
+
+/// Smallest accepted exemplar side in pixels.
+pub const MIN_SIDE: u32 = 16;
+/// Largest accepted exemplar side in pixels.
+pub const MAX_SIDE: u32 = 512;
+
+/// An RGB8 image, row-major, toroidally addressed by the synthesis.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Exemplar {
+    width: u32,
+    height: u32,
+    pixels: Vec<[u8; 3]>,
+}
+
+impl std::fmt::Debug for Exemplar {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Exemplar({}x{})", self.width, self.height)
+    }
+}
+
+impl Exemplar {
+    /// Builds an exemplar from packed RGB8 bytes, validating its size.
+    pub fn from_rgb(width: u32, height: u32, rgb: &[u8]) -> Result<Self> {
+        check_side(width, height)?;
+        if rgb.len() != width as usize * height as usize * 3 {
+            return Err(Error::MalformedImage(format!(
+                "expected {} RGB bytes for {width}x{height}, got {}",
+                width as usize * height as usize * 3,
+                rgb.len()
+            )));
+        }
+        let pixels = rgb.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        Ok(Exemplar {
+            width,
+            height,
+            pixels,
+        })
+    }
+
+    /// Decodes an encoded image (PNG; other formats the `image` crate was
+    /// built with). The header is checked before any pixel is allocated, so a
+    /// decompression bomb is rejected cheaply.
+    pub fn decode(bytes: &[u8]) -> Result<Self> {
+        let reader = image::ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| Error::MalformedImage(e.to_string()))?;
+        if reader.format().is_none() {
+            return Err(Error::MalformedImage(
+                "unrecognised image format (expected PNG)".into(),
+            ));
+        }
+        let (w, h) = reader
+            .into_dimensions()
+            .map_err(|e| Error::MalformedImage(e.to_string()))?;
+        check_side(w, h)?;
+        let mut reader = image::ImageReader::new(Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| Error::MalformedImage(e.to_string()))?;
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_SIDE);
+        limits.max_image_height = Some(MAX_SIDE);
+        limits.max_alloc = Some(64 << 20);
+        reader.limits(limits);
+        let img = reader
+            .decode()
+            .map_err(|e| Error::MalformedImage(e.to_string()))?
+            .to_rgb8();
+        Self::from_rgb(img.width(), img.height(), img.as_raw())
+    }
+
+    /// Reads and decodes an image file.
+    pub fn open(path: impl AsRef<std::path::Path>) -> Result<Self> {
+        let bytes = std::fs::read(path)?;
+        Self::decode(&bytes)
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Pixels, row-major.
+    pub fn pixels(&self) -> &[[u8; 3]] {
+        &self.pixels
+    }
+
+    /// Packed RGB8 bytes, row-major.
+    pub fn to_rgb_bytes(&self) -> Vec<u8> {
+        self.pixels.iter().flatten().copied().collect()
+    }
+}
+
+fn check_side(width: u32, height: u32) -> Result<()> {
+    let ok = |s: u32| (MIN_SIDE..=MAX_SIDE).contains(&s);
+    if ok(width) && ok(height) {
+        Ok(())
+    } else {
+        Err(Error::ImageSize {
+            width,
+            height,
+            min: MIN_SIDE,
+            max: MAX_SIDE,
+        })
+    }
+}
+
+/// The exemplars of the three planes. `xy` is sampled in the plane spanned by
+/// the x and y axes (image u along x, v along y), `yz` with u along y and v
+/// along z, `zx` with u along z and v along x.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ExemplarSet {
+    planes: [Exemplar; 3],
+}
+
+impl ExemplarSet {
+    /// One exemplar used for all three planes.
+    pub fn single(e: Exemplar) -> Self {
+        ExemplarSet {
+            planes: [e.clone(), e.clone(), e],
+        }
+    }
+
+    /// Three exemplars of equal size, for the xy, yz and zx planes.
+    pub fn triple(xy: Exemplar, yz: Exemplar, zx: Exemplar) -> Result<Self> {
+        let (w, h) = (xy.width, xy.height);
+        for (name, e) in [("yz", &yz), ("zx", &zx)] {
+            if (e.width, e.height) != (w, h) {
+                return Err(Error::SizeMismatch(format!(
+                    "xy is {w}x{h} but {name} is {}x{}",
+                    e.width, e.height
+                )));
+            }
+        }
+        Ok(ExemplarSet {
+            planes: [xy, yz, zx],
+        })
+    }
+
+    /// The exemplar of plane `p` (0 = xy, 1 = yz, 2 = zx).
+    pub fn plane(&self, p: usize) -> &Exemplar {
+        &self.planes[p]
+    }
+
+    /// True when all three planes hold the same image, which lets the
+    /// candidate search run once and derive the other planes by symmetry.
+    pub fn is_single(&self) -> bool {
+        self.planes[0] == self.planes[1] && self.planes[1] == self.planes[2]
+    }
+
+    /// Width of every plane.
+    pub fn width(&self) -> u32 {
+        self.planes[0].width
+    }
+
+    /// Height of every plane.
+    pub fn height(&self) -> u32 {
+        self.planes[0].height
+    }
+}

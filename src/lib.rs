@@ -1,0 +1,28 @@
+//! solidtex: infinite, spatially deterministic solid textures synthesized
+//! lazily from 2D exemplars (Dong et al. 2008, Zhang et al. 2011).
+//!
+//! Data flows one way: [`Exemplar`]s → [`Candidates`] (Gaussian stack,
+//! appearance vectors, 3D candidate triples; computed once and saved as
+//! `.stx`) → [`Texture`] (pyramid synthesis of exactly the voxels a request
+//! depends on, in level-aligned tiles kept in a shared [`TileCache`]).
+//!
+//! A voxel's colour is a pure function of (candidates, synthesis parameters,
+//! integer position): request shape, thread count and cache state never
+//! change a byte.
+#![deny(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod candidates;
+pub mod error;
+pub mod eval;
+pub mod exemplar;
+pub mod params;
+pub mod synth;
+pub mod texture;
+
+pub use candidates::{Candidates, PrecomputeReport, Stage};
+pub use error::{CorruptKind, Error, Result};
+pub use exemplar::{Exemplar, ExemplarSet};
+pub use params::{AnalysisParams, Scheme, SynthParams};
+pub use synth::cache::{CacheStats, TileCache};
+pub use texture::{Axis, CutPlane, Filter, Region, SynthStats, Texture};

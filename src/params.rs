@@ -1,0 +1,157 @@
+//! Every tunable number of the method, in one place with its default and
+//! its valid range. Analysis parameters shape the precomputed candidates;
+//! synthesis parameters shape the voxels produced from them.
+
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+
+/// Parameters of the exemplar analysis and 3D candidate precomputation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AnalysisParams {
+    /// Neighbourhood side N (odd). The papers use 5.
+    pub neighbourhood: u32,
+    /// Appearance-space dimensions per exemplar pixel (PCA of the N×N RGB
+    /// neighbourhood). The papers use 8.
+    pub pca_dims: u32,
+    /// Most similar strips S searched in each other exemplar (Dong: 65).
+    pub strips: u32,
+    /// Triples kept per pixel by crossbar error before coherence filtering.
+    pub triples: u32,
+    /// Candidates kept per pixel after coherence filtering (Dong: 12).
+    pub max_candidates: u32,
+    /// Number of pyramid levels analysed, finest first. Synthesis starts at
+    /// the coarsest of them (L−3 with the default 4).
+    pub levels: u32,
+    /// 2D candidates (most similar pixels) stored per exemplar pixel for the
+    /// correction's first stage, at coarse levels.
+    pub similar_coarse: u32,
+    /// 2D candidates per exemplar pixel at the finest level.
+    pub similar_fine: u32,
+}
+
+impl Default for AnalysisParams {
+    fn default() -> Self {
+        AnalysisParams {
+            neighbourhood: 5,
+            pca_dims: 8,
+            strips: 65,
+            triples: 100,
+            max_candidates: 12,
+            levels: 4,
+            similar_coarse: 4,
+            similar_fine: 2,
+        }
+    }
+}
+
+impl AnalysisParams {
+    /// Checks every field against its range.
+    pub fn validate(&self) -> Result<()> {
+        range("neighbourhood", self.neighbourhood, 3, 9)?;
+        if self.neighbourhood % 2 == 0 {
+            return Err(Error::InvalidRequest("neighbourhood must be odd".into()));
+        }
+        range("pca_dims", self.pca_dims, 2, 16)?;
+        range("strips", self.strips, 4, 256)?;
+        range("triples", self.triples, 4, 1000)?;
+        range("max_candidates", self.max_candidates, 1, 32)?;
+        range("levels", self.levels, 1, 6)?;
+        range("similar_coarse", self.similar_coarse, 1, 8)?;
+        range("similar_fine", self.similar_fine, 1, 8)?;
+        Ok(())
+    }
+}
+
+/// How correction passes choose which version of each neighbour to read
+/// (Zhang et al.'s history windows).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum Scheme {
+    /// Dong et al.: every pass reads the latest version of every neighbour;
+    /// the dependency chain grows with passes × subpasses.
+    Standard,
+    /// Zhang et al.: ⌈P/2⌉ passes on a primary grid of M³ cells then ⌊P/2⌋ on
+    /// the dual grid; neighbours across a cell wall read the version the
+    /// step started from, which bounds the dependency set.
+    DualGrid,
+}
+
+impl std::str::FromStr for Scheme {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "standard" => Ok(Scheme::Standard),
+            "dual-grid" | "dual_grid" | "dualgrid" => Ok(Scheme::DualGrid),
+            _ => Err(Error::InvalidRequest(format!(
+                "unknown scheme `{s}` (expected standard or dual-grid)"
+            ))),
+        }
+    }
+}
+
+/// Parameters of the synthesis itself; changing them changes the voxels but
+/// not the precomputed candidates.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SynthParams {
+    /// Seed hashed with level and position for every random choice.
+    pub seed: u64,
+    /// Correction passes P per level.
+    pub passes: u32,
+    /// Subpass block side s: s³ subpasses per pass (2 gives 8).
+    pub subpass_side: u32,
+    /// Correction scheme.
+    pub scheme: Scheme,
+    /// Cell side M of the dual-grid scheme, in voxels of the level.
+    pub grid: u32,
+    /// Jitter strength multiplier; 0 disables the deformation.
+    pub jitter: f32,
+    /// Also correct the initialisation level after jitter.
+    pub correct_init_level: bool,
+}
+
+impl Default for SynthParams {
+    fn default() -> Self {
+        SynthParams {
+            seed: 1,
+            passes: 2,
+            subpass_side: 2,
+            scheme: Scheme::DualGrid,
+            grid: 12,
+            jitter: 1.0,
+            correct_init_level: true,
+        }
+    }
+}
+
+impl SynthParams {
+    /// Checks every field against its range.
+    pub fn validate(&self) -> Result<()> {
+        range("passes", self.passes, 0, 6)?;
+        range("subpass_side", self.subpass_side, 1, 3)?;
+        range("grid", self.grid, 4, 64)?;
+        if !(0.0..=4.0).contains(&self.jitter) || self.jitter.is_nan() {
+            return Err(Error::InvalidRange {
+                name: "jitter",
+                value: self.jitter as f64,
+                min: 0.0,
+                max: 4.0,
+            });
+        }
+        Ok(())
+    }
+}
+
+fn range(name: &'static str, v: u32, min: u32, max: u32) -> Result<()> {
+    if (min..=max).contains(&v) {
+        Ok(())
+    } else {
+        Err(Error::InvalidRange {
+            name,
+            value: v as f64,
+            min: min as f64,
+            max: max as f64,
+        })
+    }
+}

@@ -1,0 +1,295 @@
+//! The public face of synthesis: a [`Texture`] answers requests for voxel
+//! regions, axis slices and oblique cuts by synthesizing exactly their
+//! dependency set (see [`crate::synth`]).
+
+use crate::candidates::Candidates;
+use crate::error::{Error, Result};
+use crate::params::SynthParams;
+use crate::synth::cache::TileCache;
+use crate::synth::Engine;
+use std::sync::Arc;
+
+/// Largest side of a slice or cut, in pixels.
+pub const MAX_SLICE_SIDE: u32 = 4096;
+/// Largest number of voxels in one region request.
+pub const MAX_REGION_VOXELS: u64 = 16 << 20;
+/// Coordinates must lie within ±2^31 (finest-level voxels).
+pub const COORD_LIMIT: i64 = 1 << 31;
+
+/// An axis-aligned box of voxels: `origin` is its lowest corner, `size` its
+/// extent along x, y, z.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Region {
+    /// Lowest corner.
+    pub origin: [i64; 3],
+    /// Extent along x, y, z (each ≥ 1).
+    pub size: [u32; 3],
+}
+
+/// A volume axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Axis {
+    /// The x axis (slices span y, z).
+    X,
+    /// The y axis (slices span z, x).
+    Y,
+    /// The z axis (slices span x, y).
+    Z,
+}
+
+impl std::str::FromStr for Axis {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "x" | "X" => Ok(Axis::X),
+            "y" | "Y" => Ok(Axis::Y),
+            "z" | "Z" => Ok(Axis::Z),
+            _ => Err(Error::InvalidRequest(format!(
+                "unknown axis `{s}` (expected x, y or z)"
+            ))),
+        }
+    }
+}
+
+impl Axis {
+    /// (normal axis index, u axis index, v axis index): u, v are (x, y) for
+    /// z, (y, z) for x and (z, x) for y.
+    pub fn frame(self) -> (usize, usize, usize) {
+        match self {
+            Axis::Z => (2, 0, 1),
+            Axis::X => (0, 1, 2),
+            Axis::Y => (1, 2, 0),
+        }
+    }
+}
+
+/// An oblique plane: pixel (i, j) samples `origin + i·u + j·v`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CutPlane {
+    /// Position of pixel (0, 0), in voxels of the served level.
+    pub origin: [f64; 3],
+    /// Step per pixel along the image's horizontal axis.
+    pub u: [f64; 3],
+    /// Step per pixel along the image's vertical axis.
+    pub v: [f64; 3],
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+}
+
+/// How an oblique cut samples between voxel centres.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Filter {
+    /// The nearest voxel.
+    #[default]
+    Nearest,
+    /// Trilinear blend of the eight surrounding voxels.
+    Trilinear,
+}
+
+/// What one request cost: voxels synthesized and corrected per pyramid level
+/// (index 0 is the finest level) and tiles computed or found in the cache.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SynthStats {
+    /// Voxels whose triple was produced (upsampled or initialised), per level.
+    pub voxels_per_level: Vec<u64>,
+    /// Voxel corrections performed, per level.
+    pub corrections_per_level: Vec<u64>,
+    /// Tiles synthesized by this request.
+    pub tiles_computed: u64,
+    /// Tiles served from the cache (or computed by a concurrent request).
+    pub tiles_from_cache: u64,
+}
+
+impl SynthStats {
+    /// Adds another request's counts to these.
+    pub fn merge(&mut self, other: &SynthStats) {
+        for (dst, src) in [
+            (&mut self.voxels_per_level, &other.voxels_per_level),
+            (&mut self.corrections_per_level, &other.corrections_per_level),
+        ] {
+            if dst.len() < src.len() {
+                dst.resize(src.len(), 0);
+            }
+            for (d, s) in dst.iter_mut().zip(src) {
+                *d += s;
+            }
+        }
+        self.tiles_computed += other.tiles_computed;
+        self.tiles_from_cache += other.tiles_from_cache;
+    }
+}
+
+/// A solid texture ready to be sampled anywhere. Cheap to clone; safe to
+/// share between threads. Every method blocks while it synthesizes (using
+/// rayon); call it from a blocking context.
+#[derive(Clone)]
+pub struct Texture {
+    engine: Arc<Engine>,
+}
+
+impl Texture {
+    /// Prepares synthesis from precomputed candidates. Tiles are kept in
+    /// `cache`, which may be shared by many textures.
+    pub fn new(
+        candidates: Arc<Candidates>,
+        params: SynthParams,
+        cache: Arc<TileCache>,
+    ) -> Result<Texture> {
+        params.validate()?;
+        Ok(Texture {
+            engine: Arc::new(Engine::new(candidates, params, cache)),
+        })
+    }
+
+    /// The precomputed candidates this texture synthesizes from.
+    pub fn candidates(&self) -> &Candidates {
+        self.engine.candidates()
+    }
+
+    /// The synthesis parameters.
+    pub fn params(&self) -> &SynthParams {
+        self.engine.params()
+    }
+
+    /// Highest level of detail served: lod k is pyramid level L−k, voxels
+    /// 2^k finest voxels wide, addressed in its own voxel units.
+    pub fn max_lod(&self) -> u32 {
+        self.engine.max_lod()
+    }
+
+    /// RGB8 voxels of `region` at level of detail `lod`, x fastest, then y,
+    /// then z.
+    pub fn region(&self, region: &Region, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
+        self.check_lod(lod)?;
+        check_region(region)?;
+        self.engine.region_rgb(region, lod)
+    }
+
+    /// An axis-aligned slice as RGB8 rows: pixel (i, j) is voxel
+    /// (u0 + i, v0 + j) in the plane `axis = at`, with (u, v) = (x, y) for z,
+    /// (y, z) for x and (z, x) for y.
+    #[allow(clippy::too_many_arguments)]
+    pub fn slice(
+        &self,
+        axis: Axis,
+        at: i64,
+        u0: i64,
+        v0: i64,
+        width: u32,
+        height: u32,
+        lod: u32,
+    ) -> Result<(Vec<u8>, SynthStats)> {
+        check_side(width, height)?;
+        let (n, u, v) = axis.frame();
+        let mut origin = [0i64; 3];
+        let mut size = [1u32; 3];
+        origin[n] = at;
+        origin[u] = u0;
+        origin[v] = v0;
+        size[u] = width;
+        size[v] = height;
+        let region = Region { origin, size };
+        let (rgb, stats) = self.region(&region, lod)?;
+        if u < v {
+            // Region order is x fastest: for z slices (u=x, v=y) and x
+            // slices (u=y, v=z) that already is row-major (u fastest).
+            return Ok((rgb, stats));
+        }
+        // y slices: u = z, v = x, but the region is stored x fastest.
+        let mut out = vec![0u8; rgb.len()];
+        for j in 0..height as usize {
+            for i in 0..width as usize {
+                let src = (i * height as usize + j) * 3;
+                let dst = (j * width as usize + i) * 3;
+                out[dst..dst + 3].copy_from_slice(&rgb[src..src + 3]);
+            }
+        }
+        Ok((out, stats))
+    }
+
+    /// An oblique cut as RGB8 rows (see [`CutPlane`]).
+    pub fn cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> Result<(Vec<u8>, SynthStats)> {
+        self.check_lod(lod)?;
+        check_side(plane.width, plane.height)?;
+        for c in plane.origin.iter().chain(&plane.u).chain(&plane.v) {
+            if !c.is_finite() {
+                return Err(Error::InvalidRequest("cut plane must be finite".into()));
+            }
+        }
+        self.engine.cut_rgb(plane, lod, filter)
+    }
+
+    /// RGB8 colours of arbitrary voxels at level of detail `lod`.
+    pub fn points(&self, points: &[[i64; 3]], lod: u32) -> Result<(Vec<[u8; 3]>, SynthStats)> {
+        self.check_lod(lod)?;
+        if points.len() as u64 > MAX_REGION_VOXELS {
+            return Err(Error::TooLarge(format!(
+                "{} points (limit {MAX_REGION_VOXELS})",
+                points.len()
+            )));
+        }
+        for p in points {
+            check_coords(p)?;
+        }
+        self.engine.points_rgb(points, lod)
+    }
+
+    fn check_lod(&self, lod: u32) -> Result<()> {
+        if lod > self.max_lod() {
+            return Err(Error::InvalidRange {
+                name: "lod",
+                value: lod as f64,
+                min: 0.0,
+                max: self.max_lod() as f64,
+            });
+        }
+        Ok(())
+    }
+}
+
+fn check_side(width: u32, height: u32) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(Error::InvalidRequest("width and height must be ≥ 1".into()));
+    }
+    if width > MAX_SLICE_SIDE || height > MAX_SLICE_SIDE {
+        return Err(Error::TooLarge(format!(
+            "{width}x{height} (each side ≤ {MAX_SLICE_SIDE})"
+        )));
+    }
+    Ok(())
+}
+
+fn check_coords(p: &[i64; 3]) -> Result<()> {
+    for &c in p {
+        if !(-COORD_LIMIT..=COORD_LIMIT).contains(&c) {
+            return Err(Error::InvalidRange {
+                name: "coordinate",
+                value: c as f64,
+                min: -(COORD_LIMIT as f64),
+                max: COORD_LIMIT as f64,
+            });
+        }
+    }
+    Ok(())
+}
+
+fn check_region(r: &Region) -> Result<()> {
+    if r.size.contains(&0) {
+        return Err(Error::InvalidRequest("region size must be ≥ 1 on every axis".into()));
+    }
+    let voxels: u64 = r.size.iter().map(|&s| s as u64).product();
+    if voxels > MAX_REGION_VOXELS {
+        return Err(Error::TooLarge(format!(
+            "{voxels} voxels (limit {MAX_REGION_VOXELS})"
+        )));
+    }
+    check_coords(&r.origin)?;
+    let far = [
+        r.origin[0] + r.size[0] as i64 - 1,
+        r.origin[1] + r.size[1] as i64 - 1,
+        r.origin[2] + r.size[2] as i64 - 1,
+    ];
+    check_coords(&far)
+}
