@@ -1,1 +1,1 @@
-pub fn placeholder() {}
+//! Evaluation metrics (pending).

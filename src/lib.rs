@@ -12,11 +12,13 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod appearance;
 pub mod candidates;
 pub mod error;
 pub mod eval;
 pub mod exemplar;
 pub mod params;
+pub mod stack;
 pub mod synth;
 pub mod texture;
 

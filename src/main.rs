@@ -1,1 +1,12 @@
-fn main() {}
+//! The `solidtex` command line: precompute candidates, inspect them,
+//! synthesize regions, slices and volumes, plan dependency sets, evaluate
+//! quality and run benchmarks.
+
+mod cli;
+
+use clap::Parser;
+
+fn main() -> anyhow::Result<()> {
+    let args = cli::Cli::parse();
+    cli::run(args)
+}

@@ -5,8 +5,8 @@
 use crate::candidates::Candidates;
 use crate::error::{Error, Result};
 use crate::params::SynthParams;
-use crate::synth::cache::TileCache;
 use crate::synth::Engine;
+use crate::synth::cache::TileCache;
 use std::sync::Arc;
 
 /// Largest side of a slice or cut, in pixels.
@@ -107,7 +107,10 @@ impl SynthStats {
     pub fn merge(&mut self, other: &SynthStats) {
         for (dst, src) in [
             (&mut self.voxels_per_level, &other.voxels_per_level),
-            (&mut self.corrections_per_level, &other.corrections_per_level),
+            (
+                &mut self.corrections_per_level,
+                &other.corrections_per_level,
+            ),
         ] {
             if dst.len() < src.len() {
                 dst.resize(src.len(), 0);
@@ -277,7 +280,9 @@ fn check_coords(p: &[i64; 3]) -> Result<()> {
 
 fn check_region(r: &Region) -> Result<()> {
     if r.size.contains(&0) {
-        return Err(Error::InvalidRequest("region size must be ≥ 1 on every axis".into()));
+        return Err(Error::InvalidRequest(
+            "region size must be ≥ 1 on every axis".into(),
+        ));
     }
     let voxels: u64 = r.size.iter().map(|&s| s as u64).product();
     if voxels > MAX_REGION_VOXELS {

@@ -1,7 +1,26 @@
-//! Precomputation (API placeholder while the engine lands).
-use crate::error::Result;
+//! Everything computed once per texture before any voxel is synthesized
+//! (Dong et al. §"Candidate pre-computation"): Gaussian stacks, appearance
+//! vectors, 2D similarity sets, 3D candidate triples (crossbar search, then
+//! coherence filtering) and the PCA-projected, 8-bit quantised
+//! 3-neighbourhood of every candidate. [`Candidates::save`] and
+//! [`Candidates::load`] move it to and from the `.stx` format.
+
+pub mod coherence;
+mod format;
+pub mod geometry;
+pub mod search;
+
+use crate::appearance::{self, AppearanceLevel, Pca};
+use crate::error::{Error, Result};
 use crate::exemplar::ExemplarSet;
 use crate::params::AnalysisParams;
+use crate::stack::{GaussianStack, spacing};
+use geometry::Dims;
+use kiddo::SquaredEuclidean;
+use rayon::prelude::*;
+use search::{Scored, Strips};
+use std::num::NonZero;
+use std::time::Instant;
 
 /// Stages of the precomputation, for progress reports.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -12,43 +31,638 @@ pub enum Stage {
     Search,
     /// Coherence filtering.
     Coherence,
-    /// Slab and neighbourhood vectors.
+    /// 2D similarity sets and neighbourhood vectors.
     Finish,
 }
 
-/// Summary of a precomputation.
-#[derive(Clone, Debug, Default)]
-pub struct PrecomputeReport {}
+/// Per-level summary of the candidate sets.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LevelReport {
+    /// `histogram[n]` pixels (over all three planes) have n candidates.
+    pub histogram: Vec<u64>,
+    /// Pixels that fell back to their best triple.
+    pub fallbacks: u64,
+    /// Coherence filter iterations.
+    pub iterations: u32,
+    /// Mean crossbar error of every pixel's first candidate.
+    pub mean_best_error: f64,
+    /// Mean crossbar error of hashed random triples, for comparison.
+    pub mean_random_error: f64,
+}
+
+/// Summary of a precomputation: time per stage and candidate statistics.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PrecomputeReport {
+    /// Seconds spent per stage name.
+    pub stage_seconds: Vec<(String, f64)>,
+    /// One entry per level, finest first.
+    pub levels: Vec<LevelReport>,
+}
+
+/// Candidate triples of one plane at one level, in compressed-row form.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlaneCandidates {
+    /// `offsets[c]..offsets[c + 1]` indexes the candidates of pixel c.
+    pub offsets: Vec<u32>,
+    /// Triples (xy, yz, zx pixel indices), best first per pixel.
+    pub triples: Vec<[u32; 3]>,
+    /// Crossbar error of each triple.
+    pub errors: Vec<f32>,
+}
+
+impl PlaneCandidates {
+    fn from_lists(lists: &[Vec<Scored>]) -> Self {
+        let mut offsets = Vec::with_capacity(lists.len() + 1);
+        let mut triples = Vec::new();
+        let mut errors = Vec::new();
+        offsets.push(0);
+        for l in lists {
+            for s in l {
+                triples.push(s.triple);
+                errors.push(s.error);
+            }
+            offsets.push(triples.len() as u32);
+        }
+        PlaneCandidates {
+            offsets,
+            triples,
+            errors,
+        }
+    }
+
+    /// Candidate index range of pixel `c`.
+    #[inline]
+    pub fn range(&self, c: u32) -> std::ops::Range<usize> {
+        self.offsets[c as usize] as usize..self.offsets[c as usize + 1] as usize
+    }
+
+    /// The same candidates seen from plane `p` when all three exemplars are
+    /// one image: coordinates rotate with the plane roles.
+    fn rotated(&self, p: usize) -> Self {
+        let triples = self
+            .triples
+            .iter()
+            .map(|t| {
+                let mut o = [0u32; 3];
+                for (j, &c) in t.iter().enumerate() {
+                    o[(j + p) % 3] = c;
+                }
+                o
+            })
+            .collect();
+        PlaneCandidates {
+            offsets: self.offsets.clone(),
+            triples,
+            errors: self.errors.clone(),
+        }
+    }
+}
+
+/// What is stored per level; the rest is derived at load.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct StoredLevel {
+    pub appearance_pca: [Pca; 3],
+    pub candidates: [PlaneCandidates; 3],
+    /// `k2` most similar pixels per pixel (itself first), per plane.
+    pub similar: [Vec<u32>; 3],
+    pub k2: usize,
+    /// PCA of the concatenated appearance vectors of a triple's three pixels.
+    pub joint_pca: Pca,
+    /// Quantisation scale of joint vectors: byte = round(v·scale) + 128.
+    pub quant_scale: f32,
+}
+
+/// One level, with derived data for synthesis.
+#[derive(Clone, Debug)]
+pub struct Level {
+    pub(crate) stored: StoredLevel,
+    /// Appearance vectors per plane.
+    pub appearance: [AppearanceLevel; 3],
+    /// Quantised 3-neighbourhood vector of every candidate, per plane,
+    /// `joint_dims` bytes each, in candidate order.
+    pub vectors: [Vec<u8>; 3],
+}
+
+impl Level {
+    /// Candidate triples of plane `p`.
+    pub fn candidates(&self, p: usize) -> &PlaneCandidates {
+        &self.stored.candidates[p]
+    }
+
+    /// The 2D similarity set of pixel `c` in plane `p`.
+    pub fn similar(&self, p: usize, c: u32) -> &[u32] {
+        let k2 = self.stored.k2;
+        &self.stored.similar[p][c as usize * k2..(c as usize + 1) * k2]
+    }
+
+    /// Dimensions of the quantised 3-neighbourhood vectors.
+    pub fn joint_dims(&self) -> usize {
+        self.stored.joint_pca.dims
+    }
+
+    /// The joint PCA.
+    pub fn joint_pca(&self) -> &Pca {
+        &self.stored.joint_pca
+    }
+
+    /// Quantisation scale of the 3-neighbourhood vectors.
+    pub fn quant_scale(&self) -> f32 {
+        self.stored.quant_scale
+    }
+}
 
 /// Precomputed candidate data of one texture.
 pub struct Candidates {
     exemplars: ExemplarSet,
     params: AnalysisParams,
+    dims: Dims,
+    stacks: [GaussianStack; 3],
+    levels: Vec<Level>,
+    report: PrecomputeReport,
 }
 
+impl std::fmt::Debug for Candidates {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "Candidates({}x{}, {} levels)",
+            self.dims.w,
+            self.dims.h,
+            self.levels.len()
+        )
+    }
+}
+
+/// Appearance dimensions used by the similarity k-d tree.
+const SIMILAR_DIMS: usize = 8;
+
 impl Candidates {
-    /// Runs the precomputation; `progress(stage, fraction 0..1)`.
+    /// Runs the whole precomputation; `progress(stage, fraction 0..1)` is
+    /// called as it advances. Uses the current rayon pool; the result is
+    /// identical whatever its size.
     pub fn compute(
-        _exemplars: &ExemplarSet,
-        _params: &AnalysisParams,
-        _progress: &(dyn Fn(Stage, f32) + Sync),
+        exemplars: &ExemplarSet,
+        params: &AnalysisParams,
+        progress: &(dyn Fn(Stage, f32) + Sync),
     ) -> Result<Candidates> {
-        todo!()
+        params.validate()?;
+        let dims = Dims {
+            w: exemplars.width(),
+            h: exemplars.height(),
+        };
+        let single = exemplars.is_single();
+        let levels_n = params.levels as usize;
+        let n = params.neighbourhood;
+        let mut report = PrecomputeReport::default();
+        let mut timer = Instant::now();
+        let mut lap = |report: &mut PrecomputeReport, name: &str| {
+            report
+                .stage_seconds
+                .push((name.to_string(), timer.elapsed().as_secs_f64()));
+            timer = Instant::now();
+        };
+
+        progress(Stage::Analysis, 0.0);
+        let stacks = build_stacks(exemplars, levels_n);
+        let mut appearance_pca: Vec<[Pca; 3]> = Vec::new();
+        for k in 0..levels_n {
+            let fit = |p: usize| {
+                let all = appearance::all_neighbourhoods(&stacks[p], k, n);
+                let stride = (dims.len() / 8192).max(1);
+                let len = (n * n * 3) as usize;
+                let sample: Vec<f32> = all
+                    .chunks_exact(len)
+                    .step_by(stride)
+                    .flatten()
+                    .copied()
+                    .collect();
+                Pca::fit(&sample, len, params.pca_dims as usize)
+            };
+            let first = fit(0);
+            let pcas = if single {
+                [first.clone(), first.clone(), first]
+            } else {
+                [first, fit(1), fit(2)]
+            };
+            appearance_pca.push(pcas);
+            progress(Stage::Analysis, (k + 1) as f32 / levels_n as f32);
+        }
+        lap(&mut report, "analysis");
+
+        let mut raw_lists: Vec<Vec<Vec<Vec<Scored>>>> = Vec::new();
+        for k in 0..levels_n {
+            let strips: Vec<Strips> = if single {
+                vec![Strips::new(&stacks[0], k, n)]
+            } else {
+                (0..3).map(|p| Strips::new(&stacks[p], k, n)).collect()
+            };
+            let refs: [&Strips; 3] = if single {
+                [&strips[0], &strips[0], &strips[0]]
+            } else {
+                [&strips[0], &strips[1], &strips[2]]
+            };
+            let planes = if single { 1 } else { 3 };
+            let per_plane: Vec<Vec<Vec<Scored>>> = (0..planes)
+                .map(|p| {
+                    search::search_plane(
+                        p,
+                        refs,
+                        dims,
+                        params.strips as usize,
+                        params.triples as usize,
+                    )
+                })
+                .collect();
+            raw_lists.push(per_plane);
+            progress(Stage::Search, (k + 1) as f32 / levels_n as f32);
+        }
+        lap(&mut report, "search");
+
+        let mut filtered_levels: Vec<[PlaneCandidates; 3]> = Vec::new();
+        for (k, per_plane) in raw_lists.into_iter().enumerate() {
+            let h = spacing(k) as i64;
+            let mut level_report = LevelReport {
+                histogram: vec![0; params.max_candidates as usize + 1],
+                ..Default::default()
+            };
+            let mut planes: Vec<PlaneCandidates> = Vec::new();
+            for (p, lists) in per_plane.into_iter().enumerate() {
+                let f = coherence::filter(p, lists, dims, h, params.max_candidates as usize);
+                let copies = if single { 3 } else { 1 };
+                for l in &f.lists {
+                    level_report.histogram[l.len()] += copies;
+                }
+                level_report.fallbacks += f.fallbacks as u64 * copies;
+                level_report.iterations = level_report.iterations.max(f.iterations as u32);
+                planes.push(PlaneCandidates::from_lists(&f.lists));
+            }
+            let planes: [PlaneCandidates; 3] = if single {
+                let base = planes.pop_single();
+                [base.clone(), base.rotated(1), base.rotated(2)]
+            } else {
+                planes.try_into().expect("three planes")
+            };
+            level_report.mean_best_error = mean_best_error(&planes);
+            level_report.mean_random_error = mean_random_error(&stacks, k, n, dims);
+            report.levels.push(level_report);
+            filtered_levels.push(planes);
+            progress(Stage::Coherence, (k + 1) as f32 / levels_n as f32);
+        }
+        lap(&mut report, "coherence");
+
+        let mut stored = Vec::new();
+        for (k, candidates) in filtered_levels.into_iter().enumerate() {
+            let pcas = appearance_pca[k].clone();
+            let appearance: Vec<AppearanceLevel> = (0..3)
+                .map(|p| appearance::project_all(&stacks[p], k, n, &pcas[p]))
+                .collect();
+            let k2 = if k == 0 {
+                params.similar_fine
+            } else {
+                params.similar_coarse
+            } as usize;
+            let similar_0 = similar_sets(&appearance[0], dims, k2, spacing(k) as i64);
+            let similar = if single {
+                [similar_0.clone(), similar_0.clone(), similar_0]
+            } else {
+                [
+                    similar_0,
+                    similar_sets(&appearance[1], dims, k2, spacing(k) as i64),
+                    similar_sets(&appearance[2], dims, k2, spacing(k) as i64),
+                ]
+            };
+            let joint_dims = joint_dims(k, levels_n);
+            let joint_pca = fit_joint(&appearance, &candidates, joint_dims);
+            let quant_scale = quant_scale(&appearance, &candidates, &joint_pca);
+            stored.push(StoredLevel {
+                appearance_pca: pcas,
+                candidates,
+                similar,
+                k2,
+                joint_pca,
+                quant_scale,
+            });
+            progress(Stage::Finish, (k + 1) as f32 / levels_n as f32);
+        }
+        let levels = derive_levels(&stacks, stored, n);
+        lap(&mut report, "finish");
+        Ok(Candidates {
+            exemplars: exemplars.clone(),
+            params: params.clone(),
+            dims,
+            stacks,
+            levels,
+            report,
+        })
     }
+
+    /// Rebuilds derived data around stored levels (used by `load`).
+    pub(crate) fn from_stored(
+        exemplars: ExemplarSet,
+        params: AnalysisParams,
+        stored: Vec<StoredLevel>,
+        report: PrecomputeReport,
+    ) -> Result<Candidates> {
+        params.validate()?;
+        let dims = Dims {
+            w: exemplars.width(),
+            h: exemplars.height(),
+        };
+        if stored.len() != params.levels as usize {
+            return Err(Error::CorruptFile(crate::error::CorruptKind::Invalid(
+                "level count".into(),
+            )));
+        }
+        let stacks = build_stacks(&exemplars, stored.len());
+        let levels = derive_levels(&stacks, stored, params.neighbourhood);
+        Ok(Candidates {
+            exemplars,
+            params,
+            dims,
+            stacks,
+            levels,
+            report,
+        })
+    }
+
     /// Writes the `.stx` form.
-    pub fn save(&self, _w: &mut dyn std::io::Write) -> Result<()> {
-        todo!()
+    pub fn save(&self, w: &mut dyn std::io::Write) -> Result<()> {
+        let bytes = format::encode(self);
+        w.write_all(&bytes)?;
+        Ok(())
     }
-    /// Reads the `.stx` form.
-    pub fn load(_bytes: &[u8]) -> Result<Candidates> {
-        todo!()
+
+    /// The `.stx` form as bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        format::encode(self)
     }
+
+    /// Reads the `.stx` form; a truncated, corrupt or foreign file is an
+    /// error.
+    pub fn load(bytes: &[u8]) -> Result<Candidates> {
+        format::decode(bytes)
+    }
+
     /// The exemplars.
     pub fn exemplars(&self) -> &ExemplarSet {
         &self.exemplars
     }
+
     /// The analysis parameters.
     pub fn params(&self) -> &AnalysisParams {
         &self.params
     }
+
+    /// Exemplar size.
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// Precomputation summary.
+    pub fn report(&self) -> &PrecomputeReport {
+        &self.report
+    }
+
+    /// Number of levels (finest is 0).
+    pub fn level_count(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Level `k` (0 = finest).
+    pub fn level(&self, k: usize) -> &Level {
+        &self.levels[k]
+    }
+
+    /// Gaussian stack of plane `p`.
+    pub fn stack(&self, p: usize) -> &GaussianStack {
+        &self.stacks[p]
+    }
+
+    pub(crate) fn stored_levels(&self) -> impl Iterator<Item = &StoredLevel> {
+        self.levels.iter().map(|l| &l.stored)
+    }
+
+    /// Crossbar error of any triple at level `k`, from the stacks.
+    pub fn crossbar_error(&self, k: usize, t: [u32; 3]) -> f32 {
+        triple_error(&self.stacks, k, self.params.neighbourhood, self.dims, t)
+    }
+
+    /// Bytes held by the candidate triples in their stored form (two
+    /// foreign coordinates per triple, a count per pixel), and bytes of
+    /// everything held in memory, derived data included.
+    pub fn memory_bytes(&self) -> (usize, usize) {
+        let coord_bits = (self.dims.len() as f64).log2().ceil() as usize;
+        let mut compact = 0usize;
+        let mut total = 0usize;
+        for l in &self.levels {
+            let planes = if self.exemplars.is_single() { 1 } else { 3 };
+            for p in 0..planes {
+                let c = &l.stored.candidates[p];
+                compact += (c.triples.len() * 2 * coord_bits).div_ceil(8) + self.dims.len();
+            }
+            for p in 0..3 {
+                let c = &l.stored.candidates[p];
+                total += c.triples.len() * 16 + c.offsets.len() * 4;
+                total += l.vectors[p].len() + l.stored.similar[p].len() * 4;
+                total += l.appearance[p].vectors.len() * 4;
+            }
+        }
+        for s in &self.stacks {
+            total += s.len() * self.dims.len() * 12;
+        }
+        (compact, total)
+    }
+}
+
+trait PopSingle {
+    fn pop_single(self) -> PlaneCandidates;
+}
+
+impl PopSingle for Vec<PlaneCandidates> {
+    fn pop_single(mut self) -> PlaneCandidates {
+        self.pop().expect("one plane")
+    }
+}
+
+fn build_stacks(exemplars: &ExemplarSet, levels: usize) -> [GaussianStack; 3] {
+    if exemplars.is_single() {
+        let s = GaussianStack::new(exemplars.plane(0), levels);
+        [s.clone(), s.clone(), s]
+    } else {
+        [0, 1, 2].map(|p| GaussianStack::new(exemplars.plane(p), levels))
+    }
+}
+
+/// Joint 3-neighbourhood dimensions: 12 at the coarsest level down to 8 at
+/// the finest (coarse levels capture less variance per component).
+fn joint_dims(k: usize, levels: usize) -> usize {
+    if levels <= 1 {
+        return 8;
+    }
+    8 + (4 * k + (levels - 1) / 2) / (levels - 1)
+}
+
+fn concat(appearance: &[AppearanceLevel], t: [u32; 3], out: &mut Vec<f32>) {
+    out.clear();
+    for (p, a) in appearance.iter().enumerate() {
+        out.extend_from_slice(a.vector(t[p] as usize));
+    }
+}
+
+fn fit_joint(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], dims: usize) -> Pca {
+    let input: usize = appearance.iter().map(|a| a.pca.dims).sum();
+    let total: usize = planes.iter().map(|c| c.triples.len()).sum();
+    let stride = (total / 20000).max(1);
+    let mut sample = Vec::new();
+    let mut buf = Vec::new();
+    for c in planes {
+        for t in c.triples.iter().step_by(stride) {
+            concat(appearance, *t, &mut buf);
+            sample.extend_from_slice(&buf);
+        }
+    }
+    Pca::fit(&sample, input, dims)
+}
+
+fn quant_scale(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], pca: &Pca) -> f32 {
+    let mut max = 1e-6f32;
+    let mut buf = Vec::new();
+    let mut out = vec![0f32; pca.dims];
+    for c in planes {
+        for t in &c.triples {
+            concat(appearance, *t, &mut buf);
+            pca.project(&buf, &mut out);
+            for v in &out {
+                max = max.max(v.abs());
+            }
+        }
+    }
+    127.0 / max
+}
+
+/// Quantises a projected vector: byte = round(v·scale) + 128, clamped.
+#[inline]
+pub fn quantise(v: f32, scale: f32) -> u8 {
+    ((v * scale).round() + 128.0).clamp(0.0, 255.0) as u8
+}
+
+fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) -> Vec<Level> {
+    stored
+        .into_iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let appearance: [AppearanceLevel; 3] =
+                [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &s.appearance_pca[p]));
+            let vectors = [0, 1, 2].map(|p| {
+                let c = &s.candidates[p];
+                let d = s.joint_pca.dims;
+                let mut bytes = vec![0u8; c.triples.len() * d];
+                bytes
+                    .par_chunks_mut(d)
+                    .zip(c.triples.par_iter())
+                    .for_each_init(
+                        || (Vec::new(), vec![0f32; d]),
+                        |(buf, out), (dst, t)| {
+                            concat(&appearance, *t, buf);
+                            s.joint_pca.project(buf, out);
+                            for (b, v) in dst.iter_mut().zip(out.iter()) {
+                                *b = quantise(*v, s.quant_scale);
+                            }
+                        },
+                    );
+                bytes
+            });
+            Level {
+                stored: s,
+                appearance,
+                vectors,
+            }
+        })
+        .collect()
+}
+
+/// The `k2` pixels most similar to each pixel in appearance space, itself
+/// first, skipping pixels closer than 2·h (they would only repeat the
+/// coherent candidate).
+fn similar_sets(app: &AppearanceLevel, dims: Dims, k2: usize, h: i64) -> Vec<u32> {
+    let d = app.pca.dims.min(SIMILAR_DIMS);
+    let point = |c: usize| {
+        let mut p = [0f32; SIMILAR_DIMS];
+        p[..d].copy_from_slice(&app.vector(c)[..d]);
+        p
+    };
+    let pts: Vec<[f32; SIMILAR_DIMS]> = (0..dims.len()).map(point).collect();
+    let tree: kiddo::ImmutableKdTree<f32, SIMILAR_DIMS> =
+        kiddo::ImmutableKdTree::new_from_slice(&pts);
+    let want = NonZero::new((k2 * 6 + 1).min(dims.len())).expect("non-empty");
+    let (w, hh) = (dims.w as i64, dims.h as i64);
+    (0..dims.len())
+        .into_par_iter()
+        .map(|c| {
+            let mut nn = tree.nearest_n::<SquaredEuclidean>(&pts[c], want);
+            nn.sort_by(|a, b| a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item)));
+            let (cx, cy) = dims.xy(c as u32);
+            let mut out = vec![c as u32];
+            for n in nn {
+                if out.len() == k2 {
+                    break;
+                }
+                let (x, y) = dims.xy(n.item as u32);
+                let dx = (x - cx).rem_euclid(w).min((cx - x).rem_euclid(w));
+                let dy = (y - cy).rem_euclid(hh).min((cy - y).rem_euclid(hh));
+                if dx.max(dy) >= 2 * h {
+                    out.push(n.item as u32);
+                }
+            }
+            while out.len() < k2 {
+                out.push(c as u32);
+            }
+            out
+        })
+        .flatten()
+        .collect()
+}
+
+fn triple_error(stacks: &[GaussianStack; 3], k: usize, n: u32, dims: Dims, t: [u32; 3]) -> f32 {
+    let r = (n / 2) as i64;
+    let h = spacing(k) as i64;
+    let mut e = 0f32;
+    for p in 0..3 {
+        let next = (p + 1) % 3;
+        let (px, py) = dims.xy(t[p]);
+        let (nx, ny) = dims.xy(t[next]);
+        for s in -r..=r {
+            // p's v-strip against next's u-strip.
+            let a = stacks[p].at(k, px, py + s * h);
+            let b = stacks[next].at(k, nx + s * h, ny);
+            e += (0..3).map(|c| (a[c] - b[c]).powi(2)).sum::<f32>();
+        }
+    }
+    e
+}
+
+fn mean_best_error(planes: &[PlaneCandidates; 3]) -> f64 {
+    let mut sum = 0f64;
+    let mut count = 0usize;
+    for c in planes {
+        for px in 0..c.offsets.len() - 1 {
+            let r = c.range(px as u32);
+            if !r.is_empty() {
+                sum += c.errors[r.start] as f64;
+                count += 1;
+            }
+        }
+    }
+    sum / count.max(1) as f64
+}
+
+fn mean_random_error(stacks: &[GaussianStack; 3], k: usize, n: u32, dims: Dims) -> f64 {
+    let samples = 2000u64;
+    let mut sum = 0f64;
+    for i in 0..samples {
+        let t = [0u64, 1, 2]
+            .map(|p| (crate::synth::hash::hash3(0x5eed, i, p, 0) % dims.len() as u64) as u32);
+        sum += triple_error(stacks, k, n, dims, t) as f64;
+    }
+    sum / samples as f64
 }

@@ -1,4 +1,29 @@
-//! Tile cache (API placeholder while the engine lands).
+//! The tile cache: synthesized cells of every level and correction step,
+//! kept in an LRU bounded in bytes and shared by all textures and threads.
+//! A tile is claimed before it is computed, so concurrent requests for the
+//! same missing tile compute it once: the others wait for it. A tile's bytes
+//! never depend on cache state, so evicting and recomputing it is harmless.
+
+use super::grid::Grid;
+use lru::LruCache;
+use std::collections::HashMap;
+use std::sync::{Arc, Condvar, Mutex};
+
+/// Identifies a tile: texture, level, correction step and cell position.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TileKey {
+    /// Hash of the texture's candidates and synthesis parameters.
+    pub texture: u64,
+    /// Pyramid level (0 = finest).
+    pub level: u8,
+    /// Correction step whose result the tile holds.
+    pub step: u8,
+    /// Cell coordinates.
+    pub cell: [i64; 3],
+}
+
+/// A synthesized tile: the triples of one cell.
+pub type Tile = Arc<Grid<[u32; 3]>>;
 
 /// Cache counters.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -17,22 +42,177 @@ pub struct CacheStats {
     pub evictions: u64,
 }
 
+#[derive(Default)]
+struct Flight {
+    done: Mutex<Option<Option<Tile>>>,
+    cv: Condvar,
+}
+
+struct Inner {
+    lru: LruCache<TileKey, Tile>,
+    flights: HashMap<TileKey, Arc<Flight>>,
+    stats: CacheStats,
+}
+
 /// Byte-bounded tile cache shared by textures and threads.
 pub struct TileCache {
     max_bytes: usize,
+    inner: Mutex<Inner>,
+}
+
+/// The outcome of claiming a tile.
+pub enum Claim {
+    /// Already cached.
+    Ready(Tile),
+    /// Missing: the caller computes it and must [`TileCache::publish`] or
+    /// drop the ticket.
+    Mine(Ticket),
+    /// Being computed by another request: [`TileCache::wait`] for it.
+    Wait(Waiter),
+}
+
+/// The right and duty to compute one tile. Dropping it unpublished (on an
+/// error or panic) releases anyone waiting, who then compute it themselves.
+pub struct Ticket {
+    key: TileKey,
+    flight: Arc<Flight>,
+    cache: Arc<TileCache>,
+    published: bool,
+}
+
+impl Ticket {
+    /// The tile to compute.
+    pub fn key(&self) -> TileKey {
+        self.key
+    }
+}
+
+/// A handle on a tile another request is computing.
+pub struct Waiter {
+    key: TileKey,
+    flight: Arc<Flight>,
+}
+
+impl Waiter {
+    /// The awaited tile.
+    pub fn key(&self) -> TileKey {
+        self.key
+    }
+}
+
+fn tile_bytes(t: &Tile) -> usize {
+    t.data.len() * std::mem::size_of::<[u32; 3]>() + 128
 }
 
 impl TileCache {
     /// A cache holding at most `max_bytes` of tiles.
     pub fn new(max_bytes: usize) -> Self {
-        TileCache { max_bytes }
+        TileCache {
+            max_bytes,
+            inner: Mutex::new(Inner {
+                lru: LruCache::unbounded(),
+                flights: HashMap::new(),
+                stats: CacheStats::default(),
+            }),
+        }
     }
+
     /// The byte bound.
     pub fn max_bytes(&self) -> usize {
         self.max_bytes
     }
+
     /// Current counters.
     pub fn stats(&self) -> CacheStats {
-        CacheStats::default()
+        self.lock().stats
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
+        // A panic while holding the lock cannot leave the map inconsistent
+        // (every update is a single call), so poisoning is ignored.
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Looks a tile up, claiming it if nobody has it or is computing it.
+    pub fn claim(self: &Arc<Self>, key: TileKey) -> Claim {
+        let mut g = self.lock();
+        if let Some(t) = g.lru.get(&key) {
+            let t = t.clone();
+            g.stats.hits += 1;
+            return Claim::Ready(t);
+        }
+        if let Some(f) = g.flights.get(&key) {
+            let flight = f.clone();
+            g.stats.coalesced += 1;
+            return Claim::Wait(Waiter { key, flight });
+        }
+        g.stats.misses += 1;
+        let flight = Arc::new(Flight::default());
+        g.flights.insert(key, flight.clone());
+        Claim::Mine(Ticket {
+            key,
+            flight,
+            cache: self.clone(),
+            published: false,
+        })
+    }
+
+    /// Stores a computed tile and wakes its waiters.
+    pub fn publish(&self, mut ticket: Ticket, tile: Tile) {
+        ticket.published = true;
+        {
+            let mut g = self.lock();
+            g.flights.remove(&ticket.key);
+            let bytes = tile_bytes(&tile);
+            if bytes <= self.max_bytes {
+                if let Some(old) = g.lru.put(ticket.key, tile.clone()) {
+                    g.stats.bytes -= tile_bytes(&old) as u64;
+                }
+                g.stats.bytes += bytes as u64;
+                while g.stats.bytes > self.max_bytes as u64 {
+                    match g.lru.pop_lru() {
+                        Some((_, old)) => {
+                            g.stats.bytes -= tile_bytes(&old) as u64;
+                            g.stats.evictions += 1;
+                        }
+                        None => break,
+                    }
+                }
+            }
+            g.stats.entries = g.lru.len() as u64;
+        }
+        let mut done = ticket.flight.done.lock().unwrap_or_else(|e| e.into_inner());
+        *done = Some(Some(tile));
+        ticket.flight.cv.notify_all();
+    }
+
+    /// Blocks until the awaited tile is published; `None` if its computation
+    /// failed (the caller then computes it itself).
+    pub fn wait(&self, w: Waiter) -> Option<Tile> {
+        let mut done = w.flight.done.lock().unwrap_or_else(|e| e.into_inner());
+        while done.is_none() {
+            done = w.flight.cv.wait(done).unwrap_or_else(|e| e.into_inner());
+        }
+        done.clone().flatten()
+    }
+
+    /// Drops every tile (counters are kept).
+    pub fn clear(&self) {
+        let mut g = self.lock();
+        g.lru.clear();
+        g.stats.bytes = 0;
+        g.stats.entries = 0;
+    }
+}
+
+impl Drop for Ticket {
+    fn drop(&mut self) {
+        if self.published {
+            return;
+        }
+        self.cache.lock().flights.remove(&self.key);
+        let mut done = self.flight.done.lock().unwrap_or_else(|e| e.into_inner());
+        *done = Some(None);
+        self.flight.cv.notify_all();
     }
 }

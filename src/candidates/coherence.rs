@@ -1,0 +1,122 @@
+//! Coherence filtering (Dong et al., "Triples of coherent candidates"): a
+//! triple of pixel P in plane p survives only if each of its two foreign
+//! coordinates is continued by some candidate of a neighbouring pixel
+//! P ± h·e (e a unit step in p's plane): that candidate's coordinate in the
+//! same plane must equal this one moved by the same 3D step. Such triples
+//! can grow coherent 3D patches during synthesis. Removal is simultaneous
+//! per iteration, so the result does not depend on visiting order.
+
+use super::geometry::{AXES, Dims, project};
+use super::search::Scored;
+use rayon::prelude::*;
+
+/// Dong et al. report about two iterations; removal cascades slowly after
+/// that, so the filter stops here and keeps the best `max` of what is left.
+const MAX_ITERATIONS: usize = 3;
+
+/// Outcome of filtering one plane at one level.
+pub struct Filtered {
+    /// Surviving triples per pixel, best first, at most `max` each.
+    pub lists: Vec<Vec<Scored>>,
+    /// Pixels where nothing survived and the best triple was kept instead.
+    pub fallbacks: usize,
+    /// Iterations run.
+    pub iterations: usize,
+}
+
+/// Filters `lists` (candidates of every pixel of plane `p`, sorted by
+/// error) until every pixel has at most `max` or nothing changes.
+pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize) -> Filtered {
+    let (a, b) = AXES[p];
+    let mut steps = Vec::new();
+    for axis in [a, b] {
+        for sign in [-1i64, 1] {
+            let mut d = [0i64; 3];
+            d[axis] = sign;
+            steps.push(d);
+        }
+    }
+    let original: Vec<Option<Scored>> = lists.iter().map(|l| l.first().copied()).collect();
+    let mut lists = lists;
+    let mut iterations = 0;
+    while iterations < MAX_ITERATIONS && lists.iter().any(|l| l.len() > max) {
+        iterations += 1;
+        // Per pixel and plane, the sorted coordinates its candidates use.
+        let coords: Vec<[Vec<u32>; 3]> = lists
+            .par_iter()
+            .map(|l| {
+                let mut out: [Vec<u32>; 3] = Default::default();
+                for (j, o) in out.iter_mut().enumerate() {
+                    *o = l.iter().map(|s| snap(dims, s.triple[j], h)).collect();
+                    o.sort_unstable();
+                    o.dedup();
+                }
+                out
+            })
+            .collect();
+        let next: Vec<Vec<Scored>> = lists
+            .par_iter()
+            .enumerate()
+            .map(|(c, l)| {
+                l.iter()
+                    .copied()
+                    .filter(|s| coherent(p, s.triple, c as u32, &coords, &steps, dims, h))
+                    .collect()
+            })
+            .collect();
+        let changed = next.iter().zip(&lists).any(|(n, l)| n.len() != l.len());
+        lists = next;
+        if !changed {
+            break;
+        }
+    }
+    let mut fallbacks = 0;
+    for (l, orig) in lists.iter_mut().zip(&original) {
+        if l.is_empty() {
+            if let Some(o) = orig {
+                l.push(*o);
+                fallbacks += 1;
+            }
+        }
+        l.truncate(max);
+    }
+    Filtered {
+        lists,
+        fallbacks,
+        iterations,
+    }
+}
+
+fn coherent(
+    p: usize,
+    t: [u32; 3],
+    c: u32,
+    coords: &[[Vec<u32>; 3]],
+    steps: &[[i64; 3]],
+    dims: Dims,
+    h: i64,
+) -> bool {
+    (0..3).filter(|&j| j != p).all(|j| {
+        steps.iter().any(|&d| {
+            let (du, dv) = project(p, d);
+            let neighbour = dims.shift(c, du * h, dv * h);
+            let (ju, jv) = project(j, d);
+            let want = dims.shift(t[j], ju * h, jv * h);
+            coords[neighbour as usize][j]
+                .binary_search(&snap(dims, want, h))
+                .is_ok()
+        })
+    })
+}
+
+/// A coordinate rounded to the level's sampling grid (multiples of h):
+/// at spacing h, coordinates closer than h/2 sample the same content, so
+/// continuity is tested at that resolution.
+fn snap(dims: Dims, c: u32, h: i64) -> u32 {
+    if h == 1 {
+        return c;
+    }
+    let (x, y) = dims.xy(c);
+    let round = |v: i64| (v + h / 2).div_euclid(h) * h;
+    dims.index(round(x), round(y))
+}

@@ -1,0 +1,373 @@
+//! Command-line subcommands. Each one loads a texture (a `.stx` file or an
+//! exemplar image precomputed on the fly), calls the library and writes
+//! files; no synthesis logic lives here.
+
+use anyhow::{Context, bail};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use solidtex::{
+    AnalysisParams, Axis, Candidates, Exemplar, ExemplarSet, Region, Scheme, Stage, SynthParams,
+    Texture, TileCache,
+};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Infinite, spatially deterministic solid textures from 2D exemplars.
+#[derive(Parser)]
+#[command(name = "solidtex", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Precompute 3D candidates of an exemplar into a `.stx` file.
+    Precompute(PrecomputeArgs),
+    /// Write PNGs showing precomputed data: candidate slab, crossbar error.
+    Inspect(InspectArgs),
+    /// Synthesize a box of voxels as raw RGB8 (x fastest, then y, then z).
+    Region(RegionArgs),
+    /// Synthesize an axis-aligned slice as a PNG.
+    Slice(SliceArgs),
+    /// Synthesize a full cube plus three orthogonal middle slices.
+    Volume(VolumeArgs),
+}
+
+#[derive(Args, Clone)]
+struct SourceArgs {
+    /// A `.stx` file, or an exemplar image (precomputed on the fly; the
+    /// bundled default exemplar when omitted).
+    source: Option<PathBuf>,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Correction passes per level.
+    #[arg(long, default_value_t = 2)]
+    passes: u32,
+    /// Correction scheme: standard or dual-grid.
+    #[arg(long, default_value = "dual-grid")]
+    scheme: Scheme,
+    /// Dual-grid cell side M.
+    #[arg(long, default_value_t = 12)]
+    grid: u32,
+    /// Jitter strength (0 disables).
+    #[arg(long, default_value_t = 1.0)]
+    jitter: f32,
+    /// Level of detail (0 = finest).
+    #[arg(long, default_value_t = 0)]
+    lod: u32,
+}
+
+#[derive(Args)]
+struct PrecomputeArgs {
+    /// Exemplar image used for the xy plane (and all planes unless --yz/--zx).
+    exemplar: PathBuf,
+    /// Exemplar for the yz plane.
+    #[arg(long)]
+    yz: Option<PathBuf>,
+    /// Exemplar for the zx plane.
+    #[arg(long)]
+    zx: Option<PathBuf>,
+    /// Output `.stx` file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Pyramid levels analysed.
+    #[arg(long, default_value_t = 4)]
+    levels: u32,
+}
+
+#[derive(Args)]
+struct InspectArgs {
+    /// The `.stx` file.
+    stx: PathBuf,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+struct RegionArgs {
+    #[command(flatten)]
+    src: SourceArgs,
+    #[arg(long, allow_hyphen_values = true)]
+    x: i64,
+    #[arg(long, allow_hyphen_values = true)]
+    y: i64,
+    #[arg(long, allow_hyphen_values = true)]
+    z: i64,
+    #[arg(long)]
+    w: u32,
+    #[arg(long)]
+    h: u32,
+    #[arg(long)]
+    d: u32,
+    /// Output file.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+#[derive(Args)]
+struct SliceArgs {
+    #[command(flatten)]
+    src: SourceArgs,
+    /// Axis normal to the slice: x, y or z.
+    #[arg(long)]
+    axis: Axis,
+    /// Position along the axis.
+    #[arg(long, allow_hyphen_values = true)]
+    at: i64,
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+    u0: i64,
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+    v0: i64,
+    #[arg(long, default_value_t = 256)]
+    w: u32,
+    #[arg(long, default_value_t = 256)]
+    h: u32,
+    /// Output PNG.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+#[derive(Args)]
+struct VolumeArgs {
+    #[command(flatten)]
+    src: SourceArgs,
+    /// Cube side.
+    #[arg(long, default_value_t = 128)]
+    size: u32,
+    /// Output directory.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+/// The bundled default exemplar.
+pub const DEFAULT_EXEMPLAR: &[u8] = include_bytes!("../assets/default.png");
+
+fn progress_bar() -> ProgressBar {
+    let bar = ProgressBar::new(1000);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {msg:12} [{bar:40}] {percent}% {elapsed}")
+            .expect("valid template"),
+    );
+    bar
+}
+
+fn precompute(
+    set: &ExemplarSet,
+    params: &AnalysisParams,
+    quiet: bool,
+) -> anyhow::Result<Candidates> {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        progress_bar()
+    };
+    let stages = [
+        Stage::Analysis,
+        Stage::Search,
+        Stage::Coherence,
+        Stage::Finish,
+    ];
+    let cb = |s: Stage, f: f32| {
+        let i = stages.iter().position(|&x| x == s).unwrap_or(0);
+        bar.set_message(format!("{s:?}").to_lowercase());
+        bar.set_position(((i as f32 + f) / 4.0 * 1000.0) as u64);
+    };
+    let c = Candidates::compute(set, params, &cb)?;
+    bar.finish_and_clear();
+    Ok(c)
+}
+
+fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
+    let cands = match &src.source {
+        Some(p) if p.extension().is_some_and(|e| e == "stx") => {
+            let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+            Candidates::load(&bytes)?
+        }
+        Some(p) => precompute(
+            &ExemplarSet::single(Exemplar::open(p)?),
+            &AnalysisParams::default(),
+            true,
+        )?,
+        None => precompute(
+            &ExemplarSet::single(Exemplar::decode(DEFAULT_EXEMPLAR)?),
+            &AnalysisParams::default(),
+            true,
+        )?,
+    };
+    let params = SynthParams {
+        seed: src.seed,
+        passes: src.passes,
+        scheme: src.scheme,
+        grid: src.grid,
+        jitter: src.jitter,
+        ..SynthParams::default()
+    };
+    Ok(Texture::new(
+        Arc::new(cands),
+        params,
+        Arc::new(TileCache::new(1 << 30)),
+    )?)
+}
+
+fn write_png(path: &Path, w: u32, h: u32, rgb: Vec<u8>) -> anyhow::Result<()> {
+    let img = image::RgbImage::from_raw(w, h, rgb).context("image size")?;
+    img.save(path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Runs one subcommand.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Precompute(a) => {
+            let xy = Exemplar::open(&a.exemplar)?;
+            let set = match (&a.yz, &a.zx) {
+                (None, None) => ExemplarSet::single(xy),
+                (Some(yz), Some(zx)) => {
+                    ExemplarSet::triple(xy, Exemplar::open(yz)?, Exemplar::open(zx)?)?
+                }
+                _ => bail!("give both --yz and --zx, or neither"),
+            };
+            let params = AnalysisParams {
+                levels: a.levels,
+                ..AnalysisParams::default()
+            };
+            let t0 = Instant::now();
+            let c = precompute(&set, &params, false)?;
+            let total = t0.elapsed().as_secs_f64();
+            let bytes = c.to_bytes();
+            write_atomically(&a.output, &bytes)?;
+            print_report(&c, total, bytes.len());
+        }
+        Command::Inspect(a) => inspect(&a)?,
+        Command::Region(a) => {
+            let tex = load_source(&a.src)?;
+            let region = Region {
+                origin: [a.x, a.y, a.z],
+                size: [a.w, a.h, a.d],
+            };
+            let t0 = Instant::now();
+            let (rgb, stats) = tex.region(&region, a.src.lod)?;
+            eprintln!(
+                "{} voxels in {:.3} s; {stats:?}",
+                rgb.len() / 3,
+                t0.elapsed().as_secs_f64()
+            );
+            write_atomically(&a.output, &rgb)?;
+        }
+        Command::Slice(a) => {
+            let tex = load_source(&a.src)?;
+            let t0 = Instant::now();
+            let (rgb, stats) = tex.slice(a.axis, a.at, a.u0, a.v0, a.w, a.h, a.src.lod)?;
+            eprintln!("slice in {:.3} s; {stats:?}", t0.elapsed().as_secs_f64());
+            write_png(&a.output, a.w, a.h, rgb)?;
+        }
+        Command::Volume(a) => {
+            let tex = load_source(&a.src)?;
+            std::fs::create_dir_all(&a.output)?;
+            let s = a.size;
+            let t0 = Instant::now();
+            let (rgb, stats) = tex.region(
+                &Region {
+                    origin: [0, 0, 0],
+                    size: [s, s, s],
+                },
+                a.src.lod,
+            )?;
+            eprintln!(
+                "{s}³ volume in {:.3} s; {stats:?}",
+                t0.elapsed().as_secs_f64()
+            );
+            write_atomically(&a.output.join(format!("volume_{s}.raw")), &rgb)?;
+            let mid = (s / 2) as i64;
+            for axis in [Axis::X, Axis::Y, Axis::Z] {
+                let (img, _) = tex.slice(axis, mid, 0, 0, s, s, a.src.lod)?;
+                let name = format!("slice_{axis:?}.png").to_lowercase();
+                write_png(&a.output.join(name), s, s, img)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path)?;
+    Ok(())
+}
+
+fn print_report(c: &Candidates, total: f64, file_bytes: usize) {
+    let r = c.report();
+    println!("precomputed {}x{} in {total:.3} s", c.dims().w, c.dims().h);
+    for (name, s) in &r.stage_seconds {
+        println!("  {name:<10} {s:.3} s");
+    }
+    for (k, l) in r.levels.iter().enumerate() {
+        println!(
+            "  level {k}: crossbar error best {:.0} vs random {:.0}; fallbacks {}; filter iterations {}",
+            l.mean_best_error, l.mean_random_error, l.fallbacks, l.iterations
+        );
+        let hist: Vec<String> = l
+            .histogram
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| **n > 0)
+            .map(|(i, n)| format!("{i}:{n}"))
+            .collect();
+        println!("    candidates per pixel {}", hist.join(" "));
+    }
+    let (compact, total_mem) = c.memory_bytes();
+    println!(
+        "  file {file_bytes} bytes; candidates compact {compact} bytes; in memory {total_mem} bytes"
+    );
+}
+
+fn inspect(a: &InspectArgs) -> anyhow::Result<()> {
+    let bytes = std::fs::read(&a.stx)?;
+    let c = Candidates::load(&bytes)?;
+    std::fs::create_dir_all(&a.out)?;
+    let dims = c.dims();
+    for k in 0..c.level_count() {
+        // The slab: the xy exemplar rebuilt from each pixel's first
+        // candidate (mean of its three colours), and its crossbar error.
+        let level = c.level(k);
+        let cands = level.candidates(0);
+        let mut slab = Vec::with_capacity(dims.len() * 3);
+        let mut errs = Vec::with_capacity(dims.len());
+        for px in 0..dims.len() as u32 {
+            let t = cands.triples[cands.range(px).start];
+            let col = solidtex::synth::correction::colour(&c, k, t);
+            slab.extend(col.map(|v| v.round().clamp(0.0, 255.0) as u8));
+            errs.push(c.crossbar_error(k, t));
+        }
+        write_png(
+            &a.out.join(format!("slab_level{k}.png")),
+            dims.w,
+            dims.h,
+            slab,
+        )?;
+        let max = errs.iter().cloned().fold(1e-6f32, f32::max);
+        let heat: Vec<u8> = errs.iter().flat_map(|&e| heat(e / max)).collect();
+        write_png(
+            &a.out.join(format!("crossbar_error_level{k}.png")),
+            dims.w,
+            dims.h,
+            heat,
+        )?;
+    }
+    println!("wrote {} levels to {}", c.level_count(), a.out.display());
+    Ok(())
+}
+
+fn heat(t: f32) -> [u8; 3] {
+    let t = t.clamp(0.0, 1.0);
+    let r = (t * 3.0).min(1.0);
+    let g = (t * 3.0 - 1.0).clamp(0.0, 1.0);
+    let b = (t * 3.0 - 2.0).clamp(0.0, 1.0);
+    [(r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8]
+}

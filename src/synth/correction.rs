@@ -1,0 +1,239 @@
+//! Correction (Dong et al. "Correction", Zhang et al. §4.3): a voxel's
+//! triple is replaced by the candidate whose three exemplar neighbourhoods
+//! best match the voxel's three axis-aligned N×N slice neighbourhoods.
+//!
+//! Candidates come in two stages. For each plane, the 3×3 in-plane
+//! neighbours' triples, moved back by their offset, point at exemplar
+//! pixels; those pixels' 2D similarity sets are compared in appearance space
+//! and the best pixel per plane is kept. The 3D candidates of those three
+//! pixels are then compared by their quantised, PCA-projected
+//! 3-neighbourhoods.
+
+use super::grid::{Box3, Grid};
+use crate::candidates::geometry::{AXES, Dims};
+use crate::candidates::{Candidates, Level, quantise};
+use crate::stack::spacing;
+
+const MAX_NEIGHBOURHOOD: usize = 9 * 9 * 3;
+const MAX_DIMS: usize = 16;
+
+/// Triples and colours of a working box; colours are kept in step with
+/// triples so neighbourhood gathering reads one array.
+pub struct Work {
+    /// Triples.
+    pub triples: Grid<[u32; 3]>,
+    /// Mean exemplar colour of each triple.
+    pub colours: Grid<[f32; 3]>,
+}
+
+/// Colour of a triple at level `k`: the mean of its three exemplar colours.
+#[inline]
+pub fn colour(c: &Candidates, k: usize, t: [u32; 3]) -> [f32; 3] {
+    let a = c.stack(0).level(k)[t[0] as usize];
+    let b = c.stack(1).level(k)[t[1] as usize];
+    let d = c.stack(2).level(k)[t[2] as usize];
+    [
+        (a[0] + b[0] + d[0]) / 3.0,
+        (a[1] + b[1] + d[1]) / 3.0,
+        (a[2] + b[2] + d[2]) / 3.0,
+    ]
+}
+
+impl Work {
+    /// Wraps triples and computes their colours.
+    pub fn new(c: &Candidates, k: usize, triples: Grid<[u32; 3]>) -> Work {
+        let mut colours = Grid::new(triples.bounds);
+        for (dst, t) in colours.data.iter_mut().zip(&triples.data) {
+            *dst = colour(c, k, *t);
+        }
+        Work { triples, colours }
+    }
+}
+
+/// Reusable per-thread buffers.
+pub struct Scratch {
+    neigh: [f32; MAX_NEIGHBOURHOOD],
+    app: [[f32; MAX_DIMS]; 3],
+    concat: [f32; 3 * MAX_DIMS],
+    joint: [f32; MAX_DIMS],
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Scratch {
+            neigh: [0.0; MAX_NEIGHBOURHOOD],
+            app: [[0.0; MAX_DIMS]; 3],
+            concat: [0.0; 3 * MAX_DIMS],
+            joint: [0.0; MAX_DIMS],
+        }
+    }
+}
+
+/// Everything the correction of one level reads.
+pub struct Corrector<'a> {
+    cands: &'a Candidates,
+    level: &'a Level,
+    k: usize,
+    n: i64,
+    dims: Dims,
+}
+
+impl<'a> Corrector<'a> {
+    /// A corrector for level `k`.
+    pub fn new(cands: &'a Candidates, k: usize) -> Self {
+        Corrector {
+            cands,
+            level: cands.level(k),
+            k,
+            n: cands.params().neighbourhood as i64,
+            dims: cands.dims(),
+        }
+    }
+
+    /// The best candidate triple for the voxel at `p`, reading `work`
+    /// (which must cover `p` ± N/2).
+    pub fn correct(&self, work: &Work, p: [i64; 3], s: &mut Scratch) -> [u32; 3] {
+        let r = self.n / 2;
+        let h = spacing(self.k) as i64;
+        let mut best2d = [0u32; 3];
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            // The voxel's slice neighbourhood in this plane, u outer order
+            // matching the exemplar neighbourhoods (v rows, u columns).
+            let mut o = 0;
+            let mut q = p;
+            for j in -r..=r {
+                q[b] = p[b] + j;
+                for i in -r..=r {
+                    q[a] = p[a] + i;
+                    let c = work.colours.get(q);
+                    s.neigh[o..o + 3].copy_from_slice(&c);
+                    o += 3;
+                }
+            }
+            let app = &self.level.appearance[plane];
+            let dims = app.pca.dims;
+            app.pca.project(&s.neigh[..o], &mut s.app[plane][..dims]);
+            let mut best = (f32::INFINITY, u32::MAX);
+            let mut q = p;
+            for j in -1..=1i64 {
+                q[b] = p[b] + j;
+                for i in -1..=1i64 {
+                    q[a] = p[a] + i;
+                    let t = work.triples.get(q);
+                    let base = self.dims.shift(t[plane], -i * h, -j * h);
+                    for &cand in self.level.similar(plane, base) {
+                        let v = app.vector(cand as usize);
+                        let mut d = 0f32;
+                        for x in 0..dims {
+                            let e = s.app[plane][x] - v[x];
+                            d += e * e;
+                        }
+                        if d < best.0 || (d == best.0 && cand < best.1) {
+                            best = (d, cand);
+                        }
+                    }
+                }
+            }
+            best2d[plane] = best.1;
+        }
+        // Stage two: 3D candidates of the best pixel of each plane.
+        let mut len = 0;
+        for plane in 0..3 {
+            let d = self.level.appearance[plane].pca.dims;
+            s.concat[len..len + d].copy_from_slice(&s.app[plane][..d]);
+            len += d;
+        }
+        let joint = self.level.joint_pca();
+        let jd = joint.dims;
+        joint.project(&s.concat[..len], &mut s.joint[..jd]);
+        let scale = self.level.quant_scale();
+        let mut query = [0i32; MAX_DIMS];
+        for x in 0..jd {
+            query[x] = quantise(s.joint[x], scale) as i32;
+        }
+        let mut best = (i32::MAX, [u32::MAX; 3]);
+        for (plane, &pixel) in best2d.iter().enumerate() {
+            let cands = self.level.candidates(plane);
+            let vectors = &self.level.vectors[plane];
+            for ci in cands.range(pixel) {
+                let v = &vectors[ci * jd..(ci + 1) * jd];
+                let mut d = 0i32;
+                for x in 0..jd {
+                    let e = query[x] - v[x] as i32;
+                    d += e * e;
+                }
+                let t = cands.triples[ci];
+                if d < best.0 || (d == best.0 && t < best.1) {
+                    best = (d, t);
+                }
+            }
+        }
+        best.1
+    }
+
+    /// Runs the correction steps (passes × `side³` subpasses) over `work`.
+    /// Step t updates the voxels of its subpass class inside `update(t)`
+    /// (which must lie N/2 inside `work`). Voxels of one subpass are
+    /// corrected from the same state and written together, so neither the
+    /// visiting order nor the thread count changes the result. Returns the
+    /// number of corrections.
+    pub fn run(
+        &self,
+        work: &mut Work,
+        update: impl Fn(usize) -> Box3,
+        passes: u32,
+        side: i64,
+        parallel: bool,
+    ) -> u64 {
+        use rayon::prelude::*;
+        let mut scratch = Scratch::default();
+        let mut count = 0u64;
+        let mut positions = Vec::new();
+        let mut new: Vec<[u32; 3]> = Vec::new();
+        let classes = side * side * side;
+        for step in 0..passes as usize * classes as usize {
+            let class = step as i64 % classes;
+            let phase = [class % side, (class / side) % side, class / (side * side)];
+            positions.clear();
+            for_class(&update(step), phase, side, |p| positions.push(p));
+            if parallel {
+                let w = &*work;
+                new = positions
+                    .par_iter()
+                    .map_init(Scratch::default, |s, &p| self.correct(w, p, s))
+                    .collect();
+            } else {
+                new.clear();
+                for &p in &positions {
+                    new.push(self.correct(work, p, &mut scratch));
+                }
+            }
+            for (&p, &t) in positions.iter().zip(&new) {
+                let i = work.triples.index(p);
+                work.triples.data[i] = t;
+                work.colours.data[i] = colour(self.cands, self.k, t);
+            }
+            count += positions.len() as u64;
+        }
+        count
+    }
+}
+
+/// Calls `f` for each voxel of `b` whose coordinates are congruent to
+/// `phase` modulo `side`.
+pub fn for_class(b: &Box3, phase: [i64; 3], side: i64, mut f: impl FnMut([i64; 3])) {
+    let start = |a: usize| b.lo[a] + (phase[a] - b.lo[a]).rem_euclid(side);
+    let mut z = start(2);
+    while z < b.hi[2] {
+        let mut y = start(1);
+        while y < b.hi[1] {
+            let mut x = start(0);
+            while x < b.hi[0] {
+                f([x, y, z]);
+                x += side;
+            }
+            y += side;
+        }
+        z += side;
+    }
+}
