@@ -90,13 +90,53 @@ impl Pca {
     pub fn project(&self, v: &[f32], out: &mut [f32]) {
         for (d, o) in out.iter_mut().enumerate().take(self.dims) {
             let row = &self.basis[d * self.input..(d + 1) * self.input];
-            let mut acc = 0f32;
-            for i in 0..self.input {
-                acc += (v[i] - self.mean[i]) * row[i];
-            }
-            *o = acc;
+            *o = dot(v, row) - dot(&self.mean, row);
         }
     }
+
+    /// Like [`Pca::project`] with `offsets` = the projected mean, saving
+    /// half the work when many vectors share one basis.
+    #[inline]
+    pub fn project_with(&self, offsets: &[f32], v: &[f32], out: &mut [f32]) {
+        for (d, o) in out.iter_mut().enumerate().take(self.dims) {
+            let row = &self.basis[d * self.input..(d + 1) * self.input];
+            *o = dot(v, row) - offsets[d];
+        }
+    }
+
+    /// The projected mean, for [`Pca::project_with`].
+    pub fn mean_offsets(&self) -> Vec<f32> {
+        (0..self.dims)
+            .map(|d| {
+                dot(
+                    &self.mean,
+                    &self.basis[d * self.input..(d + 1) * self.input],
+                )
+            })
+            .collect()
+    }
+}
+
+/// Dot product with eight independent accumulators, so the compiler can
+/// keep it in SIMD registers; the summation order is fixed, so results do
+/// not depend on the caller.
+#[inline]
+pub fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0f32; 8];
+    let mut ca = a.chunks_exact(8);
+    let mut cb = b.chunks_exact(8);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let mut tail = 0f32;
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        tail += x * y;
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
 /// Gathers the N×N neighbourhood of (x, y) at level `k` (spacing 2^k) as

@@ -33,6 +33,21 @@ enum Command {
     Slice(SliceArgs),
     /// Synthesize a full cube plus three orthogonal middle slices.
     Volume(VolumeArgs),
+    /// Count voxels and corrections per level for a slice or region, for
+    /// the standard and dual-grid schemes, and the single-voxel chain.
+    Plan(PlanArgs),
+}
+
+#[derive(Args)]
+struct PlanArgs {
+    #[command(flatten)]
+    src: SourceArgs,
+    /// Slice side (an axis-z slice at z = 0).
+    #[arg(long, default_value_t = 256)]
+    slice: u32,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args, Clone)]
@@ -244,6 +259,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             print_report(&c, total, bytes.len());
         }
         Command::Inspect(a) => inspect(&a)?,
+        Command::Plan(a) => plan(&a)?,
         Command::Region(a) => {
             let tex = load_source(&a.src)?;
             let region = Region {
@@ -370,4 +386,99 @@ fn heat(t: f32) -> [u8; 3] {
     let g = (t * 3.0 - 1.0).clamp(0.0, 1.0);
     let b = (t * 3.0 - 2.0).clamp(0.0, 1.0);
     [(r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8]
+}
+
+fn plan(a: &PlanArgs) -> anyhow::Result<()> {
+    let mut rows = Vec::new();
+    let base = load_source(&a.src)?;
+    let region = Region {
+        origin: [0, 0, 0],
+        size: [a.slice, a.slice, 1],
+    };
+    for scheme in [Scheme::Standard, Scheme::DualGrid] {
+        let params = SynthParams {
+            scheme,
+            ..base.params().clone()
+        };
+        let cands = Arc::new(Candidates::load(&base.candidates().to_bytes())?);
+        let tex = Texture::new(cands, params, Arc::new(TileCache::new(1 << 20)))?;
+        let slice = tex.plan(&region, a.src.lod)?;
+        let chain = tex.dependency_chain(&[[0, 0, 0]], a.src.lod)?;
+        let plane: Vec<[i64; 3]> = (0..a.slice as i64 * a.slice as i64)
+            .map(|i| [i % a.slice as i64, i / a.slice as i64, 0])
+            .collect();
+        let exact = tex.dependency_chain(&plane, a.src.lod)?;
+        rows.push((scheme, slice, chain, exact));
+    }
+    if a.json {
+        let v: Vec<serde_json::Value> = rows
+            .iter()
+            .map(|(scheme, slice, chain, exact)| {
+                serde_json::json!({
+                    "scheme": scheme,
+                    "slice": a.slice,
+                    "slice_voxels_per_level": slice.voxels_per_level,
+                    "slice_corrections_per_level": slice.corrections_per_level,
+                    "slice_exact_per_level": exact.iter().map(|(v, c)| serde_json::json!({"voxels": v, "corrections": c})).collect::<Vec<_>>(),
+                    "single_voxel_chain": chain.iter().map(|(v, c)| serde_json::json!({"voxels": v, "corrections": c})).collect::<Vec<_>>(),
+                })
+            })
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "{}² axis slice at lod {} (level 0 = finest; tile-granular work from a cold cache)",
+        a.slice, a.src.lod
+    );
+    println!(
+        "{:<10} {:>5} {:>14} {:>14}",
+        "scheme", "level", "voxels", "corrections"
+    );
+    for (scheme, slice, _, _) in &rows {
+        for (k, (v, c)) in slice
+            .voxels_per_level
+            .iter()
+            .zip(&slice.corrections_per_level)
+            .enumerate()
+        {
+            println!("{:<10} {:>5} {:>14} {:>14}", format!("{scheme:?}"), k, v, c);
+        }
+        println!(
+            "{:<10} {:>5} {:>14} {:>14}",
+            format!("{scheme:?}"),
+            "all",
+            slice.voxels_per_level.iter().sum::<u64>(),
+            slice.corrections_per_level.iter().sum::<u64>()
+        );
+    }
+    let total = |i: usize| rows[i].1.voxels_per_level.iter().sum::<u64>() as f64;
+    println!(
+        "dual grid computes {:.1} % fewer voxels (tiles)",
+        100.0 * (1.0 - total(1) / total(0))
+    );
+    println!(
+        "exact dependency sets of the slice (history-window masks), voxels/corrections per level:"
+    );
+    for (scheme, _, _, exact) in &rows {
+        let per: Vec<String> = exact.iter().map(|(v, c)| format!("{v}/{c}")).collect();
+        println!("  {:<10} {}", format!("{scheme:?}"), per.join(" "));
+    }
+    let exact_total = |i: usize| rows[i].3.iter().map(|c| c.0).sum::<u64>() as f64;
+    println!(
+        "dual grid needs {:.1} % fewer voxels (exact)",
+        100.0 * (1.0 - exact_total(1) / exact_total(0))
+    );
+    println!("single-voxel exact dependency chain (history-window masks):");
+    for (scheme, _, chain, _) in &rows {
+        let v: u64 = chain.iter().map(|c| c.0).sum();
+        let c: u64 = chain.iter().map(|c| c.1).sum();
+        let per: Vec<String> = chain.iter().map(|(v, c)| format!("{v}/{c}")).collect();
+        println!(
+            "  {:<10} {v} voxels, {c} corrections (per level voxels/corrections: {})",
+            format!("{scheme:?}"),
+            per.join(" ")
+        );
+    }
+    Ok(())
 }

@@ -49,7 +49,7 @@ impl AnalysisParams {
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
         range("neighbourhood", self.neighbourhood, 3, 9)?;
-        if self.neighbourhood % 2 == 0 {
+        if self.neighbourhood.is_multiple_of(2) {
             return Err(Error::InvalidRequest("neighbourhood must be odd".into()));
         }
         range("pca_dims", self.pca_dims, 2, 16)?;

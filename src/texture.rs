@@ -239,6 +239,29 @@ impl Texture {
         self.engine.points_rgb(points, lod)
     }
 
+    /// What a cold-cache synthesis of `region` would compute, per level,
+    /// counted without computing it (the paper's Table 1/2 form).
+    pub fn plan(&self, region: &Region, lod: u32) -> Result<SynthStats> {
+        self.check_lod(lod)?;
+        check_region(region)?;
+        Ok(self.engine.plan_region(region, lod))
+    }
+
+    /// Exact voxel-level dependency chain of a few voxels at `lod`:
+    /// version-0 voxels and corrections per level, finest first.
+    pub fn dependency_chain(&self, voxels: &[[i64; 3]], lod: u32) -> Result<Vec<(u64, u64)>> {
+        self.check_lod(lod)?;
+        if voxels.len() > 1 << 20 {
+            return Err(Error::TooLarge("at most 2^20 voxels".into()));
+        }
+        Ok(self
+            .engine
+            .exact_chain(voxels, lod)
+            .into_iter()
+            .map(|l| (l.voxels, l.corrections))
+            .collect())
+    }
+
     fn check_lod(&self, lod: u32) -> Result<()> {
         if lod > self.max_lod() {
             return Err(Error::InvalidRange {

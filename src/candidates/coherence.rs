@@ -72,11 +72,9 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
     }
     let mut fallbacks = 0;
     for (l, orig) in lists.iter_mut().zip(&original) {
-        if l.is_empty() {
-            if let Some(o) = orig {
-                l.push(*o);
-                fallbacks += 1;
-            }
+        if let (true, Some(o)) = (l.is_empty(), orig) {
+            l.push(*o);
+            fallbacks += 1;
         }
         l.truncate(max);
     }

@@ -44,11 +44,24 @@ impl Dims {
         yi * self.w + xi
     }
 
-    /// Pixel `c` moved by (du, dv), wrapping.
+    /// Pixel `c` moved by (du, dv), wrapping. Hot in the correction, so the
+    /// common case (no wrap-around) avoids divisions.
     #[inline]
     pub fn shift(self, c: u32, du: i64, dv: i64) -> u32 {
-        let (x, y) = self.xy(c);
-        self.index(x + du, y + dv)
+        let (w, h) = (self.w as i64, self.h as i64);
+        let x = (c % self.w) as i64 + du;
+        let y = (c / self.w) as i64 + dv;
+        let x = if (0..w).contains(&x) {
+            x
+        } else {
+            x.rem_euclid(w)
+        };
+        let y = if (0..h).contains(&y) {
+            y
+        } else {
+            y.rem_euclid(h)
+        };
+        (y * w + x) as u32
     }
 }
 

@@ -76,6 +76,8 @@ pub struct Corrector<'a> {
     k: usize,
     n: i64,
     dims: Dims,
+    offsets: [Vec<f32>; 3],
+    joint_offsets: Vec<f32>,
 }
 
 impl<'a> Corrector<'a> {
@@ -87,6 +89,8 @@ impl<'a> Corrector<'a> {
             k,
             n: cands.params().neighbourhood as i64,
             dims: cands.dims(),
+            offsets: [0, 1, 2].map(|p| cands.level(k).appearance[p].pca.mean_offsets()),
+            joint_offsets: cands.level(k).joint_pca().mean_offsets(),
         }
     }
 
@@ -112,8 +116,16 @@ impl<'a> Corrector<'a> {
             }
             let app = &self.level.appearance[plane];
             let dims = app.pca.dims;
-            app.pca.project(&s.neigh[..o], &mut s.app[plane][..dims]);
+            app.pca.project_with(
+                &self.offsets[plane],
+                &s.neigh[..o],
+                &mut s.app[plane][..dims],
+            );
             let mut best = (f32::INFINITY, u32::MAX);
+            // Coherent neighbours usually point at the same pixel: visit
+            // each base pixel once.
+            let mut seen = [u32::MAX; 9];
+            let mut seen_n = 0;
             let mut q = p;
             for j in -1..=1i64 {
                 q[b] = p[b] + j;
@@ -121,13 +133,13 @@ impl<'a> Corrector<'a> {
                     q[a] = p[a] + i;
                     let t = work.triples.get(q);
                     let base = self.dims.shift(t[plane], -i * h, -j * h);
+                    if seen[..seen_n].contains(&base) {
+                        continue;
+                    }
+                    seen[seen_n] = base;
+                    seen_n += 1;
                     for &cand in self.level.similar(plane, base) {
-                        let v = app.vector(cand as usize);
-                        let mut d = 0f32;
-                        for x in 0..dims {
-                            let e = s.app[plane][x] - v[x];
-                            d += e * e;
-                        }
+                        let d = sq_dist(&s.app[plane][..dims], app.vector(cand as usize));
                         if d < best.0 || (d == best.0 && cand < best.1) {
                             best = (d, cand);
                         }
@@ -145,23 +157,18 @@ impl<'a> Corrector<'a> {
         }
         let joint = self.level.joint_pca();
         let jd = joint.dims;
-        joint.project(&s.concat[..len], &mut s.joint[..jd]);
+        joint.project_with(&self.joint_offsets, &s.concat[..len], &mut s.joint[..jd]);
         let scale = self.level.quant_scale();
-        let mut query = [0i32; MAX_DIMS];
-        for x in 0..jd {
-            query[x] = quantise(s.joint[x], scale) as i32;
+        let mut query = [0u8; MAX_DIMS];
+        for (q, &v) in query.iter_mut().zip(&s.joint[..jd]) {
+            *q = quantise(v, scale);
         }
-        let mut best = (i32::MAX, [u32::MAX; 3]);
+        let mut best = (u32::MAX, [u32::MAX; 3]);
         for (plane, &pixel) in best2d.iter().enumerate() {
             let cands = self.level.candidates(plane);
             let vectors = &self.level.vectors[plane];
             for ci in cands.range(pixel) {
-                let v = &vectors[ci * jd..(ci + 1) * jd];
-                let mut d = 0i32;
-                for x in 0..jd {
-                    let e = query[x] - v[x] as i32;
-                    d += e * e;
-                }
+                let d = sq_dist_u8(&query[..jd], &vectors[ci * jd..(ci + 1) * jd]);
                 let t = cands.triples[ci];
                 if d < best.0 || (d == best.0 && t < best.1) {
                     best = (d, t);
@@ -236,4 +243,38 @@ pub fn for_class(b: &Box3, phase: [i64; 3], side: i64, mut f: impl FnMut([i64; 3
         }
         z += side;
     }
+}
+
+/// Squared L2 distance with eight independent accumulators (SIMD-friendly,
+/// fixed summation order).
+#[inline]
+fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0f32; 8];
+    let mut ca = a.chunks_exact(8);
+    let mut cb = b.chunks_exact(8);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for l in 0..8 {
+            let e = x[l] - y[l];
+            acc[l] += e * e;
+        }
+    }
+    let mut tail = 0f32;
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        tail += (x - y) * (x - y);
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
+/// Squared L2 distance between quantised vectors, in integers.
+#[inline]
+fn sq_dist_u8(a: &[u8], b: &[u8]) -> u32 {
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| {
+            let e = x as i32 - y as i32;
+            (e * e) as u32
+        })
+        .sum()
 }

@@ -57,11 +57,14 @@ pub(crate) struct Acc {
     corrections: Vec<AtomicU64>,
     computed: AtomicU64,
     cached: AtomicU64,
+    /// Count the work without doing it (tiles hold zeros).
+    dry: bool,
 }
 
 impl Acc {
-    fn new(levels: usize) -> Acc {
+    fn new(levels: usize, dry: bool) -> Acc {
         Acc {
+            dry,
             voxels: (0..levels).map(|_| AtomicU64::new(0)).collect(),
             corrections: (0..levels).map(|_| AtomicU64::new(0)).collect(),
             computed: AtomicU64::new(0),
@@ -330,6 +333,12 @@ impl Engine {
             .into_par_iter()
             .zip(boxes.par_iter())
             .map(|(input, b)| {
+                if acc.dry {
+                    acc.corrections[k].fetch_add(passes as u64 * b.volume(), Ordering::Relaxed);
+                    let mut out = Grid::new(*b);
+                    out.copy_from(&input);
+                    return Arc::new(out);
+                }
                 let mut work = Work::new(&self.cands, k, input);
                 let n = corrector.run(&mut work, |_| *b, passes, side, false);
                 acc.corrections[k].fetch_add(n, Ordering::Relaxed);
@@ -358,12 +367,27 @@ impl Engine {
                 .version0(k, &[target.dilate(r * total as i64)], acc)
                 .pop()
                 .expect("one box");
-            let mut work = Work::new(&self.cands, k, input);
-            let n = Corrector::new(&self.cands, k).run(&mut work, update, passes, side, true);
-            acc.corrections[k].fetch_add(n, Ordering::Relaxed);
+            let triples = if acc.dry {
+                let n: u64 = (0..total)
+                    .map(|t| {
+                        let class = (t as i64) % (side * side * side);
+                        let phase = [class % side, (class / side) % side, class / (side * side)];
+                        let mut c = 0u64;
+                        correction::for_class(&update(t), phase, side, |_| c += 1);
+                        c
+                    })
+                    .sum();
+                acc.corrections[k].fetch_add(n, Ordering::Relaxed);
+                input
+            } else {
+                let mut work = Work::new(&self.cands, k, input);
+                let n = Corrector::new(&self.cands, k).run(&mut work, update, passes, side, true);
+                acc.corrections[k].fetch_add(n, Ordering::Relaxed);
+                work.triples
+            };
             for b in boxes {
                 let mut g = Grid::new(b);
-                g.copy_from(&work.triples);
+                g.copy_from(&triples);
                 out.push(Arc::new(g));
             }
         }
@@ -383,15 +407,19 @@ impl Engine {
         for b in boxes {
             acc.voxels[k].fetch_add(b.volume(), Ordering::Relaxed);
         }
+        if acc.dry && k == self.init_level {
+            return boxes.iter().map(|b| Grid::new(*b)).collect();
+        }
         if k == self.init_level {
             let jitter = self.params.jitter;
             return boxes
                 .par_iter()
                 .map(|b| {
+                    let field = init::JitterField::new(&self.cands, seed, jitter, k, b);
                     let mut g = Grid::new(*b);
                     for (i, t) in g.data.iter_mut().enumerate() {
                         let p = position(b, i);
-                        *t = init::initial_triple(&self.cands, seed, jitter, k, p);
+                        *t = init::initial_triple(&self.cands, seed, &field, k, p);
                     }
                     g
                 })
@@ -404,6 +432,9 @@ impl Engine {
             need.extend(self.cells_covering(k + 1, step, pb));
         }
         let parents = self.tiles(k + 1, step, need, acc);
+        if acc.dry {
+            return boxes.iter().map(|b| Grid::new(*b)).collect();
+        }
         boxes
             .par_iter()
             .zip(parent_boxes.par_iter())
@@ -424,7 +455,47 @@ impl Engine {
     }
 
     pub(crate) fn new_acc(&self) -> Acc {
-        Acc::new(self.init_level + 1)
+        Acc::new(self.init_level + 1, false)
+    }
+
+    /// Counts what synthesizing `r` from a cold cache would compute, per
+    /// level, without computing it.
+    pub(crate) fn plan_region(&self, r: &Region, lod: u32) -> SynthStats {
+        let dry = Engine {
+            cands: self.cands.clone(),
+            params: self.params.clone(),
+            cache: Arc::new(TileCache::new(usize::MAX)),
+            key: self.key,
+            init_level: self.init_level,
+            radius: self.radius,
+            cell: self.cell,
+            steps: self.steps.clone(),
+        };
+        let acc = Acc::new(self.init_level + 1, true);
+        let b = Box3::new(r.origin, r.size.map(|s| s as i64));
+        dry.level_box(lod as usize, &b, &acc);
+        acc.stats()
+    }
+
+    /// Exact voxel-level dependency chain of a few voxels (see
+    /// [`plan::exact_chain`]).
+    pub(crate) fn exact_chain(&self, voxels: &[[i64; 3]], lod: u32) -> Vec<plan::LevelPlan> {
+        let levels: Vec<Vec<Step>> = (0..=self.init_level)
+            .skip(lod as usize)
+            .map(|k| self.steps_at(k).to_vec())
+            .collect();
+        let cell = match self.params.scheme {
+            Scheme::DualGrid => Some(self.cell),
+            Scheme::Standard => None,
+        };
+        plan::exact_chain(
+            voxels,
+            levels.len(),
+            &levels,
+            self.radius,
+            self.params.subpass_side as i64,
+            cell,
+        )
     }
 
     pub(crate) fn region_rgb(&self, r: &Region, lod: u32) -> Result<(Vec<u8>, SynthStats)> {

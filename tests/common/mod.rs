@@ -1,0 +1,78 @@
+//! Shared fixtures: real exemplars from `../shared/exemplars`, precomputed
+//! once per test binary.
+#![allow(dead_code)]
+
+use solidtex::{
+    AnalysisParams, Candidates, Exemplar, ExemplarSet, SynthParams, Texture, TileCache,
+};
+use std::path::PathBuf;
+use std::sync::{Arc, OnceLock};
+
+pub fn exemplar_path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("shared")
+        .join("exemplars")
+        .join(name)
+}
+
+pub fn exemplar(name: &str) -> Exemplar {
+    Exemplar::open(exemplar_path(name)).expect("shared exemplar readable")
+}
+
+/// A 32×32 crop of a real exemplar: small enough for fast tests, real
+/// enough to have structure.
+pub fn small_exemplar() -> Exemplar {
+    let e = exemplar("animal_leopard.png");
+    let mut rgb = Vec::new();
+    for y in 0..32 {
+        for x in 0..32 {
+            rgb.extend_from_slice(&e.pixels()[y * e.width() as usize + x]);
+        }
+    }
+    Exemplar::from_rgb(32, 32, &rgb).unwrap()
+}
+
+pub fn small_params() -> AnalysisParams {
+    AnalysisParams {
+        levels: 3,
+        ..AnalysisParams::default()
+    }
+}
+
+pub fn small_candidates() -> Arc<Candidates> {
+    static C: OnceLock<Arc<Candidates>> = OnceLock::new();
+    C.get_or_init(|| {
+        Arc::new(
+            Candidates::compute(
+                &ExemplarSet::single(small_exemplar()),
+                &small_params(),
+                &|_, _| {},
+            )
+            .unwrap(),
+        )
+    })
+    .clone()
+}
+
+pub fn texture_with(params: SynthParams, cache_bytes: usize) -> Texture {
+    Texture::new(
+        small_candidates(),
+        params,
+        Arc::new(TileCache::new(cache_bytes)),
+    )
+    .unwrap()
+}
+
+pub fn texture() -> Texture {
+    texture_with(SynthParams::default(), 256 << 20)
+}
+
+/// FNV-1a, for pinning golden outputs.
+pub fn fnv(bytes: &[u8]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    for &b in bytes {
+        h = (h ^ b as u64).wrapping_mul(0x100_0000_01b3);
+    }
+    h
+}

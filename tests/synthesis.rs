@@ -1,0 +1,280 @@
+//! Spatial determinism and laziness of synthesis, through the public API.
+
+mod common;
+
+use common::*;
+use solidtex::{Axis, CutPlane, Filter, Region, Scheme, SynthParams, Texture};
+
+fn region(t: &Texture, origin: [i64; 3], size: [u32; 3]) -> Vec<u8> {
+    t.region(&Region { origin, size }, 0).unwrap().0
+}
+
+/// Cuts the voxels of `inner` out of a region `outer` (RGB8, x fastest).
+fn crop(outer: &[u8], o: [i64; 3], os: [u32; 3], i: [i64; 3], is: [u32; 3]) -> Vec<u8> {
+    let mut out = Vec::new();
+    for z in 0..is[2] as i64 {
+        for y in 0..is[1] as i64 {
+            for x in 0..is[0] as i64 {
+                let p = [i[0] + x - o[0], i[1] + y - o[1], i[2] + z - o[2]];
+                let idx = ((p[2] * os[1] as i64 + p[1]) * os[0] as i64 + p[0]) as usize * 3;
+                out.extend_from_slice(&outer[idx..idx + 3]);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_region_equals_the_same_voxels_cut_from_larger_requests_and_slices() {
+    let t = texture();
+    let (o, s) = ([3, -5, 7], [9u32, 6, 5]);
+    let alone = region(&t, o, s);
+    let (bo, bs) = ([-10, -20, 0], [40u32, 30, 20]);
+    let big = region(&texture(), bo, bs);
+    assert_eq!(alone, crop(&big, bo, bs, o, s));
+    // z slices through the region, requested separately on a fresh cache.
+    let fresh = texture();
+    for z in 0..s[2] as i64 {
+        let (slice, _) = fresh
+            .slice(Axis::Z, o[2] + z, o[0], o[1], s[0], s[1], 0)
+            .unwrap();
+        assert_eq!(
+            slice,
+            crop(&alone, o, s, [o[0], o[1], o[2] + z], [s[0], s[1], 1])
+        );
+    }
+    // An x slice: pixel (i, j) is voxel (at, u0 + i, v0 + j) = (x, y, z).
+    let (xs, _) = fresh
+        .slice(Axis::X, o[0] + 2, o[1], o[2], s[1], s[2], 0)
+        .unwrap();
+    for j in 0..s[2] as usize {
+        for i in 0..s[1] as usize {
+            let v = crop(
+                &alone,
+                o,
+                s,
+                [o[0] + 2, o[1] + i as i64, o[2] + j as i64],
+                [1, 1, 1],
+            );
+            assert_eq!(&xs[(j * s[1] as usize + i) * 3..][..3], &v[..]);
+        }
+    }
+    // A y slice: pixel (i, j) is voxel (u0 + j... ) with u = z, v = x.
+    let (ys, _) = fresh
+        .slice(Axis::Y, o[1] + 1, o[2], o[0], s[2], s[0], 0)
+        .unwrap();
+    for j in 0..s[0] as usize {
+        for i in 0..s[2] as usize {
+            let v = crop(
+                &alone,
+                o,
+                s,
+                [o[0] + j as i64, o[1] + 1, o[2] + i as i64],
+                [1, 1, 1],
+            );
+            assert_eq!(&ys[(j * s[2] as usize + i) * 3..][..3], &v[..]);
+        }
+    }
+}
+
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let run = |n: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+            .install(|| region(&texture(), [-7, 11, 2], [20, 20, 6]))
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(4));
+}
+
+#[test]
+fn cold_warm_and_evicted_caches_give_the_same_bytes() {
+    let t = texture();
+    let r = ([0, 0, 0], [24u32, 24, 4]);
+    let (cold, cold_stats) = t
+        .region(
+            &Region {
+                origin: r.0,
+                size: r.1,
+            },
+            0,
+        )
+        .unwrap();
+    let (warm, warm_stats) = t
+        .region(
+            &Region {
+                origin: r.0,
+                size: r.1,
+            },
+            0,
+        )
+        .unwrap();
+    assert_eq!(cold, warm);
+    assert!(cold_stats.tiles_computed > 0);
+    assert_eq!(
+        warm_stats.tiles_computed, 0,
+        "warm request recomputed tiles"
+    );
+    assert!(warm_stats.tiles_from_cache > 0);
+    // A cache too small for one request's tiles evicts constantly.
+    let tiny = texture_with(SynthParams::default(), 64 << 10);
+    let (evicted, _) = tiny
+        .region(
+            &Region {
+                origin: r.0,
+                size: r.1,
+            },
+            0,
+        )
+        .unwrap();
+    assert_eq!(cold, evicted);
+    assert!(tiny_cache_evicted(&tiny));
+}
+
+fn tiny_cache_evicted(t: &Texture) -> bool {
+    // Ask again: with a 64 KiB cache the second request must recompute.
+    let (_, s) = t
+        .region(
+            &Region {
+                origin: [0, 0, 0],
+                size: [24, 24, 4],
+            },
+            0,
+        )
+        .unwrap();
+    s.tiles_computed > 0
+}
+
+#[test]
+fn far_coordinates_work_and_stay_deterministic() {
+    let t = texture();
+    for base in [(1i64 << 31) - 8, -(1i64 << 31) + 3] {
+        let a = region(&t, [base, base, base], [8, 8, 2]);
+        let b = region(&texture(), [base - 3, base, base], [11, 8, 2]);
+        assert_eq!(
+            a,
+            crop(
+                &b,
+                [base - 3, base, base],
+                [11, 8, 2],
+                [base, base, base],
+                [8, 8, 2]
+            )
+        );
+    }
+    assert!(
+        t.region(
+            &Region {
+                origin: [1 << 32, 0, 0],
+                size: [1, 1, 1]
+            },
+            0
+        )
+        .is_err()
+    );
+}
+
+#[test]
+fn cuts_sample_the_same_volume() {
+    let t = texture();
+    let (o, s) = ([0i64, 0, 0], [16u32, 16, 16]);
+    let vol = region(&t, o, s);
+    // The diagonal plane x = y, z = j.
+    let plane = CutPlane {
+        origin: [0.0, 0.0, 0.0],
+        u: [1.0, 1.0, 0.0],
+        v: [0.0, 0.0, 1.0],
+        width: 16,
+        height: 16,
+    };
+    let (cut, _) = texture().cut(&plane, 0, Filter::Nearest).unwrap();
+    for j in 0..16usize {
+        for i in 0..16usize {
+            let v = crop(&vol, o, s, [i as i64, i as i64, j as i64], [1, 1, 1]);
+            assert_eq!(&cut[(j * 16 + i) * 3..][..3], &v[..], "pixel {i},{j}");
+        }
+    }
+    let (tri, _) = t.cut(&plane, 0, Filter::Trilinear).unwrap();
+    assert_eq!(tri, cut, "integer positions interpolate to themselves");
+}
+
+#[test]
+fn levels_of_detail_and_limits() {
+    let t = texture();
+    assert_eq!(t.max_lod(), 2);
+    let (coarse, stats) = t
+        .region(
+            &Region {
+                origin: [0, 0, 0],
+                size: [8, 8, 8],
+            },
+            2,
+        )
+        .unwrap();
+    assert_eq!(coarse.len(), 8 * 8 * 8 * 3);
+    assert_eq!(
+        stats.corrections_per_level[0], 0,
+        "lod 2 must not touch level 0"
+    );
+    assert!(
+        t.region(
+            &Region {
+                origin: [0, 0, 0],
+                size: [8, 8, 8]
+            },
+            3
+        )
+        .is_err()
+    );
+    assert!(
+        t.region(
+            &Region {
+                origin: [0, 0, 0],
+                size: [0, 8, 8]
+            },
+            0
+        )
+        .is_err()
+    );
+    assert!(
+        t.region(
+            &Region {
+                origin: [0, 0, 0],
+                size: [4096, 4096, 2]
+            },
+            0
+        )
+        .is_err()
+    );
+    assert!(t.slice(Axis::Z, 0, 0, 0, 5000, 1, 0).is_err());
+}
+
+#[test]
+fn dual_grid_needs_fewer_voxels_than_standard() {
+    let region = Region {
+        origin: [0, 0, 0],
+        size: [64, 64, 1],
+    };
+    let dual = texture().plan(&region, 0).unwrap();
+    let standard = texture_with(
+        SynthParams {
+            scheme: Scheme::Standard,
+            ..SynthParams::default()
+        },
+        1 << 20,
+    )
+    .plan(&region, 0)
+    .unwrap();
+    let total = |v: &[u64]| v.iter().sum::<u64>();
+    assert!(total(&dual.voxels_per_level) < total(&standard.voxels_per_level));
+    let chain = texture().dependency_chain(&[[0, 0, 0]], 0).unwrap();
+    assert_eq!(chain.len(), 3);
+    assert!(
+        chain[0].0 > 61,
+        "a correction reads at least its 61 neighbours"
+    );
+}
