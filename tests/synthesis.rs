@@ -121,7 +121,7 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
     );
     assert!(warm_stats.tiles_from_cache > 0);
     // A cache too small for one request's tiles evicts constantly.
-    let tiny = texture_with(SynthParams::default(), 64 << 10);
+    let tiny = texture_with(SynthParams::default(), 16 << 10);
     let (evicted, _) = tiny
         .region(
             &Region {
@@ -136,7 +136,7 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
 }
 
 fn tiny_cache_evicted(t: &Texture) -> bool {
-    // Ask again: with a 64 KiB cache the second request must recompute.
+    // Ask again: with a 16 KiB cache the second request must recompute.
     let (_, s) = t
         .region(
             &Region {
