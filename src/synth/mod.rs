@@ -40,10 +40,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Side of the final-version tiles cached per level.
-pub const TILE: i64 = 8;
+pub const TILE: i64 = 4;
 
 /// Most tiles synthesized together in one group (bounds working memory).
-const MAX_GROUP_TILES: usize = 1024;
+const MAX_GROUP_TILES: usize = 8192;
 
 /// One correction step of a level: cells of side M shifted by `offset`,
 /// corrected `passes` times.

@@ -1,9 +1,11 @@
 //! Dependency planning: which voxels of which level and step a request
 //! needs, for both correction schemes.
 
-/// Splits tiles into groups of at most `max` whose bounding boxes are not
-/// much larger than the tiles themselves, so a batch never synthesizes the
-/// empty space between scattered tiles and its working memory is bounded.
+/// Splits tiles into groups whose bounding boxes hold at most `max` tiles:
+/// one group shares its halo of dependencies (large groups waste less), and
+/// its working memory is bounded (the dense working box covers the group's
+/// bounding box). Empty space inside a box costs memory but no synthesis:
+/// only the exact dependency set is computed.
 pub fn group_cells(cells: &[[i64; 3]], max: usize) -> Vec<Vec<[i64; 3]>> {
     let mut out = Vec::new();
     split(cells.to_vec(), max, &mut out);
@@ -18,7 +20,7 @@ fn split(mut cells: Vec<[i64; 3]>, max: usize, out: &mut Vec<Vec<[i64; 3]>>) {
     let hi = [0, 1, 2].map(|a| cells.iter().map(|c| c[a]).max().expect("non-empty"));
     let ext = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
     let volume: i64 = ext.iter().product();
-    if cells.len() == 1 || (volume <= 2 * cells.len() as i64 && cells.len() <= max) {
+    if cells.len() == 1 || volume <= max as i64 {
         out.push(cells);
         return;
     }
