@@ -104,25 +104,37 @@ impl<'a> Corrector<'a> {
         p: [i64; 3],
         s: &mut Scratch,
     ) -> [u32; 3] {
-        let read = |q: [i64; 3]| -> &Work {
-            match barrier {
-                Some((start, cell)) if !cell.contains(q) => start,
-                _ => work,
-            }
-        };
         let r = self.n / 2;
         let h = spacing(self.k) as i64;
+        let strides = work.triples.strides();
+        let centre = work.triples.index(p) as i64;
+        // Offsets along each axis that stay inside the barrier cell (every
+        // offset when there is none); `start` has the same layout as `work`.
+        let (start, inside) = match barrier {
+            Some((start, cell)) => (
+                start,
+                [0, 1, 2].map(|a| (cell.lo[a] - p[a], cell.hi[a] - 1 - p[a])),
+            ),
+            None => (work, [(i64::MIN, i64::MAX); 3]),
+        };
+        let pick = |a: usize, i: i64, b: usize, j: i64| -> &Work {
+            let (la, ha) = inside[a];
+            let (lb, hb) = inside[b];
+            if i >= la && i <= ha && j >= lb && j <= hb {
+                work
+            } else {
+                start
+            }
+        };
         let mut best2d = [0u32; 3];
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             // The voxel's slice neighbourhood in this plane, u outer order
             // matching the exemplar neighbourhoods (v rows, u columns).
             let mut o = 0;
-            let mut q = p;
             for j in -r..=r {
-                q[b] = p[b] + j;
                 for i in -r..=r {
-                    q[a] = p[a] + i;
-                    let c = read(q).colours.get(q);
+                    let idx = (centre + i * strides[a] + j * strides[b]) as usize;
+                    let c = pick(a, i, b, j).colours.data[idx];
                     s.neigh[o..o + 3].copy_from_slice(&c);
                     o += 3;
                 }
@@ -139,12 +151,10 @@ impl<'a> Corrector<'a> {
             // each base pixel once.
             let mut seen = [u32::MAX; 9];
             let mut seen_n = 0;
-            let mut q = p;
             for j in -1..=1i64 {
-                q[b] = p[b] + j;
                 for i in -1..=1i64 {
-                    q[a] = p[a] + i;
-                    let t = read(q).triples.get(q);
+                    let idx = (centre + i * strides[a] + j * strides[b]) as usize;
+                    let t = pick(a, i, b, j).triples.data[idx];
                     let base = self.dims.shift(t[plane], -i * h, -j * h);
                     if seen[..seen_n].contains(&base) {
                         continue;
