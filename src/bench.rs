@@ -38,8 +38,12 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 }
 
 fn fresh(c: &Arc<Candidates>) -> Texture {
-    Texture::new(c.clone(), SynthParams::default(), Arc::new(TileCache::new(2 << 30)))
-        .expect("valid params")
+    Texture::new(
+        c.clone(),
+        SynthParams::default(),
+        Arc::new(TileCache::new(2 << 30)),
+    )
+    .expect("valid params")
 }
 
 /// Runs the suite; `quick` shrinks every size so it finishes in seconds.
@@ -89,8 +93,12 @@ pub fn run(exemplars: &Path, quick: bool) -> anyhow::Result<Vec<Row>> {
     let sides: &[u32] = if quick { &[32] } else { &[256, 512] };
     for &side in sides {
         let tex = fresh(&c);
-        let (cold, stats) = time(1, || tex.slice(Axis::Z, 5, 0, 0, side, side, 0).expect("slice").1);
-        let (warm, _) = time(runs, || tex.slice(Axis::Z, 5, 0, 0, side, side, 0).expect("slice"));
+        let (cold, stats) = time(1, || {
+            tex.slice(Axis::Z, 5, 0, 0, side, side, 0).expect("slice").1
+        });
+        let (warm, _) = time(runs, || {
+            tex.slice(Axis::Z, 5, 0, 0, side, side, 0).expect("slice")
+        });
         rows.push(Row {
             name: format!("axis slice {side}² cold"),
             seconds: cold,
@@ -140,7 +148,9 @@ pub fn run(exemplars: &Path, quick: bool) -> anyhow::Result<Vec<Row>> {
         seconds: warm,
         detail: String::new(),
     });
-    let (s, (rgb, stats)) = time(1, || fresh(&c).points(&[[12345, -678, 91011]], 0).expect("voxel"));
+    let (s, (rgb, stats)) = time(1, || {
+        fresh(&c).points(&[[12345, -678, 91011]], 0).expect("voxel")
+    });
     rows.push(Row {
         name: "single voxel (cold)".into(),
         seconds: s,

@@ -36,6 +36,39 @@ enum Command {
     /// Count voxels and corrections per level for a slice or region, for
     /// the standard and dual-grid schemes, and the single-voxel chain.
     Plan(PlanArgs),
+    /// Time precomputation and synthesis on the shared exemplars.
+    Bench(BenchArgs),
+    /// Score synthesized slices against their exemplar, next to baselines.
+    Eval(EvalArgs),
+}
+
+#[derive(Args)]
+struct EvalArgs {
+    /// Exemplar images to evaluate.
+    #[arg(required = true)]
+    exemplars: Vec<PathBuf>,
+    /// Slice side.
+    #[arg(long, default_value_t = 128)]
+    side: u32,
+    /// Also score the standard scheme.
+    #[arg(long)]
+    standard: bool,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Directory of exemplar PNGs.
+    #[arg(long, default_value = "../shared/exemplars")]
+    exemplars: PathBuf,
+    /// Small sizes only (seconds), for CI.
+    #[arg(long)]
+    quick: bool,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -70,6 +103,9 @@ struct SourceArgs {
     /// Jitter strength (0 disables).
     #[arg(long, default_value_t = 1.0)]
     jitter: f32,
+    /// Subpass block side s (s³ subpasses per pass; 1 disables subpasses).
+    #[arg(long, default_value_t = 2)]
+    subpass_side: u32,
     /// Level of detail (0 = finest).
     #[arg(long, default_value_t = 0)]
     lod: u32,
@@ -219,6 +255,7 @@ fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
         scheme: src.scheme,
         grid: src.grid,
         jitter: src.jitter,
+        subpass_side: src.subpass_side,
         ..SynthParams::default()
     };
     Ok(Texture::new(
@@ -260,6 +297,32 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Inspect(a) => inspect(&a)?,
         Command::Plan(a) => plan(&a)?,
+        Command::Eval(a) => {
+            let mut all = Vec::new();
+            for path in &a.exemplars {
+                let name = path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                let e = Exemplar::open(path)?;
+                let scores = crate::evalcmd::evaluate(&name, &e, a.side, a.standard)?;
+                if !a.json {
+                    crate::evalcmd::print(&scores);
+                }
+                all.extend(scores);
+            }
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&all)?);
+            }
+        }
+        Command::Bench(a) => {
+            let rows = crate::bench::run(&a.exemplars, a.quick)?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&rows)?);
+            } else {
+                crate::bench::print(&rows);
+            }
+        }
         Command::Region(a) => {
             let tex = load_source(&a.src)?;
             let region = Region {
@@ -366,6 +429,28 @@ fn inspect(a: &InspectArgs) -> anyhow::Result<()> {
             dims.w,
             dims.h,
             slab,
+        )?;
+        // The slab seen from the side: the x–z section through the middle
+        // row, each of its N layers drawn 4 pixels tall.
+        let n = c.params().neighbourhood as i64;
+        let y0 = dims.h / 2;
+        let h = 1i64 << k;
+        let mut side = Vec::new();
+        for row in 0..n * 4 {
+            let dz = row / 4 - n / 2;
+            for x in 0..dims.w {
+                let px = y0 * dims.w + x;
+                let t = cands.triples[cands.range(px).start];
+                let t = solidtex::candidates::geometry::offset_triple(dims, t, [0, 0, dz], h);
+                let col = solidtex::synth::correction::colour(&c, k, t);
+                side.extend(col.map(|v| v.round().clamp(0.0, 255.0) as u8));
+            }
+        }
+        write_png(
+            &a.out.join(format!("slab_side_level{k}.png")),
+            dims.w,
+            (n * 4) as u32,
+            side,
         )?;
         let max = errs.iter().cloned().fold(1e-6f32, f32::max);
         let heat: Vec<u8> = errs.iter().flat_map(|&e| heat(e / max)).collect();

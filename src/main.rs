@@ -2,7 +2,9 @@
 //! synthesize regions, slices and volumes, plan dependency sets, evaluate
 //! quality and run benchmarks.
 
+mod bench;
 mod cli;
+mod evalcmd;
 
 use clap::Parser;
 
