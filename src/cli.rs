@@ -36,6 +36,8 @@ enum Command {
     /// Count voxels and corrections per level for a slice or region, for
     /// the standard and dual-grid schemes, and the single-voxel chain.
     Plan(PlanArgs),
+    /// Run the HTTP voxel service.
+    Serve(solidtex::server::ServeArgs),
 }
 
 #[derive(Args)]
@@ -238,6 +240,7 @@ fn write_png(path: &Path, w: u32, h: u32, rgb: Vec<u8>) -> anyhow::Result<()> {
 /// Runs one subcommand.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Serve(a) => return solidtex::server::serve_main(a),
         Command::Precompute(a) => {
             let xy = Exemplar::open(&a.exemplar)?;
             let set = match (&a.yz, &a.zx) {
