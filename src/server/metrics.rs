@@ -230,19 +230,19 @@ impl Collector for CacheCollector {
     fn encode(&self, mut encoder: DescriptorEncoder) -> Result<(), std::fmt::Error> {
         let s = self.cache.stats();
         for (name, help, v) in [
-            ("solidtex_cache_hits", "Tile lookups served from the cache", s.hits),
-            ("solidtex_cache_misses", "Tile lookups that computed the tile", s.misses),
-            ("solidtex_cache_coalesced", "Tile lookups that waited for a concurrent computation", s.coalesced),
-            ("solidtex_cache_evictions", "Tiles evicted to respect the byte bound", s.evictions),
+            ("cache_hits", "Tile lookups served from the cache", s.hits),
+            ("cache_misses", "Tile lookups that computed the tile", s.misses),
+            ("cache_coalesced", "Tile lookups that waited for a concurrent computation", s.coalesced),
+            ("cache_evictions", "Tiles evicted to respect the byte bound", s.evictions),
         ] {
             let c = ConstCounter::new(v);
             let m = encoder.encode_descriptor(name, help, None, c.metric_type())?;
             c.encode(m)?;
         }
         for (name, help, v) in [
-            ("solidtex_cache_bytes", "Bytes of tiles held in the cache", s.bytes as i64),
-            ("solidtex_cache_entries", "Tiles held in the cache", s.entries as i64),
-            ("solidtex_cache_max_bytes", "Byte bound of the cache", self.cache.max_bytes() as i64),
+            ("cache_bytes", "Bytes of tiles held in the cache", s.bytes as i64),
+            ("cache_entries", "Tiles held in the cache", s.entries as i64),
+            ("cache_max_bytes", "Byte bound of the cache", self.cache.max_bytes() as i64),
         ] {
             let g = ConstGauge::new(v);
             let m = encoder.encode_descriptor(name, help, None, g.metric_type())?;
