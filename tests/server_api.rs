@@ -19,21 +19,38 @@ async fn operations_endpoints() {
 
     let (st, _, b) = get(&c, &s.url("/readyz")).await;
     assert_eq!(st, 200);
-    assert_eq!(serde_json::from_slice::<Value>(&b).unwrap()["status"], "ready");
+    assert_eq!(
+        serde_json::from_slice::<Value>(&b).unwrap()["status"],
+        "ready"
+    );
 
     let (st, h, b) = get(&c, &s.url("/openapi.yaml")).await;
     assert_eq!(st, 200);
-    assert!(h["content-type"].to_str().unwrap().starts_with("application/yaml"));
+    assert!(
+        h["content-type"]
+            .to_str()
+            .unwrap()
+            .starts_with("application/yaml")
+    );
     assert!(String::from_utf8(b).unwrap().starts_with("openapi: 3."));
 
     let (st, _, b) = get(&c, &s.url("/v1/textures")).await;
     assert_eq!(st, 200);
-    assert_eq!(serde_json::from_slice::<Value>(&b).unwrap()["textures"], serde_json::json!([]));
+    assert_eq!(
+        serde_json::from_slice::<Value>(&b).unwrap()["textures"],
+        serde_json::json!([])
+    );
 
     let text = metrics(&c, &s).await;
-    assert!(text.contains("# TYPE solidtex_http_requests counter"), "{text}");
+    assert!(
+        text.contains("# TYPE solidtex_http_requests counter"),
+        "{text}"
+    );
     assert_eq!(
-        metric(&text, r#"solidtex_http_requests_total{route="/healthz",method="GET",status="200"}"#),
+        metric(
+            &text,
+            r#"solidtex_http_requests_total{route="/healthz",method="GET",status="200"}"#
+        ),
         1.0
     );
     for name in [
@@ -75,7 +92,10 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     assert_eq!(location, format!("/v1/textures/{id}"));
     assert_eq!(v["status"], "pending");
     assert_eq!(v["params"]["levels"], 3);
-    assert_eq!(v["exemplar"], serde_json::json!({"width": 32, "height": 32, "planes": 1}));
+    assert_eq!(
+        v["exemplar"],
+        serde_json::json!({"width": 32, "height": 32, "planes": 1})
+    );
 
     let ready = wait_ready(&c, &s, &id).await;
     assert_eq!(ready["progress"], 1.0);
@@ -106,15 +126,29 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     assert_eq!(st, 202);
     assert_ne!(v["id"], id.as_str());
 
-    let list: Value = c.get(s.url("/v1/textures")).send().await.unwrap().json().await.unwrap();
-    let ids: Vec<&str> = list["textures"].as_array().unwrap().iter().map(|t| t["id"].as_str().unwrap()).collect();
+    let list: Value = c
+        .get(s.url("/v1/textures"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let ids: Vec<&str> = list["textures"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["id"].as_str().unwrap())
+        .collect();
     assert!(ids.contains(&id.as_str()));
     assert_eq!(ids.len(), 2);
 
     // A region: the reference all other routes are checked against.
     let (x0, y0, z0) = (-5i64, 7i64, 3i64);
     let (w, h, d) = (12u32, 10u32, 6u32);
-    let url = s.url(&format!("/v1/textures/{id}/region.raw?x={x0}&y={y0}&z={z0}&w={w}&h={h}&d={d}"));
+    let url = s.url(&format!(
+        "/v1/textures/{id}/region.raw?x={x0}&y={y0}&z={z0}&w={w}&h={h}&d={d}"
+    ));
     let (st, hd, region) = get(&c, &url).await;
     assert_eq!(st, 200);
     assert_eq!(hd["content-type"], "application/octet-stream");
@@ -136,38 +170,72 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     };
 
     // Slices: z → (u, v) = (x, y); x → (y, z); y → (z, x).
-    let (st, hd, z_png) = get(&c, &s.url(&format!("/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}", z0 + 2))).await;
+    let (st, hd, z_png) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}",
+            z0 + 2
+        )),
+    )
+    .await;
     assert_eq!(st, 200);
     assert_eq!(hd["content-type"], "image/png");
     let (pw, ph, z_rgb) = decode_png(&z_png);
     assert_eq!((pw, ph), (w, h));
     for j in 0..h as usize {
         for i in 0..w as usize {
-            assert_eq!(pixel(&z_rgb, w, i, j), voxel(x0 + i as i64, y0 + j as i64, z0 + 2));
+            assert_eq!(
+                pixel(&z_rgb, w, i, j),
+                voxel(x0 + i as i64, y0 + j as i64, z0 + 2)
+            );
         }
     }
-    let (st, _, x_png) = get(&c, &s.url(&format!("/v1/textures/{id}/slices/x/{}.png?u0={y0}&v0={z0}&w={h}&h={d}", x0 + 4))).await;
+    let (st, _, x_png) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/slices/x/{}.png?u0={y0}&v0={z0}&w={h}&h={d}",
+            x0 + 4
+        )),
+    )
+    .await;
     assert_eq!(st, 200);
     let (_, _, x_rgb) = decode_png(&x_png);
     for j in 0..d as usize {
         for i in 0..h as usize {
-            assert_eq!(pixel(&x_rgb, h, i, j), voxel(x0 + 4, y0 + i as i64, z0 + j as i64));
+            assert_eq!(
+                pixel(&x_rgb, h, i, j),
+                voxel(x0 + 4, y0 + i as i64, z0 + j as i64)
+            );
         }
     }
-    let (st, _, y_png) = get(&c, &s.url(&format!("/v1/textures/{id}/slices/y/{}.png?u0={z0}&v0={x0}&w={d}&h={w}", y0 + 1))).await;
+    let (st, _, y_png) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/slices/y/{}.png?u0={z0}&v0={x0}&w={d}&h={w}",
+            y0 + 1
+        )),
+    )
+    .await;
     assert_eq!(st, 200);
     let (_, _, y_rgb) = decode_png(&y_png);
     for j in 0..w as usize {
         for i in 0..d as usize {
-            assert_eq!(pixel(&y_rgb, d, i, j), voxel(x0 + j as i64, y0 + 1, z0 + i as i64));
+            assert_eq!(
+                pixel(&y_rgb, d, i, j),
+                voxel(x0 + j as i64, y0 + 1, z0 + i as i64)
+            );
         }
     }
 
     // An axis-aligned cut with integer steps is the z slice.
-    let (st, _, cut_png) = get(&c, &s.url(&format!(
-        "/v1/textures/{id}/cut.png?origin={x0},{y0},{}&u=1,0,0&v=0,1,0&w={w}&h={h}",
-        z0 + 2
-    ))).await;
+    let (st, _, cut_png) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/cut.png?origin={x0},{y0},{}&u=1,0,0&v=0,1,0&w={w}&h={h}",
+            z0 + 2
+        )),
+    )
+    .await;
     assert_eq!(st, 200);
     assert_eq!(decode_png(&cut_png).2, z_rgb);
     // An oblique trilinear cut has the asked size.
@@ -176,41 +244,89 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     assert_eq!(decode_png(&obl).0, 9);
 
     // A brick is the aligned region of edge 16.
-    let (st, hd, brick) = get(&c, &s.url(&format!("/v1/textures/{id}/bricks/0/-1_0_2.raw"))).await;
+    let (st, hd, brick) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/bricks/0/-1_0_2.raw")),
+    )
+    .await;
     assert_eq!(st, 200);
     assert_eq!(hd["x-solidtex-origin"], "-16,0,32");
     assert_eq!(brick.len(), 16 * 16 * 16 * 3);
-    let (_, _, same) = get(&c, &s.url(&format!("/v1/textures/{id}/region.raw?x=-16&y=0&z=32&w=16&h=16&d=16"))).await;
+    let (_, _, same) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/region.raw?x=-16&y=0&z=32&w=16&h=16&d=16"
+        )),
+    )
+    .await;
     assert_eq!(brick, same);
 
     // Coarser levels of detail.
     for lod in 1..=max_lod {
-        let (st, _, b) = get(&c, &s.url(&format!("/v1/textures/{id}/bricks/{lod}/0_0_0.raw"))).await;
+        let (st, _, b) = get(
+            &c,
+            &s.url(&format!("/v1/textures/{id}/bricks/{lod}/0_0_0.raw")),
+        )
+        .await;
         assert_eq!(st, 200);
         assert_eq!(b.len(), 16 * 16 * 16 * 3);
-        let (st, _, p) = get(&c, &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=8&h=8&lod={lod}"))).await;
+        let (st, _, p) = get(
+            &c,
+            &s.url(&format!(
+                "/v1/textures/{id}/slices/z/0.png?w=8&h=8&lod={lod}"
+            )),
+        )
+        .await;
         assert_eq!(st, 200);
         assert_eq!(decode_png(&p).0, 8);
     }
 
     // ETag and 304.
-    let slice_url = s.url(&format!("/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}", z0 + 2));
+    let slice_url = s.url(&format!(
+        "/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}",
+        z0 + 2
+    ));
     let (_, h1, b1) = get(&c, &slice_url).await;
     let tag = h1["etag"].to_str().unwrap().to_string();
     assert!(tag.starts_with('"') && tag.ends_with('"') && !tag.starts_with("W/"));
     assert_eq!(b1, z_png, "same request, same bytes");
-    let r = c.get(&slice_url).header("if-none-match", &tag).send().await.unwrap();
+    let r = c
+        .get(&slice_url)
+        .header("if-none-match", &tag)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status().as_u16(), 304);
     assert_eq!(r.headers()["etag"].to_str().unwrap(), tag);
-    assert_eq!(r.headers()["cache-control"], "public, max-age=31536000, immutable");
+    assert_eq!(
+        r.headers()["cache-control"],
+        "public, max-age=31536000, immutable"
+    );
     assert!(r.bytes().await.unwrap().is_empty());
-    let r = c.get(&slice_url).header("if-none-match", "\"other\"").send().await.unwrap();
+    let r = c
+        .get(&slice_url)
+        .header("if-none-match", "\"other\"")
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status().as_u16(), 200);
-    let (_, h2, _) = get(&c, &s.url(&format!("/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}", z0 + 3))).await;
+    let (_, h2, _) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}",
+            z0 + 3
+        )),
+    )
+    .await;
     assert_ne!(h2["etag"], tag.as_str());
     let brick_url = s.url(&format!("/v1/textures/{id}/bricks/0/-1_0_2.raw"));
     let (_, hb, _) = get(&c, &brick_url).await;
-    let r = c.get(&brick_url).header("if-none-match", hb["etag"].to_str().unwrap()).send().await.unwrap();
+    let r = c
+        .get(&brick_url)
+        .header("if-none-match", hb["etag"].to_str().unwrap())
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status().as_u16(), 304);
 
     // Metrics saw the synthesis.
@@ -221,12 +337,20 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     assert_eq!(metric(&text, "solidtex_jobs_running"), 0.0);
 
     // Delete: gone, files gone, second delete 404.
-    let r = c.delete(s.url(&format!("/v1/textures/{id}"))).send().await.unwrap();
+    let r = c
+        .delete(s.url(&format!("/v1/textures/{id}")))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status().as_u16(), 204);
     assert!(!dir.path().join("textures").join(&id).exists());
     let (st, hd, b) = get(&c, &s.url(&format!("/v1/textures/{id}"))).await;
     assert_error(st, &hd, &b, 404, "unknown_texture");
-    let r = c.delete(s.url(&format!("/v1/textures/{id}"))).send().await.unwrap();
+    let r = c
+        .delete(s.url(&format!("/v1/textures/{id}")))
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status().as_u16(), 404);
     s.stop().await;
 }
@@ -236,14 +360,24 @@ async fn multipart_uploads() {
     let dir = tempfile::tempdir().unwrap();
     let s = TestServer::start(test_args(dir.path())).await;
     let c = client();
-    let part = |b: Vec<u8>| reqwest::multipart::Part::bytes(b).file_name("e.png").mime_str("image/png").unwrap();
+    let part = |b: Vec<u8>| {
+        reqwest::multipart::Part::bytes(b)
+            .file_name("e.png")
+            .mime_str("image/png")
+            .unwrap()
+    };
 
     let form = reqwest::multipart::Form::new()
         .part("xy", part(exemplar_png(32, 1)))
         .part("yz", part(exemplar_png(32, 2)))
         .part("zx", part(exemplar_png(32, 3)))
         .text("params", r#"{"levels": 3, "seed": 5}"#);
-    let r = c.post(s.url("/v1/textures")).multipart(form).send().await.unwrap();
+    let r = c
+        .post(s.url("/v1/textures"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status().as_u16(), 202);
     let v: Value = r.json().await.unwrap();
     assert_eq!(v["exemplar"]["planes"], 3);
@@ -251,7 +385,11 @@ async fn multipart_uploads() {
     let id = v["id"].as_str().unwrap().to_string();
     let ready = wait_ready(&c, &s, &id).await;
     assert_eq!(ready["status"], "ready");
-    let (st, _, b) = get(&c, &s.url(&format!("/v1/textures/{id}/slices/y/0.png?w=8&h=8&lod=1"))).await;
+    let (st, _, b) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/y/0.png?w=8&h=8&lod=1")),
+    )
+    .await;
     assert_eq!(st, 200);
     assert_eq!(decode_png(&b).0, 8);
 
@@ -259,7 +397,12 @@ async fn multipart_uploads() {
     let form = reqwest::multipart::Form::new()
         .part("image", part(exemplar_png(32, 4)))
         .text("params", r#"{"levels": 3}"#);
-    let r = c.post(s.url("/v1/textures")).multipart(form).send().await.unwrap();
+    let r = c
+        .post(s.url("/v1/textures"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status().as_u16(), 202);
     let v: Value = r.json().await.unwrap();
     let (_, raw) = upload(&c, &s, exemplar_png(32, 4), "levels=3").await;
@@ -267,7 +410,11 @@ async fn multipart_uploads() {
 
     // Form errors.
     let cases: Vec<(reqwest::multipart::Form, u16, &str)> = vec![
-        (reqwest::multipart::Form::new().text("params", "{}"), 400, "missing_exemplar"),
+        (
+            reqwest::multipart::Form::new().text("params", "{}"),
+            400,
+            "missing_exemplar",
+        ),
         (
             reqwest::multipart::Form::new()
                 .part("xy", part(exemplar_png(32, 1)))
@@ -284,17 +431,23 @@ async fn multipart_uploads() {
             "size_mismatch",
         ),
         (
-            reqwest::multipart::Form::new().part("image", part(exemplar_png(32, 1))).text("params", "{nope"),
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 1)))
+                .text("params", "{nope"),
             400,
             "invalid_params",
         ),
         (
-            reqwest::multipart::Form::new().part("image", part(exemplar_png(32, 1))).text("params", r#"{"passes": 100}"#),
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 1)))
+                .text("params", r#"{"passes": 100}"#),
             400,
             "out_of_range",
         ),
         (
-            reqwest::multipart::Form::new().part("image", part(exemplar_png(32, 1))).text("colour", "red"),
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 1)))
+                .text("colour", "red"),
             400,
             "invalid_request",
         ),
@@ -305,7 +458,12 @@ async fn multipart_uploads() {
         ),
     ];
     for (form, status, code) in cases {
-        let r = c.post(s.url("/v1/textures")).multipart(form).send().await.unwrap();
+        let r = c
+            .post(s.url("/v1/textures"))
+            .multipart(form)
+            .send()
+            .await
+            .unwrap();
         let st = r.status().as_u16();
         let h = r.headers().clone();
         let b = r.bytes().await.unwrap();
@@ -349,9 +507,21 @@ async fn every_error_class_is_json() {
 
     let cases: Vec<(String, u16, &str)> = vec![
         // Unknown texture and routes.
-        (s.url("/v1/textures/0123456789abcdef0123456789abcdef"), 404, "unknown_texture"),
-        (s.url("/v1/textures/nope/slices/z/0.png"), 404, "unknown_texture"),
-        (s.url("/v1/textures/nope/bricks/0/0_0_0.raw"), 404, "unknown_texture"),
+        (
+            s.url("/v1/textures/0123456789abcdef0123456789abcdef"),
+            404,
+            "unknown_texture",
+        ),
+        (
+            s.url("/v1/textures/nope/slices/z/0.png"),
+            404,
+            "unknown_texture",
+        ),
+        (
+            s.url("/v1/textures/nope/bricks/0/0_0_0.raw"),
+            404,
+            "unknown_texture",
+        ),
         (s.url("/v1/nothing"), 404, "no_route"),
         (t("/slices/z/0.jpg"), 404, "no_route"),
         (t("/bricks/0/0_0_0.bin"), 404, "no_route"),
@@ -362,7 +532,11 @@ async fn every_error_class_is_json() {
         (t("/slices/z/0.png?w=8.5"), 400, "invalid_parameter"),
         (t("/slices/z/0.png?w=8&w=9"), 400, "invalid_parameter"),
         (t("/slices/z/2147483649.png"), 400, "out_of_range"),
-        (t("/slices/z/99999999999999999999999.png"), 400, "out_of_range"),
+        (
+            t("/slices/z/99999999999999999999999.png"),
+            400,
+            "out_of_range",
+        ),
         (t("/slices/z/0.png?u0=2147483647&w=8"), 400, "out_of_range"),
         (t("/slices/z/0.png?lod=3"), 400, "out_of_range"),
         (t("/slices/z/0.png?lod=-1"), 400, "out_of_range"),
@@ -370,7 +544,11 @@ async fn every_error_class_is_json() {
         (t("/cut.png?u=a,b,c"), 400, "invalid_parameter"),
         (t("/cut.png?u=inf,0,0"), 400, "invalid_parameter"),
         (t("/cut.png?filter=cubic"), 400, "invalid_parameter"),
-        (t("/cut.png?origin=2147483000,0,0&u=1000,0,0&w=4&h=4"), 400, "out_of_range"),
+        (
+            t("/cut.png?origin=2147483000,0,0&u=1000,0,0&w=4&h=4"),
+            400,
+            "out_of_range",
+        ),
         (t("/region.raw?x=zero"), 400, "invalid_parameter"),
         (t("/bricks/x/0_0_0.raw"), 400, "invalid_parameter"),
         (t("/bricks/0/0_0.raw"), 400, "invalid_parameter"),
@@ -414,22 +592,84 @@ async fn every_error_class_is_json() {
         let rgb = vec![9u8; 600 * 16 * 3];
         encode_png(600, 16, &rgb)
     };
-    let cases: Vec<(Vec<u8>, Option<&str>, &str, u16, &str)> = vec![
-        (b"GIF89a not really".to_vec(), Some("image/png"), "", 400, "malformed_image"),
-        (exemplar_png(32, 1)[..60].to_vec(), Some("image/png"), "", 400, "malformed_image"),
+    // (body, content type, query, status, code)
+    type UploadCase<'a> = (Vec<u8>, Option<&'a str>, &'a str, u16, &'a str);
+    let cases: Vec<UploadCase> = vec![
+        (
+            b"GIF89a not really".to_vec(),
+            Some("image/png"),
+            "",
+            400,
+            "malformed_image",
+        ),
+        (
+            exemplar_png(32, 1)[..60].to_vec(),
+            Some("image/png"),
+            "",
+            400,
+            "malformed_image",
+        ),
         (Vec::new(), Some("image/png"), "", 400, "malformed_image"),
         (tiny, Some("image/png"), "", 400, "image_size"),
         (huge_side, Some("image/png"), "", 400, "image_size"),
         (bomb_png(), Some("image/png"), "", 400, "image_size"),
-        (exemplar_png(32, 1), Some("text/plain"), "", 415, "unsupported_media_type"),
-        (exemplar_png(32, 1), Some("application/json"), "", 415, "unsupported_media_type"),
+        (
+            exemplar_png(32, 1),
+            Some("text/plain"),
+            "",
+            415,
+            "unsupported_media_type",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("application/json"),
+            "",
+            415,
+            "unsupported_media_type",
+        ),
         (exemplar_png(32, 1), None, "", 415, "unsupported_media_type"),
-        (vec![0u8; 300 << 10], Some("image/png"), "", 413, "payload_too_large"),
-        (exemplar_png(32, 1), Some("image/png"), "?sed=4", 400, "invalid_params"),
-        (exemplar_png(32, 1), Some("image/png"), "?seed=-4", 400, "invalid_params"),
-        (exemplar_png(32, 1), Some("image/png"), "?jitter=9", 400, "out_of_range"),
-        (exemplar_png(32, 1), Some("image/png"), "?scheme=fancy", 400, "invalid_params"),
-        (exemplar_png(32, 1), Some("multipart/form-data"), "", 400, "malformed_multipart"),
+        (
+            vec![0u8; 300 << 10],
+            Some("image/png"),
+            "",
+            413,
+            "payload_too_large",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("image/png"),
+            "?sed=4",
+            400,
+            "invalid_params",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("image/png"),
+            "?seed=-4",
+            400,
+            "invalid_params",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("image/png"),
+            "?jitter=9",
+            400,
+            "out_of_range",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("image/png"),
+            "?scheme=fancy",
+            400,
+            "invalid_params",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("multipart/form-data"),
+            "",
+            400,
+            "malformed_multipart",
+        ),
     ];
     for (body, ct, query, status, code) in cases {
         let r = post(body, ct, query).await.unwrap();
@@ -445,7 +685,11 @@ async fn every_error_class_is_json() {
     let (st, b) = upload(&c, &s, exemplar_png(32, 21), SMALL_PARAMS).await;
     assert_eq!(st, 202);
     let pending = b["id"].as_str().unwrap();
-    let (st, h, body) = get(&c, &s.url(&format!("/v1/textures/{pending}/slices/z/0.png?w=4&h=4"))).await;
+    let (st, h, body) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{pending}/slices/z/0.png?w=4&h=4")),
+    )
+    .await;
     assert_error(st, &h, &body, 409, "texture_pending");
     assert_eq!(h["retry-after"], "1");
     wait_ready(&c, &s, a["id"].as_str().unwrap()).await;
@@ -453,7 +697,12 @@ async fn every_error_class_is_json() {
 
     // Nothing above was a server error.
     let text = metrics(&c, &s).await;
-    assert!(!text.lines().any(|l| l.starts_with("solidtex_http_requests_total") && l.contains("status=\"5")), "{text}");
+    assert!(
+        !text
+            .lines()
+            .any(|l| l.starts_with("solidtex_http_requests_total") && l.contains("status=\"5")),
+        "{text}"
+    );
     s.stop().await;
 }
 
@@ -463,7 +712,10 @@ async fn cors_headers() {
     let s = TestServer::start(test_args(dir.path())).await;
     let c = client();
     let r = c
-        .request(reqwest::Method::OPTIONS, s.url("/v1/textures/default/slices/z/0.png"))
+        .request(
+            reqwest::Method::OPTIONS,
+            s.url("/v1/textures/default/slices/z/0.png"),
+        )
         .header("origin", "https://viewer.example")
         .header("access-control-request-method", "GET")
         .header("access-control-request-headers", "if-none-match")
@@ -472,15 +724,33 @@ async fn cors_headers() {
         .unwrap();
     assert!(r.status().is_success(), "{}", r.status());
     assert_eq!(r.headers()["access-control-allow-origin"], "*");
-    assert!(r.headers()["access-control-allow-methods"].to_str().unwrap().contains("GET"));
-    let r = c.get(s.url("/healthz")).header("origin", "https://viewer.example").send().await.unwrap();
+    assert!(
+        r.headers()["access-control-allow-methods"]
+            .to_str()
+            .unwrap()
+            .contains("GET")
+    );
+    let r = c
+        .get(s.url("/healthz"))
+        .header("origin", "https://viewer.example")
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.headers()["access-control-allow-origin"], "*");
-    let exposed = r.headers()["access-control-expose-headers"].to_str().unwrap().to_string();
+    let exposed = r.headers()["access-control-expose-headers"]
+        .to_str()
+        .unwrap()
+        .to_string();
     for h in ["etag", "retry-after", "x-solidtex-width"] {
         assert!(exposed.contains(h), "{exposed}");
     }
     // Errors carry CORS headers too.
-    let r = c.get(s.url("/nope")).header("origin", "https://viewer.example").send().await.unwrap();
+    let r = c
+        .get(s.url("/nope"))
+        .header("origin", "https://viewer.example")
+        .send()
+        .await
+        .unwrap();
     assert_eq!(r.status().as_u16(), 404);
     assert_eq!(r.headers()["access-control-allow-origin"], "*");
     s.stop().await;
@@ -499,7 +769,11 @@ async fn full_queue_answers_503_with_retry_after() {
     let mut tasks = Vec::new();
     for i in 0..8 {
         let c = c.clone();
-        let url = s.url(&format!("/v1/textures/{id}/bricks/0/{}_{}_0.raw", i * 7, i * 3));
+        let url = s.url(&format!(
+            "/v1/textures/{id}/bricks/0/{}_{}_0.raw",
+            i * 7,
+            i * 3
+        ));
         tasks.push(tokio::spawn(async move {
             let r = c.get(url).send().await.unwrap();
             let st = r.status().as_u16();
@@ -523,7 +797,10 @@ async fn full_queue_answers_503_with_retry_after() {
     }
     assert!(ok >= 1 && refused >= 1, "ok {ok}, refused {refused}");
     let text = metrics(&c, &s).await;
-    assert_eq!(metric(&text, "solidtex_jobs_rejected_total"), refused as f64);
+    assert_eq!(
+        metric(&text, "solidtex_jobs_rejected_total"),
+        refused as f64
+    );
     // The server is still fine afterwards.
     let (st, _, _) = get(&c, &s.url(&format!("/v1/textures/{id}/bricks/0/0_0_0.raw"))).await;
     assert_eq!(st, 200);

@@ -22,7 +22,11 @@ fn sample_paths(id: &str) -> Vec<String> {
     ]
 }
 
-async fn fetch_all(c: &reqwest::Client, s: &TestServer, paths: &[String]) -> Vec<(Vec<u8>, String)> {
+async fn fetch_all(
+    c: &reqwest::Client,
+    s: &TestServer,
+    paths: &[String],
+) -> Vec<(Vec<u8>, String)> {
     let mut out = Vec::new();
     for p in paths {
         let (st, h, b) = get(c, &s.url(p)).await;
@@ -39,20 +43,41 @@ async fn restart_serves_identical_bytes_without_recomputing() {
     let s = TestServer::start(test_args(dir.path())).await;
     let id = ready_texture(&c, &s, 11).await;
     let before = fetch_all(&c, &s, &sample_paths(&id)).await;
-    let meta_before: Value = c.get(s.url(&format!("/v1/textures/{id}"))).send().await.unwrap().json().await.unwrap();
+    let meta_before: Value = c
+        .get(s.url(&format!("/v1/textures/{id}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
     s.stop().await;
 
     let s = TestServer::start(test_args(dir.path())).await;
     // Ready from the first request on: no precompute ran.
-    let meta: Value = c.get(s.url(&format!("/v1/textures/{id}"))).send().await.unwrap().json().await.unwrap();
+    let meta: Value = c
+        .get(s.url(&format!("/v1/textures/{id}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
     assert_eq!(meta["status"], "ready");
     assert_eq!(meta["params"], meta_before["params"]);
     assert_eq!(meta["created"], meta_before["created"]);
     let after = fetch_all(&c, &s, &sample_paths(&id)).await;
     assert_eq!(before, after, "bytes and ETags survive a restart");
     let text = metrics(&c, &s).await;
-    assert_eq!(metric(&text, r#"solidtex_precomputes_total{outcome="ok"}"#), 0.0, "{text}");
-    assert_eq!(metric(&text, "solidtex_precompute_duration_seconds_count"), 0.0);
+    assert_eq!(
+        metric(&text, r#"solidtex_precomputes_total{outcome="ok"}"#),
+        0.0,
+        "{text}"
+    );
+    assert_eq!(
+        metric(&text, "solidtex_precompute_duration_seconds_count"),
+        0.0
+    );
     assert_eq!(metric(&text, "solidtex_textures_loaded_total"), 1.0);
     // Uploading it again is known at once.
     let (st, v) = upload(&c, &s, exemplar_png(32, 11), SMALL_PARAMS).await;
@@ -111,11 +136,22 @@ async fn interrupted_or_damaged_precomputes_are_redone() {
     assert_eq!(fetch_all(&c, &s, &sample_paths(&a)).await, ref_a);
     assert_eq!(fetch_all(&c, &s, &sample_paths(&b)).await, ref_b);
     let text = metrics(&c, &s).await;
-    assert_eq!(metric(&text, r#"solidtex_precomputes_total{outcome="ok"}"#), 2.0, "{text}");
+    assert_eq!(
+        metric(&text, r#"solidtex_precomputes_total{outcome="ok"}"#),
+        2.0,
+        "{text}"
+    );
     assert_eq!(metric(&text, "solidtex_textures_loaded_total"), 0.0);
 
     // The failed one says why, and voxel requests get 409.
-    let v: Value = c.get(s.url(&format!("/v1/textures/{f}"))).send().await.unwrap().json().await.unwrap();
+    let v: Value = c
+        .get(s.url(&format!("/v1/textures/{f}")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
     assert_eq!(v["status"], "failed");
     assert_eq!(v["reason"], "out of memory");
     let (st, h, body) = get(&c, &s.url(&sample_paths(&f)[0])).await;
@@ -129,7 +165,11 @@ async fn interrupted_or_damaged_precomputes_are_redone() {
     // Everything persisted: a third start loads all three.
     let s = TestServer::start(test_args(dir.path())).await;
     let text = metrics(&c, &s).await;
-    assert_eq!(metric(&text, "solidtex_textures_loaded_total"), 3.0, "{text}");
+    assert_eq!(
+        metric(&text, "solidtex_textures_loaded_total"),
+        3.0,
+        "{text}"
+    );
     s.stop().await;
 }
 
@@ -142,8 +182,14 @@ async fn concurrent_clients_match_a_sequential_client() {
     // Overlapping slices and bricks at two levels of detail.
     let mut paths = Vec::new();
     for k in 0..4i64 {
-        paths.push(format!("/v1/textures/{id}/slices/z/{k}.png?u0={}&v0=-3&w=20&h=16", k * 5));
-        paths.push(format!("/v1/textures/{id}/slices/y/{}.png?w=16&h=16&lod=1", k * 3));
+        paths.push(format!(
+            "/v1/textures/{id}/slices/z/{k}.png?u0={}&v0=-3&w=20&h=16",
+            k * 5
+        ));
+        paths.push(format!(
+            "/v1/textures/{id}/slices/y/{}.png?w=16&h=16&lod=1",
+            k * 3
+        ));
         paths.push(format!("/v1/textures/{id}/bricks/0/{}_0_0.raw", k - 1));
         paths.push(format!("/v1/textures/{id}/bricks/1/0_{}_0.raw", k - 2));
     }
@@ -174,7 +220,11 @@ async fn concurrent_clients_match_a_sequential_client() {
     for t in tasks {
         let got = t.await.unwrap();
         for (i, bytes) in got.iter().enumerate() {
-            assert!(bytes == &reference[i].0, "client result differs for {}", paths[i]);
+            assert!(
+                bytes == &reference[i].0,
+                "client result differs for {}",
+                paths[i]
+            );
         }
     }
     let text = metrics(&c, &s).await;
@@ -211,7 +261,14 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
     let c = client();
 
     // The bundled exemplar is registered at start.
-    let v: Value = c.get(format!("{base}/v1/textures/default")).send().await.unwrap().json().await.unwrap();
+    let v: Value = c
+        .get(format!("{base}/v1/textures/default"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
     assert_eq!(v["id"], "default");
     assert_eq!(v["exemplar"]["width"], 128);
     assert_eq!(v["brick_size"], 48, "configured from the environment");
@@ -228,10 +285,20 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
         .send()
         .await
         .unwrap();
-    let id = r.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
     let t0 = Instant::now();
     loop {
-        let v: Value = c.get(format!("{base}/v1/textures/{id}")).send().await.unwrap().json().await.unwrap();
+        let v: Value = c
+            .get(format!("{base}/v1/textures/{id}"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
         if v["status"] == "ready" {
             break;
         }
@@ -261,7 +328,10 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
         if let Some(st) = child.try_wait().unwrap() {
             break st;
         }
-        assert!(t0.elapsed() < Duration::from_secs(30), "server did not exit");
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "server did not exit"
+        );
         tokio::time::sleep(Duration::from_millis(20)).await;
     };
     assert!(status.success(), "exit status {status}");

@@ -12,7 +12,9 @@ use std::collections::BTreeSet;
 use tower::ServiceExt;
 
 const DOC: &str = include_str!("../openapi.yaml");
-const METHODS: [&str; 8] = ["get", "put", "post", "delete", "options", "head", "patch", "trace"];
+const METHODS: [&str; 8] = [
+    "get", "put", "post", "delete", "options", "head", "patch", "trace",
+];
 
 fn doc_routes() -> BTreeSet<(String, String)> {
     let v: serde_yaml_ng::Value = serde_yaml_ng::from_str(DOC).unwrap();
@@ -38,8 +40,14 @@ fn document_is_openapi_3() {
     for (path, item) in &api.paths.paths {
         let item = item.as_item().expect("inline path items");
         for (method, op) in item.iter() {
-            assert!(op.operation_id.is_some(), "{method} {path} has no operationId");
-            assert!(op.responses.default.is_some(), "{method} {path} has no default error");
+            assert!(
+                op.operation_id.is_some(),
+                "{method} {path} has no operationId"
+            );
+            assert!(
+                op.responses.default.is_some(),
+                "{method} {path} has no default error"
+            );
             assert!(!op.responses.responses.is_empty(), "{method} {path}");
         }
     }
@@ -93,7 +101,9 @@ fn instantiate(path: &str) -> String {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn router_serves_every_documented_route() {
     let dir = tempfile::tempdir().unwrap();
-    let server = Server::bind(&server_support::test_args(dir.path())).await.unwrap();
+    let server = Server::bind(&server_support::test_args(dir.path()))
+        .await
+        .unwrap();
     let app = router(server.state());
     let codes_of = |body: &[u8]| -> String {
         serde_json::from_slice::<Value>(body)
@@ -111,7 +121,9 @@ async fn router_serves_every_documented_route() {
             .unwrap();
         let res = app.clone().oneshot(req).await.unwrap();
         let status = res.status();
-        let body = axum::body::to_bytes(res.into_body(), 1 << 20).await.unwrap();
+        let body = axum::body::to_bytes(res.into_body(), 1 << 20)
+            .await
+            .unwrap();
         let code = codes_of(&body);
         assert!(
             code != "no_route" && code != "method_not_allowed",
@@ -122,7 +134,9 @@ async fn router_serves_every_documented_route() {
     for uri in ["/v1/texture", "/v1/textures/x/slices", "/v2/textures"] {
         let req = Request::builder().uri(uri).body(Body::empty()).unwrap();
         let res = app.clone().oneshot(req).await.unwrap();
-        let body = axum::body::to_bytes(res.into_body(), 1 << 20).await.unwrap();
+        let body = axum::body::to_bytes(res.into_body(), 1 << 20)
+            .await
+            .unwrap();
         assert_eq!(codes_of(&body), "no_route", "{uri}");
     }
 }
@@ -130,11 +144,18 @@ async fn router_serves_every_documented_route() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn served_document_is_the_file() {
     let dir = tempfile::tempdir().unwrap();
-    let server = Server::bind(&server_support::test_args(dir.path())).await.unwrap();
+    let server = Server::bind(&server_support::test_args(dir.path()))
+        .await
+        .unwrap();
     let app = router(server.state());
-    let req = Request::builder().uri("/openapi.yaml").body(Body::empty()).unwrap();
+    let req = Request::builder()
+        .uri("/openapi.yaml")
+        .body(Body::empty())
+        .unwrap();
     let res = app.oneshot(req).await.unwrap();
     assert_eq!(res.status(), 200);
-    let body = axum::body::to_bytes(res.into_body(), 1 << 20).await.unwrap();
+    let body = axum::body::to_bytes(res.into_body(), 1 << 20)
+        .await
+        .unwrap();
     assert_eq!(body, DOC.as_bytes());
 }

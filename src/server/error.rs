@@ -51,7 +51,12 @@ impl ApiError {
     }
 
     /// 400: a parameter lies outside its documented range.
-    pub fn out_of_range(name: &str, value: impl std::fmt::Display, min: impl std::fmt::Display, max: impl std::fmt::Display) -> Self {
+    pub fn out_of_range(
+        name: &str,
+        value: impl std::fmt::Display,
+        min: impl std::fmt::Display,
+        max: impl std::fmt::Display,
+    ) -> Self {
         Self::new(
             StatusCode::BAD_REQUEST,
             "out_of_range",
@@ -91,7 +96,13 @@ impl ApiError {
 
 impl std::fmt::Display for ApiError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} {}: {}", self.status.as_u16(), self.code, self.message)
+        write!(
+            f,
+            "{} {}: {}",
+            self.status.as_u16(),
+            self.code,
+            self.message
+        )
     }
 }
 
@@ -190,7 +201,10 @@ pub async fn json_errors(req: axum::extract::Request, next: axum::middleware::Ne
         header::CONTENT_TYPE,
         HeaderValue::from_static("application/json"),
     );
-    Response::from_parts(parts, Body::from(error_body(code_for_status(status), &message)))
+    Response::from_parts(
+        parts,
+        Body::from(error_body(code_for_status(status), &message)),
+    )
 }
 
 /// The answer to a panic inside a handler: a JSON 500; the server goes on.
@@ -218,7 +232,10 @@ mod tests {
     #[test]
     fn engine_errors_map_to_statuses() {
         let e: ApiError = crate::Error::MalformedImage("x".into()).into();
-        assert_eq!((e.status, e.code), (StatusCode::BAD_REQUEST, "malformed_image"));
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::BAD_REQUEST, "malformed_image")
+        );
         let e: ApiError = crate::Error::TooLarge("x".into()).into();
         assert_eq!(e.code, "too_large");
         let e: ApiError = crate::Error::InvalidRange {
@@ -228,7 +245,10 @@ mod tests {
             max: 3.0,
         }
         .into();
-        assert_eq!((e.status, e.code), (StatusCode::BAD_REQUEST, "out_of_range"));
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::BAD_REQUEST, "out_of_range")
+        );
         let e: ApiError = crate::Error::Io(std::io::Error::other("disk")).into();
         assert_eq!(e.status, StatusCode::INTERNAL_SERVER_ERROR);
     }

@@ -108,7 +108,11 @@ mod tests {
     use std::sync::mpsc;
 
     fn jobs(max: u32, queue: u32) -> Jobs {
-        Jobs::new(max, queue, Arc::new(Metrics::new(Arc::new(TileCache::new(1 << 20)))))
+        Jobs::new(
+            max,
+            queue,
+            Arc::new(Metrics::new(Arc::new(TileCache::new(1 << 20)))),
+        )
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -101,7 +101,11 @@ impl Metrics {
     pub fn new(cache: Arc<TileCache>) -> Metrics {
         let mut registry = Registry::with_prefix("solidtex");
         let requests = Family::<RequestLabels, Counter>::default();
-        registry.register("http_requests", "HTTP requests by route, method and status", requests.clone());
+        registry.register(
+            "http_requests",
+            "HTTP requests by route, method and status",
+            requests.clone(),
+        );
         let latency = Family::<RouteLabels, Histogram, fn() -> Histogram>::new_with_constructor(
             latency_histogram as fn() -> Histogram,
         );
@@ -112,21 +116,53 @@ impl Metrics {
             latency.clone(),
         );
         let voxels = Family::<LevelLabels, Counter>::default();
-        registry.register("synth_voxels", "Voxels synthesized, per pyramid level (0 = finest)", voxels.clone());
+        registry.register(
+            "synth_voxels",
+            "Voxels synthesized, per pyramid level (0 = finest)",
+            voxels.clone(),
+        );
         let corrections = Family::<LevelLabels, Counter>::default();
-        registry.register("synth_corrections", "Voxel corrections performed, per pyramid level", corrections.clone());
+        registry.register(
+            "synth_corrections",
+            "Voxel corrections performed, per pyramid level",
+            corrections.clone(),
+        );
         let tiles_computed = Counter::default();
-        registry.register("synth_tiles_computed", "Tiles synthesized by requests", tiles_computed.clone());
+        registry.register(
+            "synth_tiles_computed",
+            "Tiles synthesized by requests",
+            tiles_computed.clone(),
+        );
         let tiles_from_cache = Counter::default();
-        registry.register("synth_tiles_from_cache", "Tiles requests found in the cache or got from a concurrent request", tiles_from_cache.clone());
+        registry.register(
+            "synth_tiles_from_cache",
+            "Tiles requests found in the cache or got from a concurrent request",
+            tiles_from_cache.clone(),
+        );
         let jobs_queued = Gauge::default();
-        registry.register("jobs_queued", "Synthesis jobs waiting for a slot", jobs_queued.clone());
+        registry.register(
+            "jobs_queued",
+            "Synthesis jobs waiting for a slot",
+            jobs_queued.clone(),
+        );
         let jobs_running = Gauge::default();
-        registry.register("jobs_running", "Synthesis jobs running", jobs_running.clone());
+        registry.register(
+            "jobs_running",
+            "Synthesis jobs running",
+            jobs_running.clone(),
+        );
         let jobs_rejected = Counter::default();
-        registry.register("jobs_rejected", "Requests answered 503 because the queue was full", jobs_rejected.clone());
+        registry.register(
+            "jobs_rejected",
+            "Requests answered 503 because the queue was full",
+            jobs_rejected.clone(),
+        );
         let precomputes = Family::<OutcomeLabels, Counter>::default();
-        registry.register("precomputes", "Candidate precomputations finished, by outcome", precomputes.clone());
+        registry.register(
+            "precomputes",
+            "Candidate precomputations finished, by outcome",
+            precomputes.clone(),
+        );
         let precompute_seconds = precompute_histogram();
         registry.register_with_unit(
             "precompute_duration",
@@ -135,9 +171,17 @@ impl Metrics {
             precompute_seconds.clone(),
         );
         let precomputes_pending = Gauge::default();
-        registry.register("precomputes_pending", "Precomputations queued or running", precomputes_pending.clone());
+        registry.register(
+            "precomputes_pending",
+            "Precomputations queued or running",
+            precomputes_pending.clone(),
+        );
         let textures_loaded = Counter::default();
-        registry.register("textures_loaded", "Ready textures loaded from the data directory without recomputation", textures_loaded.clone());
+        registry.register(
+            "textures_loaded",
+            "Ready textures loaded from the data directory without recomputation",
+            textures_loaded.clone(),
+        );
         let textures = Family::<StatusLabels, Gauge>::default();
         registry.register("textures", "Textures by status", textures.clone());
         registry.register_collector(Box::new(CacheCollector { cache }));
@@ -181,14 +225,18 @@ impl Metrics {
         for (k, &n) in stats.voxels_per_level.iter().enumerate() {
             if n > 0 {
                 self.voxels
-                    .get_or_create(&LevelLabels { level: k.to_string() })
+                    .get_or_create(&LevelLabels {
+                        level: k.to_string(),
+                    })
                     .inc_by(n);
             }
         }
         for (k, &n) in stats.corrections_per_level.iter().enumerate() {
             if n > 0 {
                 self.corrections
-                    .get_or_create(&LevelLabels { level: k.to_string() })
+                    .get_or_create(&LevelLabels {
+                        level: k.to_string(),
+                    })
                     .inc_by(n);
             }
         }
@@ -231,18 +279,38 @@ impl Collector for CacheCollector {
         let s = self.cache.stats();
         for (name, help, v) in [
             ("cache_hits", "Tile lookups served from the cache", s.hits),
-            ("cache_misses", "Tile lookups that computed the tile", s.misses),
-            ("cache_coalesced", "Tile lookups that waited for a concurrent computation", s.coalesced),
-            ("cache_evictions", "Tiles evicted to respect the byte bound", s.evictions),
+            (
+                "cache_misses",
+                "Tile lookups that computed the tile",
+                s.misses,
+            ),
+            (
+                "cache_coalesced",
+                "Tile lookups that waited for a concurrent computation",
+                s.coalesced,
+            ),
+            (
+                "cache_evictions",
+                "Tiles evicted to respect the byte bound",
+                s.evictions,
+            ),
         ] {
             let c = ConstCounter::new(v);
             let m = encoder.encode_descriptor(name, help, None, c.metric_type())?;
             c.encode(m)?;
         }
         for (name, help, v) in [
-            ("cache_bytes", "Bytes of tiles held in the cache", s.bytes as i64),
+            (
+                "cache_bytes",
+                "Bytes of tiles held in the cache",
+                s.bytes as i64,
+            ),
             ("cache_entries", "Tiles held in the cache", s.entries as i64),
-            ("cache_max_bytes", "Byte bound of the cache", self.cache.max_bytes() as i64),
+            (
+                "cache_max_bytes",
+                "Byte bound of the cache",
+                self.cache.max_bytes() as i64,
+            ),
         ] {
             let g = ConstGauge::new(v);
             let m = encoder.encode_descriptor(name, help, None, g.metric_type())?;

@@ -127,7 +127,10 @@ impl Server {
 
     /// Serves until `shutdown` resolves, then stops accepting and returns
     /// once in-flight requests are answered.
-    pub async fn run(self, shutdown: impl Future<Output = ()> + Send + 'static) -> anyhow::Result<()> {
+    pub async fn run(
+        self,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> anyhow::Result<()> {
         let app = routes::router(self.state);
         axum::serve(self.listener, app)
             .with_graceful_shutdown(shutdown)
@@ -173,7 +176,11 @@ fn init_tracing(args: &ServeArgs) {
         .with_writer(std::io::stderr);
     let _ = match args.log_format {
         LogFormat::Pretty => builder.try_init(),
-        LogFormat::Json => builder.json().flatten_event(true).with_current_span(true).try_init(),
+        LogFormat::Json => builder
+            .json()
+            .flatten_event(true)
+            .with_current_span(true)
+            .try_init(),
     };
 }
 
@@ -212,7 +219,10 @@ pub fn serve_main(args: ServeArgs) -> anyhow::Result<()> {
         match tokio::time::timeout(timeout, serving).await {
             Ok(r) => r.context("server task")?,
             Err(_) => {
-                tracing::warn!(seconds = timeout.as_secs(), "requests still in flight at shutdown timeout");
+                tracing::warn!(
+                    seconds = timeout.as_secs(),
+                    "requests still in flight at shutdown timeout"
+                );
                 Ok(())
             }
         }

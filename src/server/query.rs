@@ -62,7 +62,12 @@ where
     T: FromStr + PartialOrd + Copy + std::fmt::Display,
 {
     let v: T = s.trim().parse().map_err(|_| {
-        if !s.is_empty() && s.trim().trim_start_matches(['-', '+']).bytes().all(|b| b.is_ascii_digit()) {
+        if !s.is_empty()
+            && s.trim()
+                .trim_start_matches(['-', '+'])
+                .bytes()
+                .all(|b| b.is_ascii_digit())
+        {
             ApiError::out_of_range(name, s, min, max)
         } else {
             ApiError::invalid_parameter(name, format_args!("`{s}` is not an integer"))
@@ -89,7 +94,10 @@ pub fn parse_vec3(name: &str, s: &str) -> Result<[f64; 3], ApiError> {
             ApiError::invalid_parameter(name, format_args!("`{p}` is not a number"))
         })?;
         if !v.is_finite() {
-            return Err(ApiError::invalid_parameter(name, "components must be finite"));
+            return Err(ApiError::invalid_parameter(
+                name,
+                "components must be finite",
+            ));
         }
         *o = v;
     }
@@ -106,15 +114,24 @@ mod tests {
         assert_eq!(q.int("a", 0i64, -10, 10).unwrap(), 5);
         assert_eq!(q.int("b", 0i64, -10, 10).unwrap(), -7);
         assert_eq!(q.int("missing", 3i64, -10, 10).unwrap(), 3);
-        assert_eq!(q.int("c", 0i64, -10, 10).unwrap_err().code, "invalid_parameter");
-        assert_eq!(q.int("d", 0i64, i64::MIN, i64::MAX).unwrap_err().code, "out_of_range");
+        assert_eq!(
+            q.int("c", 0i64, -10, 10).unwrap_err().code,
+            "invalid_parameter"
+        );
+        assert_eq!(
+            q.int("d", 0i64, i64::MIN, i64::MAX).unwrap_err().code,
+            "out_of_range"
+        );
         assert_eq!(q.int("a", 0u32, 6, 10).unwrap_err().code, "out_of_range");
         assert_eq!(q.int("b", 0u32, 0, 10).unwrap_err().code, "out_of_range");
     }
 
     #[test]
     fn duplicates_rejected() {
-        assert_eq!(Query::parse(Some("a=1&a=2")).unwrap_err().code, "invalid_parameter");
+        assert_eq!(
+            Query::parse(Some("a=1&a=2")).unwrap_err().code,
+            "invalid_parameter"
+        );
     }
 
     #[test]

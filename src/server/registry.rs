@@ -11,7 +11,7 @@
 use super::error::{ApiError, panic_message};
 use super::metrics::{Metrics, OutcomeLabels};
 use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
-use super::store::{Found, Store, StoredMeta, StoredStatus, META_VERSION};
+use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
 use crate::{Candidates, Stage, Texture, TileCache};
 use axum::http::StatusCode;
 use std::collections::HashMap;
@@ -79,7 +79,10 @@ impl Entry {
 
     /// Current status.
     pub fn status(&self) -> Status {
-        self.status.read().unwrap_or_else(|e| e.into_inner()).clone()
+        self.status
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     fn set_status(&self, s: Status) {
@@ -99,7 +102,10 @@ impl Entry {
     /// Seconds the precompute took, when it ran in this process or was
     /// recorded by an earlier one.
     pub fn precompute_seconds(&self) -> Option<f64> {
-        *self.precompute_seconds.lock().unwrap_or_else(|e| e.into_inner())
+        *self
+            .precompute_seconds
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
     }
 
     fn set_progress(&self, stage: &'static str, fraction: f32) {
@@ -198,7 +204,11 @@ impl Registry {
 
     /// The texture `id`, if known.
     pub fn get(&self, id: &str) -> Option<Arc<Entry>> {
-        self.map.read().unwrap_or_else(|e| e.into_inner()).get(id).cloned()
+        self.map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(id)
+            .cloned()
     }
 
     /// Every texture, oldest first.
@@ -262,13 +272,11 @@ impl Registry {
         let id = id.map(str::to_string).unwrap_or_else(|| hash.clone());
         let entry = {
             let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
-            if let Some(e) = map.get(&id) {
-                if e.content_hash == hash {
-                    match e.status() {
-                        Status::Ready(_) => return Ok(Submitted::Known(e.clone())),
-                        Status::Pending => return Ok(Submitted::Pending(e.clone())),
-                        Status::Failed(_) => {}
-                    }
+            if let Some(e) = map.get(&id).filter(|e| e.content_hash == hash) {
+                match e.status() {
+                    Status::Ready(_) => return Ok(Submitted::Known(e.clone())),
+                    Status::Pending => return Ok(Submitted::Pending(e.clone())),
+                    Status::Failed(_) => {}
                 }
             }
             // Server-chosen ids (the bundled default) are never refused.
@@ -304,7 +312,9 @@ impl Registry {
             }
             drop(map);
             self.update_gauges();
-            return Err(ApiError::internal(format!("could not store the texture: {why}")));
+            return Err(ApiError::internal(format!(
+                "could not store the texture: {why}"
+            )));
         }
         self.start_precompute(entry.clone());
         Ok(Submitted::Pending(entry))
@@ -314,7 +324,9 @@ impl Registry {
     pub async fn delete(self: &Arc<Self>, id: &str) -> Result<(), ApiError> {
         let entry = {
             let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
-            let e = map.remove(id).ok_or_else(|| ApiError::unknown_texture(id))?;
+            let e = map
+                .remove(id)
+                .ok_or_else(|| ApiError::unknown_texture(id))?;
             e.deleted.store(true, Ordering::SeqCst);
             e
         };
@@ -385,7 +397,12 @@ impl Registry {
                 .map_err(|e| e.to_string())?;
             Ok::<_, String>((c, t))
         }))
-        .unwrap_or_else(|p| Err(format!("precompute panicked: {}", panic_message(p.as_ref()))));
+        .unwrap_or_else(|p| {
+            Err(format!(
+                "precompute panicked: {}",
+                panic_message(p.as_ref())
+            ))
+        });
         let seconds = t0.elapsed().as_secs_f64();
         *entry
             .precompute_seconds
@@ -505,7 +522,9 @@ impl Registry {
                 }
                 StoredStatus::Failed => {
                     entry.set_status(Status::Failed(
-                        meta.reason.clone().unwrap_or_else(|| "precompute failed".into()),
+                        meta.reason
+                            .clone()
+                            .unwrap_or_else(|| "precompute failed".into()),
                     ));
                 }
             }
@@ -516,7 +535,10 @@ impl Registry {
     }
 
     fn load_ready(&self, entry: &Entry) -> Result<Texture, String> {
-        let bytes = self.store.read_candidates(&entry.id).map_err(|e| e.to_string())?;
+        let bytes = self
+            .store
+            .read_candidates(&entry.id)
+            .map_err(|e| e.to_string())?;
         let c = Candidates::load(&bytes).map_err(|e| e.to_string())?;
         if c.params() != &entry.params.analysis {
             return Err("stored candidates were made with other parameters".into());
@@ -547,7 +569,12 @@ mod tests {
     #[test]
     fn progress_is_monotone_over_stages() {
         let mut last = -1.0;
-        for s in [Stage::Analysis, Stage::Search, Stage::Coherence, Stage::Finish] {
+        for s in [
+            Stage::Analysis,
+            Stage::Search,
+            Stage::Coherence,
+            Stage::Finish,
+        ] {
             for f in [0.0, 0.5, 1.0] {
                 let (_, p) = overall_progress(s, f);
                 assert!(p >= last - 1e-6);

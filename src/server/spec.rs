@@ -76,7 +76,9 @@ impl TextureParams {
     /// Parameters from query-string pairs: each value is read as a JSON
     /// scalar when it is one (`seed=7`, `jitter=0.5`, `correct_init_level=false`)
     /// and as a string otherwise (`scheme=dual-grid`).
-    pub fn flat_from_pairs<'a>(pairs: impl Iterator<Item = (&'a str, &'a str)>) -> Map<String, Value> {
+    pub fn flat_from_pairs<'a>(
+        pairs: impl Iterator<Item = (&'a str, &'a str)>,
+    ) -> Map<String, Value> {
         pairs
             .map(|(k, v)| {
                 let value = match serde_json::from_str::<Value>(v) {
@@ -213,14 +215,17 @@ mod tests {
     use super::*;
 
     fn img(seed: u8) -> Exemplar {
-        let rgb: Vec<u8> = (0..16 * 16 * 3).map(|i| (i as u8).wrapping_mul(seed)).collect();
+        let rgb: Vec<u8> = (0..16 * 16 * 3)
+            .map(|i| (i as u8).wrapping_mul(seed))
+            .collect();
         Exemplar::from_rgb(16, 16, &rgb).unwrap()
     }
 
     #[test]
     fn flat_params_split() {
-        let p = TextureParams::from_json(r#"{"seed": 9, "neighbourhood": 7, "scheme": "standard"}"#)
-            .unwrap();
+        let p =
+            TextureParams::from_json(r#"{"seed": 9, "neighbourhood": 7, "scheme": "standard"}"#)
+                .unwrap();
         assert_eq!(p.synth.seed, 9);
         assert_eq!(p.analysis.neighbourhood, 7);
         assert_eq!(p.synth.scheme, crate::Scheme::Standard);
@@ -232,17 +237,46 @@ mod tests {
 
     #[test]
     fn bad_params() {
-        assert_eq!(TextureParams::from_json(r#"{"sed": 1}"#).unwrap_err().code, "invalid_params");
-        assert_eq!(TextureParams::from_json(r#"{"seed": "x"}"#).unwrap_err().code, "invalid_params");
-        assert_eq!(TextureParams::from_json("[1]").unwrap_err().code, "invalid_params");
-        assert_eq!(TextureParams::from_json("{").unwrap_err().code, "invalid_params");
-        assert_eq!(TextureParams::from_json(r#"{"passes": 99}"#).unwrap_err().code, "out_of_range");
-        assert_eq!(TextureParams::from_json(r#"{"neighbourhood": 4}"#).unwrap_err().code, "invalid_request");
+        assert_eq!(
+            TextureParams::from_json(r#"{"sed": 1}"#).unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"seed": "x"}"#)
+                .unwrap_err()
+                .code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json("[1]").unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json("{").unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"passes": 99}"#)
+                .unwrap_err()
+                .code,
+            "out_of_range"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"neighbourhood": 4}"#)
+                .unwrap_err()
+                .code,
+            "invalid_request"
+        );
     }
 
     #[test]
     fn query_pairs_typed() {
-        let pairs = [("seed", "7"), ("scheme", "dual-grid"), ("jitter", "0.5"), ("correct_init_level", "false")];
+        let pairs = [
+            ("seed", "7"),
+            ("scheme", "dual-grid"),
+            ("jitter", "0.5"),
+            ("correct_init_level", "false"),
+        ];
         let flat = TextureParams::flat_from_pairs(pairs.into_iter());
         let p = TextureParams::from_flat(&flat).unwrap();
         assert_eq!(p.synth.seed, 7);
@@ -255,7 +289,10 @@ mod tests {
         let spec = |e: Exemplar, seed| TextureSpec {
             planes: Planes::Single(e),
             params: TextureParams {
-                synth: SynthParams { seed, ..Default::default() },
+                synth: SynthParams {
+                    seed,
+                    ..Default::default()
+                },
                 ..Default::default()
             },
         };

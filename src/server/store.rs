@@ -175,7 +175,11 @@ impl Store {
         if meta.exemplar.planes == 1 {
             Ok(Planes::Single(open("exemplar")?))
         } else {
-            Ok(Planes::Triple(Box::new([open("xy")?, open("yz")?, open("zx")?])))
+            Ok(Planes::Triple(Box::new([
+                open("xy")?,
+                open("yz")?,
+                open("zx")?,
+            ])))
         }
     }
 
@@ -187,7 +191,10 @@ impl Store {
         }
         // Rename first so that a crash mid-way leaves no half directory
         // under a valid id (the `.tmp` name is cleared at the next start).
-        let trash = self.root.join("textures").join(format!("{id}.deleting{TMP_SUFFIX}"));
+        let trash = self
+            .root
+            .join("textures")
+            .join(format!("{id}.deleting{TMP_SUFFIX}"));
         fs::rename(&dir, &trash)?;
         sync_dir(&self.root.join("textures"))?;
         fs::remove_dir_all(&trash)
@@ -242,7 +249,9 @@ pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> io::Result<()> {
-    let dir = path.parent().ok_or_else(|| io::Error::other("path has no parent"))?;
+    let dir = path
+        .parent()
+        .ok_or_else(|| io::Error::other("path has no parent"))?;
     let name = path
         .file_name()
         .ok_or_else(|| io::Error::other("path has no file name"))?
@@ -310,13 +319,21 @@ mod tests {
         write_atomic(&p, b"one").unwrap();
         write_atomic(&p, b"two").unwrap();
         assert_eq!(fs::read(&p).unwrap(), b"two");
-        assert_eq!(fs::read_dir(d.path()).unwrap().count(), 1, "no temporary left");
+        assert_eq!(
+            fs::read_dir(d.path()).unwrap().count(),
+            1,
+            "no temporary left"
+        );
         let err = write_atomic_with(&p, |w| {
             w.write_all(b"partial")?;
             Err(io::Error::other("fail"))
         });
         assert!(err.is_err());
-        assert_eq!(fs::read(&p).unwrap(), b"two", "failed write leaves the old file");
+        assert_eq!(
+            fs::read(&p).unwrap(),
+            b"two",
+            "failed write leaves the old file"
+        );
         assert_eq!(fs::read_dir(d.path()).unwrap().count(), 1);
     }
 
@@ -339,7 +356,8 @@ mod tests {
     fn open_clears_debris() {
         let d = tempfile::tempdir().unwrap();
         let s = Store::open(d.path()).unwrap();
-        s.create(&meta("keep", StoredStatus::Ready), &planes()).unwrap();
+        s.create(&meta("keep", StoredStatus::Ready), &planes())
+            .unwrap();
         fs::write(s.dir("keep").join(".candidates.stx.1.tmp"), b"half").unwrap();
         fs::create_dir_all(s.dir("nometa")).unwrap();
         fs::write(s.dir("nometa").join("exemplar.png"), b"x").unwrap();

@@ -20,7 +20,8 @@ pub fn exemplar_png(side: u32, seed: u32) -> Vec<u8> {
             state ^= state >> 17;
             state ^= state << 5;
             let stripe = ((x + y * 2 + seed * 3) % 8 < 4) as u32;
-            let blob = (((x as f32 * 0.4 + seed as f32).sin() * (y as f32 * 0.3).cos()) * 60.0) as i32;
+            let blob =
+                (((x as f32 * 0.4 + seed as f32).sin() * (y as f32 * 0.3).cos()) * 60.0) as i32;
             rgb.push((60 + stripe * 120 + (state % 16)) as u8);
             rgb.push((120 + blob).clamp(0, 255) as u8);
             rgb.push((40 + (state >> 8) % 64 + seed * 20 % 100) as u8);
@@ -116,7 +117,12 @@ pub fn client() -> reqwest::Client {
 }
 
 /// Uploads a PNG with query parameters; returns (status, body).
-pub async fn upload(c: &reqwest::Client, s: &TestServer, png: Vec<u8>, query: &str) -> (u16, Value) {
+pub async fn upload(
+    c: &reqwest::Client,
+    s: &TestServer,
+    png: Vec<u8>,
+    query: &str,
+) -> (u16, Value) {
     let r = c
         .post(s.url(&format!("/v1/textures?{query}")))
         .header("content-type", "image/png")
@@ -145,7 +151,10 @@ pub async fn wait_ready(c: &reqwest::Client, s: &TestServer, id: &str) -> Value 
             Some("pending") => {}
             other => panic!("texture {id} is {other:?}: {v}"),
         }
-        assert!(t0.elapsed() < Duration::from_secs(120), "precompute too slow");
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "precompute too slow"
+        );
         tokio::time::sleep(Duration::from_millis(25)).await;
     }
 }
@@ -168,7 +177,13 @@ pub async fn get(c: &reqwest::Client, url: &str) -> (u16, reqwest::header::Heade
 }
 
 /// Asserts an error response: status, JSON shape and code.
-pub fn assert_error(status: u16, headers: &reqwest::header::HeaderMap, body: &[u8], want_status: u16, want_code: &str) {
+pub fn assert_error(
+    status: u16,
+    headers: &reqwest::header::HeaderMap,
+    body: &[u8],
+    want_status: u16,
+    want_code: &str,
+) {
     let v: Value = serde_json::from_slice(body)
         .unwrap_or_else(|_| panic!("error body is not JSON: {}", String::from_utf8_lossy(body)));
     assert_eq!(status, want_status, "{v}");
@@ -177,7 +192,12 @@ pub fn assert_error(status: u16, headers: &reqwest::header::HeaderMap, body: &[u
         "application/json"
     );
     assert_eq!(v["error"]["code"], want_code, "{v}");
-    assert!(v["error"]["message"].as_str().is_some_and(|m| !m.is_empty()), "{v}");
+    assert!(
+        v["error"]["message"]
+            .as_str()
+            .is_some_and(|m| !m.is_empty()),
+        "{v}"
+    );
 }
 
 /// The value of a metric sample in Prometheus text (`name{labels}` as
@@ -194,5 +214,11 @@ pub fn metric(text: &str, sample: &str) -> f64 {
 
 /// Scrapes `/metrics`.
 pub async fn metrics(c: &reqwest::Client, s: &TestServer) -> String {
-    c.get(s.url("/metrics")).send().await.unwrap().text().await.unwrap()
+    c.get(s.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap()
 }

@@ -74,9 +74,39 @@ const EXPOSED: [&str; 8] = [
 /// The complete service.
 pub fn router(state: AppState) -> Router {
     let upload_limit = state.max_upload_bytes;
+    let routes = Router::new()
+        .route("/healthz", get(ops::healthz))
+        .route("/readyz", get(ops::readyz))
+        .route("/metrics", get(ops::metrics))
+        .route("/openapi.yaml", get(ops::openapi))
+        .route(
+            "/v1/textures",
+            get(textures::list)
+                .post(textures::create)
+                .layer(DefaultBodyLimit::max(upload_limit)),
+        )
+        .route(
+            "/v1/textures/{id}",
+            get(textures::show).delete(textures::remove),
+        )
+        .route("/v1/textures/{id}/slices/{axis}/{at}", get(voxels::slice))
+        .route("/v1/textures/{id}/cut.png", get(voxels::cut))
+        .route("/v1/textures/{id}/region.raw", get(voxels::region))
+        .route("/v1/textures/{id}/bricks/{lod}/{brick}", get(voxels::brick));
+    with_middleware(routes, state)
+}
+
+/// Wraps routes in the middleware stack and the JSON 404 fallback.
+fn with_middleware(routes: Router<AppState>, state: AppState) -> Router {
     let cors = CorsLayer::new()
         .allow_origin(Any)
-        .allow_methods([Method::GET, Method::POST, Method::DELETE, Method::HEAD, Method::OPTIONS])
+        .allow_methods([
+            Method::GET,
+            Method::POST,
+            Method::DELETE,
+            Method::HEAD,
+            Method::OPTIONS,
+        ])
         .allow_headers(Any)
         .expose_headers(EXPOSED.map(HeaderName::from_static))
         .max_age(Duration::from_secs(86400));
@@ -103,22 +133,7 @@ pub fn router(state: AppState) -> Router {
                 .level(tracing::Level::INFO)
                 .latency_unit(tower_http::LatencyUnit::Micros),
         );
-    Router::new()
-        .route("/healthz", get(ops::healthz))
-        .route("/readyz", get(ops::readyz))
-        .route("/metrics", get(ops::metrics))
-        .route("/openapi.yaml", get(ops::openapi))
-        .route(
-            "/v1/textures",
-            get(textures::list)
-                .post(textures::create)
-                .layer(DefaultBodyLimit::max(upload_limit)),
-        )
-        .route("/v1/textures/{id}", get(textures::show).delete(textures::remove))
-        .route("/v1/textures/{id}/slices/{axis}/{at}", get(voxels::slice))
-        .route("/v1/textures/{id}/cut.png", get(voxels::cut))
-        .route("/v1/textures/{id}/region.raw", get(voxels::region))
-        .route("/v1/textures/{id}/bricks/{lod}/{brick}", get(voxels::brick))
+    routes
         .fallback(no_route)
         .layer(middleware::from_fn(json_errors))
         .layer(CatchPanicLayer::custom(panic_response))
@@ -157,3 +172,57 @@ async fn track(State(s): State<AppState>, req: Request, next: Next) -> Response 
 
 /// `Cache-Control` of responses that never change.
 pub const IMMUTABLE: &str = "public, max-age=31536000, immutable";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::server::{ServeArgs, Server};
+    use axum::body::Body;
+    use tower::ServiceExt;
+
+    async fn boom() -> StatusCode {
+        let v: Vec<u8> = Vec::new();
+        if v.is_empty() {
+            panic!("boom");
+        }
+        StatusCode::OK
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_panicking_handler_is_a_json_500_and_the_server_goes_on() {
+        let dir = tempfile::tempdir().unwrap();
+        let server = Server::bind(&ServeArgs::for_data_dir(dir.path()))
+            .await
+            .unwrap();
+        let state = server.state();
+        let routes = Router::new()
+            .route("/boom", get(boom))
+            .route("/healthz", get(ops::healthz));
+        let app = with_middleware(routes, state.clone());
+        let call = |uri: &'static str| {
+            let app = app.clone();
+            async move {
+                let res = app
+                    .oneshot(axum::http::Request::get(uri).body(Body::empty()).unwrap())
+                    .await
+                    .unwrap();
+                let status = res.status();
+                let body = axum::body::to_bytes(res.into_body(), 1 << 16)
+                    .await
+                    .unwrap();
+                (
+                    status,
+                    serde_json::from_slice::<serde_json::Value>(&body).unwrap(),
+                )
+            }
+        };
+        let (status, v) = call("/boom").await;
+        assert_eq!(status, StatusCode::INTERNAL_SERVER_ERROR);
+        assert_eq!(v["error"]["code"], "internal");
+        let (status, _) = call("/healthz").await;
+        assert_eq!(status, StatusCode::OK);
+        assert!(state.metrics.encode().contains(
+            r#"solidtex_http_requests_total{route="/boom",method="GET",status="500"} 1"#
+        ));
+    }
+}

@@ -63,15 +63,24 @@ fn checked_id(id: &str) -> Result<(), ApiError> {
 }
 
 /// `GET /v1/textures/{id}`.
-pub async fn show(State(s): State<AppState>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
+pub async fn show(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, ApiError> {
     checked_id(&id)?;
     tracing::Span::current().record("texture", id.as_str());
-    let e = s.registry.get(&id).ok_or_else(|| ApiError::unknown_texture(&id))?;
+    let e = s
+        .registry
+        .get(&id)
+        .ok_or_else(|| ApiError::unknown_texture(&id))?;
     Ok(Json(view(&e, s.brick_size)))
 }
 
 /// `DELETE /v1/textures/{id}`.
-pub async fn remove(State(s): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+pub async fn remove(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
     checked_id(&id)?;
     tracing::Span::current().record("texture", id.as_str());
     s.registry.delete(&id).await?;
@@ -106,7 +115,11 @@ pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response,
     let raw = match essence.as_str() {
         "image/png" => RawPlanes::Single(read_body(req, limit).await?),
         "multipart/form-data" => read_multipart(req, &mut flat).await?,
-        "" => return Err(unsupported("missing Content-Type (send image/png or multipart/form-data)")),
+        "" => {
+            return Err(unsupported(
+                "missing Content-Type (send image/png or multipart/form-data)",
+            ));
+        }
         other => {
             return Err(unsupported(&format!(
                 "unsupported Content-Type `{other}` (send image/png or multipart/form-data)"
@@ -139,7 +152,11 @@ fn created_response(entry: &Arc<Entry>, status: StatusCode, brick_size: u32) -> 
 }
 
 fn unsupported(message: &str) -> ApiError {
-    ApiError::new(StatusCode::UNSUPPORTED_MEDIA_TYPE, "unsupported_media_type", message)
+    ApiError::new(
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "unsupported_media_type",
+        message,
+    )
 }
 
 fn too_large(limit: usize) -> ApiError {
@@ -173,9 +190,16 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
     ApiError::new(status, code, e.body_text())
 }
 
-async fn read_multipart(req: Request, flat: &mut Map<String, Value>) -> Result<RawPlanes, ApiError> {
+async fn read_multipart(
+    req: Request,
+    flat: &mut Map<String, Value>,
+) -> Result<RawPlanes, ApiError> {
     let mut mp = Multipart::from_request(req, &()).await.map_err(|e| {
-        ApiError::new(StatusCode::BAD_REQUEST, "malformed_multipart", e.body_text())
+        ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "malformed_multipart",
+            e.body_text(),
+        )
     })?;
     let (mut single, mut xy, mut yz, mut zx) = (None, None, None, None);
     while let Some(field) = mp.next_field().await.map_err(multipart_error)? {
@@ -188,7 +212,11 @@ async fn read_multipart(req: Request, flat: &mut Map<String, Value>) -> Result<R
             "zx" => &mut zx,
             "params" => {
                 let text = std::str::from_utf8(&data).map_err(|_| {
-                    ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", "`params` is not UTF-8")
+                    ApiError::new(
+                        StatusCode::BAD_REQUEST,
+                        "invalid_params",
+                        "`params` is not UTF-8",
+                    )
                 })?;
                 match serde_json::from_str::<Value>(text) {
                     Ok(Value::Object(m)) => flat.extend(m),
@@ -206,7 +234,9 @@ async fn read_multipart(req: Request, flat: &mut Map<String, Value>) -> Result<R
                 return Err(ApiError::new(
                     StatusCode::BAD_REQUEST,
                     "invalid_request",
-                    format!("unknown form field `{other}` (expected xy, yz, zx or image, and params)"),
+                    format!(
+                        "unknown form field `{other}` (expected xy, yz, zx or image, and params)"
+                    ),
                 ));
             }
         };
@@ -253,7 +283,11 @@ fn decode(raw: RawPlanes, params: TextureParams) -> Result<TextureSpec, ApiError
     let planes = match raw {
         RawPlanes::Single(b) => Planes::Single(decode_one("image", &b)?),
         RawPlanes::Triple([a, b, c]) => {
-            let t = [decode_one("xy", &a)?, decode_one("yz", &b)?, decode_one("zx", &c)?];
+            let t = [
+                decode_one("xy", &a)?,
+                decode_one("yz", &b)?,
+                decode_one("zx", &c)?,
+            ];
             let p = Planes::Triple(Box::new(t));
             p.to_set()?;
             p

@@ -139,10 +139,7 @@ async fn raw_job(
     s: &AppState,
     f: impl FnOnce() -> crate::Result<(Vec<u8>, SynthStats)> + Send + 'static,
 ) -> Result<Vec<u8>, ApiError> {
-    let (rgb, stats) = s
-        .jobs
-        .run(move || f().map_err(ApiError::from))
-        .await??;
+    let (rgb, stats) = s.jobs.run(move || f().map_err(ApiError::from)).await??;
     account(s, &stats);
     Ok(rgb)
 }
@@ -190,7 +187,10 @@ pub async fn slice(
         Axis::Y => "y",
         Axis::Z => "z",
     };
-    let tag = etag(&entry, &format!("slice/{name}/{at}/{u0}/{v0}/{w}/{h}/{lod}"));
+    let tag = etag(
+        &entry,
+        &format!("slice/{name}/{at}/{u0}/{v0}/{w}/{h}/{lod}"),
+    );
     if not_modified(&headers, &tag) {
         return Ok(not_modified_response(&tag));
     }
@@ -370,7 +370,10 @@ mod tests {
         let tag = "\"abc\"";
         let mut h = HeaderMap::new();
         assert!(!not_modified(&h, tag));
-        h.insert(header::IF_NONE_MATCH, HeaderValue::from_static("\"x\", W/\"abc\""));
+        h.insert(
+            header::IF_NONE_MATCH,
+            HeaderValue::from_static("\"x\", W/\"abc\""),
+        );
         assert!(not_modified(&h, tag));
         h.insert(header::IF_NONE_MATCH, HeaderValue::from_static("*"));
         assert!(not_modified(&h, tag));
