@@ -19,7 +19,10 @@ type StripTree = kiddo::ImmutableKdTree<f32, STRIP_DIMS>;
 /// The u- and v-strips (horizontal and vertical runs of N pixels, spaced
 /// h_k apart) through every pixel of one plane at one level.
 pub struct Strips {
+    /// Floats per strip, padded to a multiple of 8 for SIMD distances.
     len: usize,
+    /// Meaningful floats per strip (3·N).
+    raw: usize,
     /// `len` floats per pixel: the run along the image's u axis.
     pub u: Vec<f32>,
     /// `len` floats per pixel: the run along the image's v axis.
@@ -32,7 +35,8 @@ impl Strips {
         let (w, h) = (stack.width() as i64, stack.height() as i64);
         let r = (n / 2) as i64;
         let step = spacing(k) as i64;
-        let len = n as usize * 3;
+        let raw = n as usize * 3;
+        let len = raw.div_ceil(8) * 8;
         let mut u = Vec::with_capacity((w * h) as usize * len);
         let mut v = Vec::with_capacity((w * h) as usize * len);
         for y in 0..h {
@@ -40,12 +44,14 @@ impl Strips {
                 for t in -r..=r {
                     u.extend_from_slice(&stack.at(k, x + t * step, y));
                 }
+                u.resize(u.len() + len - raw, 0.0);
                 for t in -r..=r {
                     v.extend_from_slice(&stack.at(k, x, y + t * step));
                 }
+                v.resize(v.len() + len - raw, 0.0);
             }
         }
-        Strips { len, u, v }
+        Strips { len, raw, u, v }
     }
 
     #[inline]
@@ -59,9 +65,17 @@ impl Strips {
     }
 }
 
+/// Squared distance of two padded strips, eight lanes at a time.
 #[inline]
 fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
-    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+    let mut acc = [0f32; 8];
+    for (x, y) in a.chunks_exact(8).zip(b.chunks_exact(8)) {
+        for l in 0..8 {
+            let e = x[l] - y[l];
+            acc[l] += e * e;
+        }
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
 }
 
 /// Squared L2 crossbar error of a triple (pixel indices in xy, yz, zx):
@@ -87,7 +101,7 @@ pub struct Scored {
 
 fn reduce(pca: &Pca, strip: &[f32]) -> [f32; STRIP_DIMS] {
     let mut out = [0f32; STRIP_DIMS];
-    pca.project(strip, &mut out[..pca.dims]);
+    pca.project(&strip[..pca.input], &mut out[..pca.dims]);
     out
 }
 
@@ -116,11 +130,12 @@ pub fn search_plane(
     let stride = (dims.len() / 4096).max(1);
     for st in strips {
         for c in (0..dims.len()).step_by(stride) {
-            sample.extend_from_slice(st.u(c as u32));
-            sample.extend_from_slice(st.v(c as u32));
+            sample.extend_from_slice(&st.u(c as u32)[..st.raw]);
+            sample.extend_from_slice(&st.v(c as u32)[..st.raw]);
         }
     }
-    let pca = Pca::fit(&sample, len, STRIP_DIMS.min(len));
+    let raw = strips[0].raw;
+    let pca = Pca::fit(&sample, raw, STRIP_DIMS.min(raw));
     let q_tree = tree(&pca, &strips[q].v, len);
     let r_tree = tree(&pca, &strips[r].u, len);
     let s = NonZero::new(s.min(dims.len())).expect("non-empty exemplar");

@@ -19,6 +19,7 @@ const MAX_DIMS: usize = 16;
 
 /// Triples and colours of a working box; colours are kept in step with
 /// triples so neighbourhood gathering reads one array.
+#[derive(Clone)]
 pub struct Work {
     /// Triples.
     pub triples: Grid<[u32; 3]>,
@@ -71,7 +72,6 @@ impl Default for Scratch {
 
 /// Everything the correction of one level reads.
 pub struct Corrector<'a> {
-    cands: &'a Candidates,
     level: &'a Level,
     k: usize,
     n: i64,
@@ -84,7 +84,6 @@ impl<'a> Corrector<'a> {
     /// A corrector for level `k`.
     pub fn new(cands: &'a Candidates, k: usize) -> Self {
         Corrector {
-            cands,
             level: cands.level(k),
             k,
             n: cands.params().neighbourhood as i64,
@@ -94,22 +93,48 @@ impl<'a> Corrector<'a> {
         }
     }
 
-    /// The best candidate triple for the voxel at `p`, reading `work`
-    /// (which must cover `p` ± N/2).
-    pub fn correct(&self, work: &Work, p: [i64; 3], s: &mut Scratch) -> [u32; 3] {
+    /// The best candidate triple for the voxel at `p`. Its history window
+    /// decides which version of each neighbour it reads: the latest (`work`)
+    /// inside `barrier`'s cell, the step's starting version (`barrier`'s
+    /// work) outside it; without a barrier, always the latest.
+    pub fn correct(
+        &self,
+        work: &Work,
+        barrier: Option<(&Work, &Box3)>,
+        p: [i64; 3],
+        s: &mut Scratch,
+    ) -> [u32; 3] {
         let r = self.n / 2;
         let h = spacing(self.k) as i64;
+        let strides = work.triples.strides();
+        let centre = work.triples.index(p) as i64;
+        // Offsets along each axis that stay inside the barrier cell (every
+        // offset when there is none); `start` has the same layout as `work`.
+        let (start, inside) = match barrier {
+            Some((start, cell)) => (
+                start,
+                [0, 1, 2].map(|a| (cell.lo[a] - p[a], cell.hi[a] - 1 - p[a])),
+            ),
+            None => (work, [(i64::MIN, i64::MAX); 3]),
+        };
+        let pick = |a: usize, i: i64, b: usize, j: i64| -> &Work {
+            let (la, ha) = inside[a];
+            let (lb, hb) = inside[b];
+            if i >= la && i <= ha && j >= lb && j <= hb {
+                work
+            } else {
+                start
+            }
+        };
         let mut best2d = [0u32; 3];
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             // The voxel's slice neighbourhood in this plane, u outer order
             // matching the exemplar neighbourhoods (v rows, u columns).
             let mut o = 0;
-            let mut q = p;
             for j in -r..=r {
-                q[b] = p[b] + j;
                 for i in -r..=r {
-                    q[a] = p[a] + i;
-                    let c = work.colours.get(q);
+                    let idx = (centre + i * strides[a] + j * strides[b]) as usize;
+                    let c = pick(a, i, b, j).colours.data[idx];
                     s.neigh[o..o + 3].copy_from_slice(&c);
                     o += 3;
                 }
@@ -126,12 +151,10 @@ impl<'a> Corrector<'a> {
             // each base pixel once.
             let mut seen = [u32::MAX; 9];
             let mut seen_n = 0;
-            let mut q = p;
             for j in -1..=1i64 {
-                q[b] = p[b] + j;
                 for i in -1..=1i64 {
-                    q[a] = p[a] + i;
-                    let t = work.triples.get(q);
+                    let idx = (centre + i * strides[a] + j * strides[b]) as usize;
+                    let t = pick(a, i, b, j).triples.data[idx];
                     let base = self.dims.shift(t[plane], -i * h, -j * h);
                     if seen[..seen_n].contains(&base) {
                         continue;
@@ -176,53 +199,6 @@ impl<'a> Corrector<'a> {
             }
         }
         best.1
-    }
-
-    /// Runs the correction steps (passes × `side³` subpasses) over `work`.
-    /// Step t updates the voxels of its subpass class inside `update(t)`
-    /// (which must lie N/2 inside `work`). Voxels of one subpass are
-    /// corrected from the same state and written together, so neither the
-    /// visiting order nor the thread count changes the result. Returns the
-    /// number of corrections.
-    pub fn run(
-        &self,
-        work: &mut Work,
-        update: impl Fn(usize) -> Box3,
-        passes: u32,
-        side: i64,
-        parallel: bool,
-    ) -> u64 {
-        use rayon::prelude::*;
-        let mut scratch = Scratch::default();
-        let mut count = 0u64;
-        let mut positions = Vec::new();
-        let mut new: Vec<[u32; 3]> = Vec::new();
-        let classes = side * side * side;
-        for step in 0..passes as usize * classes as usize {
-            let class = step as i64 % classes;
-            let phase = [class % side, (class / side) % side, class / (side * side)];
-            positions.clear();
-            for_class(&update(step), phase, side, |p| positions.push(p));
-            if parallel {
-                let w = &*work;
-                new = positions
-                    .par_iter()
-                    .map_init(Scratch::default, |s, &p| self.correct(w, p, s))
-                    .collect();
-            } else {
-                new.clear();
-                for &p in &positions {
-                    new.push(self.correct(work, p, &mut scratch));
-                }
-            }
-            for (&p, &t) in positions.iter().zip(&new) {
-                let i = work.triples.index(p);
-                work.triples.data[i] = t;
-                work.colours.data[i] = colour(self.cands, self.k, t);
-            }
-            count += positions.len() as u64;
-        }
-        count
     }
 }
 

@@ -99,6 +99,11 @@ impl<T: Copy + Default> Grid<T> {
         }
     }
 
+    /// Index steps along x, y and z.
+    pub fn strides(&self) -> [i64; 3] {
+        [1, self.sx as i64, (self.sx * self.sy) as i64]
+    }
+
     /// Linear index of `p` (must be inside).
     #[inline]
     pub fn index(&self, p: [i64; 3]) -> usize {

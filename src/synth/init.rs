@@ -138,7 +138,7 @@ impl JitterField {
                         if dist2 > bump.reach2 {
                             continue;
                         }
-                        let w = (-dist2 * bump.inv_sigma2).exp();
+                        let w = exp_neg(dist2 * bump.inv_sigma2);
                         for (da, pa) in d.iter_mut().zip(bump.push) {
                             *da += w * pa;
                         }
@@ -170,4 +170,42 @@ pub fn initial_triple(
 pub fn upsample(c: &Candidates, parent: [u32; 3], k: usize, p: [i64; 3]) -> [u32; 3] {
     let o = p.map(|v| v.rem_euclid(2));
     offset_triple(c.dims(), parent, o, spacing(k) as i64)
+}
+
+/// e^(−x) for x ≥ 0 from basic arithmetic only, so every machine computes
+/// the same bits (libm's `exp` may differ in the last place between
+/// platforms, and a rounded displacement would then differ too).
+fn exp_neg(x: f32) -> f32 {
+    if x > 80.0 {
+        return 0.0;
+    }
+    // e^(−x) = 2^(−n) · e^(−r) with r = x − n·ln 2 in [0, ln 2).
+    let n = (x * std::f32::consts::LOG2_E).floor();
+    let r = x - n * std::f32::consts::LN_2;
+    // Taylor series of e^(−r) to r¹⁰/10!: truncation below 1e−8 on [0, ln 2).
+    let mut term = 1.0f32;
+    let mut sum = 1.0f32;
+    for i in 1..11 {
+        term *= -r / i as f32;
+        sum += term;
+    }
+    let mut scale = 1.0f32;
+    for _ in 0..n as u32 {
+        scale *= 0.5;
+    }
+    sum * scale
+}
+
+#[cfg(test)]
+mod tests {
+    use super::exp_neg;
+
+    #[test]
+    fn exp_neg_matches_exp() {
+        for i in 0..2000 {
+            let x = i as f32 * 0.01;
+            let want = (-x).exp();
+            assert!((exp_neg(x) - want).abs() <= 2e-6 * want, "x = {x}");
+        }
+    }
 }

@@ -3,24 +3,22 @@
 //!
 //! Each level k (0 = finest) holds a coordinate triple per voxel. Version 0
 //! of a level comes from the jittered candidate slab (coarsest synthesized
-//! level) or from upsampling the parent level. Correction steps then refine
-//! it. A step's history window decides which version of each neighbour a
-//! correction reads; both schemes are expressed by what a tile's working box
-//! contains:
+//! level) or from upsampling the parent level; correction steps refine it.
+//! A correction's history window says which version of each neighbour it
+//! reads:
 //!
-//! - **dual grid**: space is cut into M³ cells. A primary-grid step corrects
-//!   one cell from a box holding version 0 around it: neighbours inside the
-//!   cell are read at their latest version, neighbours across the wall at
-//!   version 0 (the barrier). The dual-grid step does the same on cells
-//!   shifted by M/2, starting from the primary result. A cell's result thus
-//!   depends on a bounded neighbourhood, whatever P and s.
-//! - **standard**: every correction reads the latest version of every
-//!   neighbour (Dong et al.), so the box a tile needs grows by N/2 per
-//!   subpass; tiles are computed in batches over their dilated bounding box.
+//! - **standard** (Dong et al.): the latest version of every neighbour, so
+//!   the dependency set grows by N/2 with every subpass;
+//! - **dual grid** (Zhang et al.): ⌈P/2⌉ passes on a grid of M³ cells, then
+//!   ⌊P/2⌋ on the grid shifted by M/2; a neighbour across the cell wall is
+//!   read at the version the step started from, which bounds the set.
 //!
-//! Results are cut into level-aligned tiles (cells) that the shared
-//! [`cache::TileCache`] keeps, so coarse levels are computed once for many
-//! requests.
+//! A request is answered from final-version tiles (level-aligned cubes of
+//! [`TILE`] voxels) kept in the shared [`cache::TileCache`]. Missing tiles of
+//! a level are synthesized together: [`plan::backward`] walks the history
+//! windows back from them to the exact voxels each subpass must correct and
+//! the version-0 voxels needed, whose parents come from the parent level's
+//! tiles (recursively), and only those voxels are computed.
 
 pub mod cache;
 pub mod correction;
@@ -34,12 +32,18 @@ use crate::error::Result;
 use crate::params::{Scheme, SynthParams};
 use crate::texture::{CutPlane, Filter, Region, SynthStats};
 use cache::{Claim, Tile, TileCache, TileKey};
-use correction::{Corrector, Work, colour};
+use correction::{Corrector, Scratch, Work, colour};
 use grid::{Box3, Grid};
 use rayon::prelude::*;
 use std::collections::{BTreeSet, HashMap};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Side of the final-version tiles cached per level.
+pub const TILE: i64 = 4;
+
+/// Most tiles synthesized together in one group (bounds working memory).
+const MAX_GROUP_TILES: usize = 8192;
 
 /// One correction step of a level: cells of side M shifted by `offset`,
 /// corrected `passes` times.
@@ -170,44 +174,31 @@ impl Engine {
         }
     }
 
-    /// Grid shift of the tiles of step `step` (0 = version 0).
-    fn offset_of(&self, k: usize, step: usize) -> i64 {
-        if step == 0 {
-            0
-        } else {
-            self.steps_at(k)[step - 1].offset
-        }
+    fn tile_of(p: [i64; 3]) -> [i64; 3] {
+        p.map(|v| v.div_euclid(TILE))
     }
 
-    fn cell_box(&self, k: usize, step: usize, c: [i64; 3]) -> Box3 {
-        let o = self.offset_of(k, step);
-        Box3::new(c.map(|v| v * self.cell + o), [self.cell; 3])
+    fn tile_box(t: [i64; 3]) -> Box3 {
+        Box3::new(t.map(|v| v * TILE), [TILE; 3])
     }
 
-    fn cells_covering(&self, k: usize, step: usize, b: &Box3) -> Vec<[i64; 3]> {
-        let o = self.offset_of(k, step);
-        let lo = b.lo.map(|v| (v - o).div_euclid(self.cell));
-        let hi = b.hi.map(|v| (v - 1 - o).div_euclid(self.cell));
-        let mut out = Vec::new();
+    fn tiles_covering(b: &Box3) -> BTreeSet<[i64; 3]> {
+        let lo = Self::tile_of(b.lo);
+        let hi = Self::tile_of(b.hi.map(|v| v - 1));
+        let mut out = BTreeSet::new();
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
-                    out.push([x, y, z]);
+                    out.insert([x, y, z]);
                 }
             }
         }
         out
     }
 
-    fn final_step(&self, k: usize) -> usize {
-        self.steps_at(k).len()
-    }
-
     /// Final triples of level `k` over `b`.
     pub(crate) fn level_box(&self, k: usize, b: &Box3, acc: &Acc) -> Grid<[u32; 3]> {
-        let step = self.final_step(k);
-        let cells: BTreeSet<[i64; 3]> = self.cells_covering(k, step, b).into_iter().collect();
-        let tiles = self.tiles(k, step, cells, acc);
+        let tiles = self.tiles(k, Self::tiles_covering(b), acc);
         let mut g = Grid::new(*b);
         for t in tiles.values() {
             g.copy_from(t);
@@ -215,15 +206,9 @@ impl Engine {
         g
     }
 
-    /// Tiles of step `step` at level `k`, from the cache or computed; a
-    /// tile another request is computing is waited for (outside rayon).
-    fn tiles(
-        &self,
-        k: usize,
-        step: usize,
-        cells: BTreeSet<[i64; 3]>,
-        acc: &Acc,
-    ) -> HashMap<[i64; 3], Tile> {
+    /// Final tiles of level `k`, from the cache or computed; a tile another
+    /// request is computing is waited for (outside rayon).
+    fn tiles(&self, k: usize, cells: BTreeSet<[i64; 3]>, acc: &Acc) -> HashMap<[i64; 3], Tile> {
         let mut out = HashMap::new();
         let mut mine = Vec::new();
         let mut theirs = Vec::new();
@@ -233,7 +218,7 @@ impl Engine {
             let key = TileKey {
                 texture: self.key,
                 level: k as u8,
-                step: step as u8,
+                step: 0,
                 cell: c,
             };
             match self.cache.claim(key) {
@@ -251,17 +236,16 @@ impl Engine {
         let mut todo: Vec<[i64; 3]> = mine.iter().map(|t| t.key().cell).collect();
         todo.extend(&unclaimed);
         if !todo.is_empty() {
-            let computed = self.compute(k, step, &todo, acc);
+            let mut computed = self.compute(k, &todo, acc);
             acc.computed
                 .fetch_add(computed.len() as u64, Ordering::Relaxed);
-            let mut by_cell: HashMap<[i64; 3], Tile> = todo.iter().copied().zip(computed).collect();
             for ticket in mine {
                 let c = ticket.key().cell;
-                let t = by_cell.remove(&c).expect("computed");
+                let t = computed.remove(&c).expect("computed");
                 self.cache.publish(ticket, t.clone());
                 out.insert(c, t);
             }
-            out.extend(by_cell);
+            out.extend(computed);
         }
         for w in theirs {
             let c = w.key().cell;
@@ -271,187 +255,134 @@ impl Engine {
                     out.insert(c, t);
                 }
                 None => {
-                    let t = self.compute(k, step, &[c], acc).pop().expect("one tile");
+                    let mut t = self.compute(k, &[c], acc);
                     acc.computed.fetch_add(1, Ordering::Relaxed);
-                    out.insert(c, t);
+                    out.insert(c, t.remove(&c).expect("one tile"));
                 }
             }
         }
         out
     }
 
-    /// Computes tiles of step `step` at level `k` (no cache lookups for
-    /// them; prerequisites go through the cache).
-    fn compute(&self, k: usize, step: usize, cells: &[[i64; 3]], acc: &Acc) -> Vec<Tile> {
-        if step == 0 {
-            let boxes: Vec<Box3> = cells.iter().map(|&c| self.cell_box(k, 0, c)).collect();
-            return self
-                .version0(k, &boxes, acc)
-                .into_iter()
-                .map(Arc::new)
-                .collect();
+    /// Synthesizes final tiles of level `k` (no cache lookups for them;
+    /// their prerequisites go through the cache). Tiles are processed in
+    /// compact groups so memory stays bounded and scattered tiles never pull
+    /// in the space between them.
+    fn compute(&self, k: usize, tiles: &[[i64; 3]], acc: &Acc) -> HashMap<[i64; 3], Tile> {
+        let mut out = HashMap::new();
+        for group in plan::group_cells(tiles, MAX_GROUP_TILES) {
+            out.extend(self.compute_group(k, &group, acc));
         }
-        match self.params.scheme {
-            Scheme::DualGrid => self.compute_grid_step(k, step, cells, acc),
-            Scheme::Standard => self.compute_standard(k, cells, acc),
-        }
+        out
     }
 
-    /// A dual-grid step: each cell is corrected inside a box that holds the
-    /// previous step's result N/2 around it; neighbours outside the cell
-    /// stay at that version (the barrier of its history window).
-    fn compute_grid_step(&self, k: usize, step: usize, cells: &[[i64; 3]], acc: &Acc) -> Vec<Tile> {
-        let r = self.radius;
-        let boxes: Vec<Box3> = cells.iter().map(|&c| self.cell_box(k, step, c)).collect();
-        let inputs: Vec<Grid<[u32; 3]>> = if step == 1 {
-            self.version0(
-                k,
-                &boxes.iter().map(|b| b.dilate(r)).collect::<Vec<_>>(),
-                acc,
-            )
-        } else {
-            let mut need = BTreeSet::new();
-            for b in &boxes {
-                need.extend(self.cells_covering(k, step - 1, &b.dilate(r)));
+    fn compute_group(&self, k: usize, tiles: &[[i64; 3]], acc: &Acc) -> Vec<([i64; 3], Tile)> {
+        let mut targets = Vec::with_capacity(tiles.len() * (TILE * TILE * TILE) as usize);
+        for &t in tiles {
+            let b = Self::tile_box(t);
+            for i in 0..b.volume() as usize {
+                targets.push(position(&b, i));
             }
-            let prev = self.tiles(k, step - 1, need, acc);
-            boxes
-                .iter()
-                .map(|b| {
-                    let mut g = Grid::new(b.dilate(r));
-                    for c in self.cells_covering(k, step - 1, &g.bounds) {
-                        g.copy_from(&prev[&c]);
-                    }
-                    g
-                })
-                .collect()
+        }
+        let steps = self.steps_at(k);
+        let barrier_cell = match self.params.scheme {
+            Scheme::DualGrid => Some(self.cell),
+            Scheme::Standard => None,
         };
-        let passes = self.steps_at(k)[step - 1].passes;
         let side = self.params.subpass_side as i64;
-        let corrector = Corrector::new(&self.cands, k);
-        inputs
-            .into_par_iter()
-            .zip(boxes.par_iter())
-            .map(|(input, b)| {
-                if acc.dry {
-                    acc.corrections[k].fetch_add(passes as u64 * b.volume(), Ordering::Relaxed);
-                    let mut out = Grid::new(*b);
-                    out.copy_from(&input);
-                    return Arc::new(out);
+        let chain = plan::backward(&targets, steps, self.radius, side, barrier_cell);
+        acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
+        acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
+        let triples = self.version0(k, &chain.need, acc);
+        let triples = if acc.dry {
+            triples
+        } else {
+            let mut work = Work::new(&self.cands, k, triples);
+            let corrector = Corrector::new(&self.cands, k);
+            let mut step_start: Option<(usize, Work)> = None;
+            for (si, voxels) in &chain.subpasses {
+                if barrier_cell.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
+                    step_start = Some((*si, work.clone()));
                 }
-                let mut work = Work::new(&self.cands, k, input);
-                let n = corrector.run(&mut work, |_| *b, passes, side, false);
-                acc.corrections[k].fetch_add(n, Ordering::Relaxed);
-                let mut out = Grid::new(*b);
-                out.copy_from(&work.triples);
-                Arc::new(out)
-            })
-            .collect()
-    }
-
-    /// Dong's standard correction for a batch of cells: every step reads
-    /// the latest version of every neighbour, so the box needed grows by
-    /// N/2 per subpass going back; the batch is computed over that box.
-    fn compute_standard(&self, k: usize, cells: &[[i64; 3]], acc: &Acc) -> Vec<Tile> {
-        let mut out = Vec::with_capacity(cells.len());
-        for group in plan::group_cells(cells, self.cell) {
-            let boxes: Vec<Box3> = group.iter().map(|&c| self.cell_box(k, 1, c)).collect();
-            let target = boxes.iter().skip(1).fold(boxes[0], |a, b| a.union(b));
-            let side = self.params.subpass_side as i64;
-            let passes = self.steps[0].passes;
-            let total = (passes as i64 * side * side * side) as usize;
-            let r = self.radius;
-            // Step t updates target ⊕ r·(total − 1 − t).
-            let update = |t: usize| target.dilate(r * (total - 1 - t) as i64);
-            let input = self
-                .version0(k, &[target.dilate(r * total as i64)], acc)
-                .pop()
-                .expect("one box");
-            let triples = if acc.dry {
-                let n: u64 = (0..total)
-                    .map(|t| {
-                        let class = (t as i64) % (side * side * side);
-                        let phase = [class % side, (class / side) % side, class / (side * side)];
-                        let mut c = 0u64;
-                        correction::for_class(&update(t), phase, side, |_| c += 1);
-                        c
+                let offset = steps[*si].offset;
+                let start = step_start.as_ref().map(|s| &s.1);
+                let w = &work;
+                let new: Vec<[u32; 3]> = voxels
+                    .par_iter()
+                    .map_init(Scratch::default, |s, &p| {
+                        let barrier = barrier_cell.map(|m| {
+                            let c = p.map(|v| (v - offset).div_euclid(m) * m + offset);
+                            Box3::new(c, [m; 3])
+                        });
+                        match (start, barrier) {
+                            (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p, s),
+                            _ => corrector.correct(w, None, p, s),
+                        }
                     })
-                    .sum();
-                acc.corrections[k].fetch_add(n, Ordering::Relaxed);
-                input
-            } else {
-                let mut work = Work::new(&self.cands, k, input);
-                let n = Corrector::new(&self.cands, k).run(&mut work, update, passes, side, true);
-                acc.corrections[k].fetch_add(n, Ordering::Relaxed);
-                work.triples
-            };
-            for b in boxes {
-                let mut g = Grid::new(b);
-                g.copy_from(&triples);
-                out.push(Arc::new(g));
+                    .collect();
+                for (&p, t) in voxels.iter().zip(new) {
+                    let i = work.triples.index(p);
+                    work.triples.data[i] = t;
+                    work.colours.data[i] = colour(&self.cands, k, t);
+                }
             }
-        }
-        // Groups reorder cells; restore the caller's order.
-        let mut by_cell: HashMap<[i64; 3], Tile> = HashMap::new();
-        for t in out {
-            let c = t.bounds.lo.map(|v| v.div_euclid(self.cell));
-            by_cell.insert(c, t);
-        }
-        cells.iter().map(|c| by_cell[c].clone()).collect()
-    }
-
-    /// Version 0 of level `k` over each box: the jittered slab at the
-    /// initial level, else the parent level's final triples upsampled.
-    fn version0(&self, k: usize, boxes: &[Box3], acc: &Acc) -> Vec<Grid<[u32; 3]>> {
-        let seed = self.params.seed;
-        for b in boxes {
-            acc.voxels[k].fetch_add(b.volume(), Ordering::Relaxed);
-        }
-        if acc.dry && k == self.init_level {
-            return boxes.iter().map(|b| Grid::new(*b)).collect();
-        }
-        if k == self.init_level {
-            let jitter = self.params.jitter;
-            return boxes
-                .par_iter()
-                .map(|b| {
-                    let field = init::JitterField::new(&self.cands, seed, jitter, k, b);
-                    let mut g = Grid::new(*b);
-                    for (i, t) in g.data.iter_mut().enumerate() {
-                        let p = position(b, i);
-                        *t = init::initial_triple(&self.cands, seed, &field, k, p);
-                    }
-                    g
-                })
-                .collect();
-        }
-        let parent_boxes: Vec<Box3> = boxes.iter().map(|b| b.parent()).collect();
-        let step = self.final_step(k + 1);
-        let mut need = BTreeSet::new();
-        for pb in &parent_boxes {
-            need.extend(self.cells_covering(k + 1, step, pb));
-        }
-        let parents = self.tiles(k + 1, step, need, acc);
-        if acc.dry {
-            return boxes.iter().map(|b| Grid::new(*b)).collect();
-        }
-        boxes
-            .par_iter()
-            .zip(parent_boxes.par_iter())
-            .map(|(b, pb)| {
-                let mut pg = Grid::new(*pb);
-                for c in self.cells_covering(k + 1, step, pb) {
-                    pg.copy_from(&parents[&c]);
-                }
-                let mut g = Grid::new(*b);
-                for (i, t) in g.data.iter_mut().enumerate() {
-                    let p = position(b, i);
-                    let parent = pg.get(p.map(|v| v.div_euclid(2)));
-                    *t = init::upsample(&self.cands, parent, k, p);
-                }
-                g
+            work.triples
+        };
+        tiles
+            .iter()
+            .map(|&t| {
+                let mut g = Grid::new(Self::tile_box(t));
+                g.copy_from(&triples);
+                (t, Arc::new(g))
             })
             .collect()
+    }
+
+    /// Version 0 of level `k` at the voxels of `need` (a grid over its
+    /// box; other voxels are left unset): the jittered slab at the initial
+    /// level, else the parent level's final triples upsampled.
+    fn version0(&self, k: usize, need: &plan::Mask, acc: &Acc) -> Grid<[u32; 3]> {
+        let b = need.bounds();
+        let mut g = Grid::new(b);
+        let zs: Vec<i64> = (b.lo[2]..b.hi[2]).collect();
+        let layer = (b.size()[0] * b.size()[1]) as usize;
+        if k == self.init_level {
+            if acc.dry {
+                return g;
+            }
+            let field =
+                init::JitterField::new(&self.cands, self.params.seed, self.params.jitter, k, &b);
+            g.data
+                .par_chunks_mut(layer)
+                .zip(zs.par_iter())
+                .for_each(|(dst, &z)| {
+                    for p in need.layer(z) {
+                        let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
+                        dst[i] = init::initial_triple(&self.cands, self.params.seed, &field, k, p);
+                    }
+                });
+            return g;
+        }
+        let mut parent_tiles = BTreeSet::new();
+        for p in need.positions() {
+            parent_tiles.insert(Self::tile_of(p.map(|v| v.div_euclid(2))));
+        }
+        let parents = self.tiles(k + 1, parent_tiles, acc);
+        if acc.dry {
+            return g;
+        }
+        g.data
+            .par_chunks_mut(layer)
+            .zip(zs.par_iter())
+            .for_each(|(dst, &z)| {
+                for p in need.layer(z) {
+                    let q = p.map(|v| v.div_euclid(2));
+                    let parent = parents[&Self::tile_of(q)].get(q);
+                    let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
+                    dst[i] = init::upsample(&self.cands, parent, k, p);
+                }
+            });
+        g
     }
 
     pub(crate) fn new_acc(&self) -> Acc {
@@ -518,12 +449,12 @@ impl Engine {
     /// Final triples at arbitrary voxels of level `k`, fetched tile by tile
     /// so scattered points never pull in their bounding box.
     fn triples_at(&self, k: usize, points: &[[i64; 3]], acc: &Acc) -> Vec<[u32; 3]> {
-        let step = self.final_step(k);
-        let o = self.offset_of(k, step);
-        let cell_of = |p: &[i64; 3]| p.map(|v| (v - o).div_euclid(self.cell));
-        let cells: BTreeSet<[i64; 3]> = points.iter().map(cell_of).collect();
-        let tiles = self.tiles(k, step, cells, acc);
-        points.iter().map(|p| tiles[&cell_of(p)].get(*p)).collect()
+        let cells: BTreeSet<[i64; 3]> = points.iter().map(|p| Self::tile_of(*p)).collect();
+        let tiles = self.tiles(k, cells, acc);
+        points
+            .iter()
+            .map(|p| tiles[&Self::tile_of(*p)].get(*p))
+            .collect()
     }
 
     pub(crate) fn points_rgb(

@@ -1,16 +1,18 @@
 //! Dependency planning: which voxels of which level and step a request
 //! needs, for both correction schemes.
 
-/// Splits cells into groups whose bounding boxes are not much larger than
-/// the cells themselves (so a standard-scheme batch never synthesizes the
-/// empty space between scattered cells).
-pub fn group_cells(cells: &[[i64; 3]], _cell: i64) -> Vec<Vec<[i64; 3]>> {
+/// Splits tiles into groups whose bounding boxes hold at most `max` tiles:
+/// one group shares its halo of dependencies (large groups waste less), and
+/// its working memory is bounded (the dense working box covers the group's
+/// bounding box). Empty space inside a box costs memory but no synthesis:
+/// only the exact dependency set is computed.
+pub fn group_cells(cells: &[[i64; 3]], max: usize) -> Vec<Vec<[i64; 3]>> {
     let mut out = Vec::new();
-    split(cells.to_vec(), &mut out);
+    split(cells.to_vec(), max, &mut out);
     out
 }
 
-fn split(mut cells: Vec<[i64; 3]>, out: &mut Vec<Vec<[i64; 3]>>) {
+fn split(mut cells: Vec<[i64; 3]>, max: usize, out: &mut Vec<Vec<[i64; 3]>>) {
     if cells.is_empty() {
         return;
     }
@@ -18,7 +20,7 @@ fn split(mut cells: Vec<[i64; 3]>, out: &mut Vec<Vec<[i64; 3]>>) {
     let hi = [0, 1, 2].map(|a| cells.iter().map(|c| c[a]).max().expect("non-empty"));
     let ext = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
     let volume: i64 = ext.iter().product();
-    if cells.len() == 1 || volume <= 2 * cells.len() as i64 {
+    if cells.len() == 1 || volume <= max as i64 {
         out.push(cells);
         return;
     }
@@ -27,11 +29,12 @@ fn split(mut cells: Vec<[i64; 3]>, out: &mut Vec<Vec<[i64; 3]>>) {
         .expect("three axes");
     cells.sort_by_key(|c| (c[axis], c[(axis + 1) % 3], c[(axis + 2) % 3]));
     let right = cells.split_off(cells.len() / 2);
-    split(cells, out);
-    split(right, out);
+    split(cells, max, out);
+    split(right, max, out);
 }
 
 use super::Step;
+use super::grid::{Box3, Grid};
 
 /// Exact dependency counts of one level under a history-window scheme.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -52,10 +55,14 @@ fn shape(v: [i64; 3], r: i64, mut f: impl FnMut([i64; 3])) {
                 let mut q = v;
                 q[a] += i;
                 q[b] += j;
-                // Each plane contains the centre lines of the others; only
-                // the xy plane reports them, so every voxel comes once.
-                let on_axis = (i == 0 || j == 0) && (a, b) != (0, 1);
-                if !on_axis {
+                // The planes share their axis lines: xy reports the x and y
+                // lines, yz the z line, so every voxel comes once.
+                let repeated = match (a, b) {
+                    (0, 1) => false,
+                    (1, 2) => j == 0,
+                    _ => i == 0 || j == 0,
+                };
+                if !repeated {
                     f(q);
                 }
             }
@@ -63,26 +70,24 @@ fn shape(v: [i64; 3], r: i64, mut f: impl FnMut([i64; 3])) {
     }
 }
 
-fn class_of(p: [i64; 3], side: i64) -> i64 {
-    p[0].rem_euclid(side) + side * p[1].rem_euclid(side) + side * side * p[2].rem_euclid(side)
-}
-
 /// A dense set of voxels inside a fixed box.
-struct Mask {
-    grid: super::grid::Grid<bool>,
+pub struct Mask {
+    grid: Grid<bool>,
     count: u64,
 }
 
 impl Mask {
-    fn new(b: super::grid::Box3) -> Mask {
+    /// An empty set able to hold the voxels of `b`.
+    pub fn new(b: Box3) -> Mask {
         Mask {
-            grid: super::grid::Grid::new(b),
+            grid: Grid::new(b),
             count: 0,
         }
     }
 
+    /// Adds `p` (which must lie inside the box).
     #[inline]
-    fn insert(&mut self, p: [i64; 3]) {
+    pub fn insert(&mut self, p: [i64; 3]) {
         let i = self.grid.index(p);
         if !self.grid.data[i] {
             self.grid.data[i] = true;
@@ -90,7 +95,31 @@ impl Mask {
         }
     }
 
-    fn positions(&self) -> impl Iterator<Item = [i64; 3]> + '_ {
+    /// Adds `p` without keeping the count (call [`Mask::recount`] after a
+    /// batch of marks); the hot path of dependency planning.
+    #[inline]
+    pub fn mark(&mut self, p: [i64; 3]) {
+        let i = self.grid.index(p);
+        self.grid.data[i] = true;
+    }
+
+    /// Recomputes the count after [`Mask::mark`] calls.
+    pub fn recount(&mut self) {
+        self.count = self.grid.data.iter().filter(|b| **b).count() as u64;
+    }
+
+    /// Number of voxels in the set.
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// The box the set lives in.
+    pub fn bounds(&self) -> Box3 {
+        self.grid.bounds
+    }
+
+    /// Members in x-fastest order.
+    pub fn positions(&self) -> impl Iterator<Item = [i64; 3]> + '_ {
         self.grid
             .data
             .iter()
@@ -98,6 +127,106 @@ impl Mask {
             .filter(|(_, b)| **b)
             .map(|(i, _)| self.grid.position(i))
     }
+
+    /// Members of one z layer, x fastest.
+    pub fn layer(&self, z: i64) -> impl Iterator<Item = [i64; 3]> + '_ {
+        let b = self.grid.bounds;
+        let s = b.size();
+        let per = (s[0] * s[1]) as usize;
+        let start = (z - b.lo[2]) as usize * per;
+        self.grid.data[start..start + per]
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| **m)
+            .map(move |(i, _)| self.grid.position(start + i))
+    }
+}
+
+/// What synthesizing some voxels of one level at their final version
+/// requires: the version-0 voxels, and for every subpass in forward order
+/// the voxels to correct.
+pub struct LevelChain {
+    /// Voxels whose version 0 is needed.
+    pub need: Mask,
+    /// Per subpass (all steps, forward order): its step index and the voxels
+    /// it corrects.
+    pub subpasses: Vec<(usize, Vec<[i64; 3]>)>,
+}
+
+impl LevelChain {
+    /// Total corrections.
+    pub fn corrections(&self) -> u64 {
+        self.subpasses.iter().map(|s| s.1.len() as u64).sum()
+    }
+}
+
+/// Walks the correction steps of one level backwards from `targets` (voxels
+/// needed at the final version), following each correction's history
+/// window: a neighbour is needed at the previous subpass's version, or, when
+/// `cell` is set and the neighbour lies across the step's cell wall, at the
+/// version the step started from (Zhang et al.'s barrier).
+pub fn backward(
+    targets: &[[i64; 3]],
+    steps: &[Step],
+    radius: i64,
+    side: i64,
+    cell: Option<i64>,
+) -> LevelChain {
+    let classes = side * side * side;
+    let first = targets.first().copied().unwrap_or([0; 3]);
+    let bounds = targets.iter().fold(Box3::new(first, [1, 1, 1]), |b, p| {
+        b.union(&Box3::new(*p, [1, 1, 1]))
+    });
+    let growth: i64 = steps
+        .iter()
+        .map(|s| s.passes as i64 * classes * radius)
+        .sum();
+    let mut need = Mask::new(bounds.dilate(growth + radius));
+    for p in targets {
+        need.insert(*p);
+    }
+    let mut subpasses = Vec::new();
+    for (si, step) in steps.iter().enumerate().rev() {
+        let mut start = Mask::new(need.bounds());
+        for t in (0..step.passes as i64 * classes).rev() {
+            let class = t % classes;
+            let phase = [class % side, (class / side) % side, class / (side * side)];
+            let mut corrected = Vec::new();
+            super::correction::for_class(&need.bounds(), phase, side, |v| {
+                if need.grid.data[need.grid.index(v)] {
+                    corrected.push(v);
+                }
+            });
+            for &v in &corrected {
+                match cell {
+                    None => shape(v, radius, |q| need.mark(q)),
+                    Some(m) => {
+                        let lo = v.map(|c| (c - step.offset).div_euclid(m) * m + step.offset);
+                        let cell_box = Box3::new(lo, [m; 3]);
+                        shape(v, radius, |q| {
+                            if cell_box.contains(q) {
+                                need.mark(q);
+                            } else {
+                                start.mark(q);
+                            }
+                        });
+                    }
+                }
+            }
+            // Blocks of 16×16 columns keep each thread's reads local; the
+            // voxels of one subpass are independent, so order is free.
+            corrected.sort_unstable_by_key(|p| (p[1] >> 4, p[0] >> 4, p[2], p[1], p[0]));
+            subpasses.push((si, corrected));
+        }
+        need.recount();
+        start.recount();
+        let extra: Vec<[i64; 3]> = start.positions().collect();
+        for q in extra {
+            need.insert(q);
+        }
+    }
+    subpasses.reverse();
+    LevelChain { need, subpasses }
 }
 
 /// Exact voxel-level dependency sets of a request (Dong et al.'s
@@ -105,9 +234,7 @@ impl Mask {
 /// level by level from the finest: for each level, the version-0 voxels and
 /// the corrections needed. `steps_per_level[k]` lists the correction steps
 /// at level k (empty: no correction); `cell` is the dual-grid cell side, or
-/// `None` for the standard scheme, where every correction reads the latest
-/// version of every neighbour. Within a grid step a neighbour across the
-/// cell wall is read at the version the step started from.
+/// `None` for the standard scheme.
 pub fn exact_chain(
     request: &[[i64; 3]],
     levels: usize,
@@ -116,63 +243,24 @@ pub fn exact_chain(
     side: i64,
     cell: Option<i64>,
 ) -> Vec<LevelPlan> {
-    use super::grid::Box3;
-    let Some(first) = request.first() else {
-        return Vec::new();
-    };
-    let mut bounds = request.iter().fold(Box3::new(*first, [1, 1, 1]), |b, p| {
-        b.union(&Box3::new(*p, [1, 1, 1]))
-    });
     let mut points: Vec<[i64; 3]> = request.to_vec();
     let mut out = Vec::new();
-    let classes = side * side * side;
     for steps in steps_per_level.iter().take(levels) {
-        let growth: i64 = steps
-            .iter()
-            .map(|s| s.passes as i64 * classes * radius)
-            .sum();
-        let mut need = Mask::new(bounds.dilate(growth + radius));
-        for p in &points {
-            need.insert(*p);
+        if points.is_empty() {
+            break;
         }
-        let mut corrections = 0u64;
-        for step in steps.iter().rev() {
-            let cell_of = |p: [i64; 3]| cell.map(|m| p.map(|v| (v - step.offset).div_euclid(m)));
-            let mut start = Mask::new(need.grid.bounds);
-            for t in (0..step.passes as i64 * classes).rev() {
-                let class = t % classes;
-                let corrected: Vec<[i64; 3]> = need
-                    .positions()
-                    .filter(|&v| class_of(v, side) == class)
-                    .collect();
-                corrections += corrected.len() as u64;
-                for v in corrected {
-                    let cv = cell_of(v);
-                    shape(v, radius, |q| {
-                        if cell_of(q) == cv {
-                            need.insert(q);
-                        } else {
-                            start.insert(q);
-                        }
-                    });
-                }
-            }
-            let extra: Vec<[i64; 3]> = start.positions().collect();
-            for q in extra {
-                need.insert(q);
-            }
-        }
+        let chain = backward(&points, steps, radius, side, cell);
         out.push(LevelPlan {
-            voxels: need.count,
-            corrections,
+            voxels: chain.need.count(),
+            corrections: chain.corrections(),
         });
-        let mut parents: Vec<[i64; 3]> = need
+        let mut parents: Vec<[i64; 3]> = chain
+            .need
             .positions()
             .map(|p| p.map(|v| v.div_euclid(2)))
             .collect();
         parents.sort_unstable();
         parents.dedup();
-        bounds = need.grid.bounds.parent();
         points = parents;
     }
     out
