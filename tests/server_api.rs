@@ -806,3 +806,37 @@ async fn full_queue_answers_503_with_retry_after() {
     assert_eq!(st, 200);
     s.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn request_budget_is_enforced() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.max_request_voxels = 4096;
+    let s = TestServer::start(args).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 10).await;
+    let t = |p: &str| s.url(&format!("/v1/textures/{id}{p}"));
+    for (path, status) in [
+        ("/slices/z/0.png?w=64&h=64", 200),
+        ("/slices/z/0.png?w=65&h=64", 400),
+        ("/region.raw?w=16&h=16&d=16", 200),
+        ("/region.raw?w=16&h=16&d=17", 400),
+        ("/bricks/0/0_0_0.raw", 200),
+        ("/cut.png?w=16&h=16&u=2,0,0&v=0,2,0", 200),
+        ("/cut.png?w=16&h=16&u=100,0,0&v=0,100,0", 400),
+    ] {
+        let (st, h, b) = get(&c, &t(path)).await;
+        if status == 200 {
+            assert_eq!(st, 200, "{path}");
+        } else {
+            assert_error(st, &h, &b, 400, "too_large");
+        }
+    }
+    s.stop().await;
+
+    // Bricks larger than the budget are a configuration error.
+    let mut args = test_args(dir.path());
+    args.max_request_voxels = 1000;
+    let err = solidtex::server::Server::bind(&args).await.err().unwrap();
+    assert!(err.to_string().contains("budget"), "{err}");
+}

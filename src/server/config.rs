@@ -56,6 +56,14 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_BRICK_SIZE", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub brick_size: u32,
 
+    /// Work budget of one voxel request, in voxels: w·h for slices,
+    /// w·h·d for regions and bricks, w·h·clamp(|u|,1,8)·clamp(|v|,1,8) for
+    /// cuts. Requests over it get 400 `too_large`. The default allows the
+    /// documented caps (4096² slices, 16 Mi-voxel regions); lower it on
+    /// shared servers.
+    #[arg(long, env = "SOLIDTEX_MAX_REQUEST_VOXELS", default_value_t = 16 << 20, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_request_voxels: u64,
+
     /// Register the bundled exemplar under the id `default` at start.
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
     pub default_texture: bool,
@@ -98,6 +106,7 @@ impl ServeArgs {
             http_threads: 2,
             max_upload_bytes: 8 << 20,
             brick_size: 64,
+            max_request_voxels: 16 << 20,
             default_texture: false,
             shutdown_timeout: 30,
             log_format: LogFormat::Pretty,

@@ -58,6 +58,14 @@ impl Server {
     /// Opens the data directory, brings its textures back, registers the
     /// bundled exemplar (when configured) and binds the listener.
     pub async fn bind(args: &ServeArgs) -> anyhow::Result<Server> {
+        let brick_voxels = u64::from(args.brick_size).pow(3);
+        if brick_voxels > args.max_request_voxels {
+            anyhow::bail!(
+                "bricks of edge {} ({brick_voxels} voxels) exceed the request budget of {} voxels",
+                args.brick_size,
+                args.max_request_voxels
+            );
+        }
         let data_dir = args.resolved_data_dir();
         let store = {
             let d = data_dir.clone();
@@ -104,6 +112,7 @@ impl Server {
             jobs,
             metrics,
             brick_size: args.brick_size,
+            max_request_voxels: args.max_request_voxels,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
         });
         tracing::info!(

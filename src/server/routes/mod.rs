@@ -52,6 +52,8 @@ pub struct Shared {
     pub metrics: Arc<Metrics>,
     /// Edge of served bricks.
     pub brick_size: u32,
+    /// Work budget of one voxel request (see [`crate::server::ServeArgs`]).
+    pub max_request_voxels: u64,
     /// Largest accepted upload, bytes.
     pub max_upload_bytes: usize,
 }

@@ -44,6 +44,17 @@ fn coord(q: &Query, name: &str) -> Result<i64, ApiError> {
     q.int(name, 0i64, -COORD_LIMIT, COORD_LIMIT)
 }
 
+/// Checks a request's work against the server's budget.
+fn check_budget(s: &AppState, what: &str, voxels: u64) -> Result<(), ApiError> {
+    if voxels > s.max_request_voxels {
+        return Err(ApiError::too_large(format!(
+            "{what} costs {voxels} voxels; this server's budget per request is {}",
+            s.max_request_voxels
+        )));
+    }
+    Ok(())
+}
+
 /// Checks that `start + len - 1` stays within the coordinate limit.
 fn check_extent(name: &str, start: i64, len: u32) -> Result<(), ApiError> {
     let last = start + len as i64 - 1;
@@ -182,6 +193,7 @@ pub async fn slice(
     let lod = lod(&q, &tex)?;
     check_extent("u0", u0, w)?;
     check_extent("v0", v0, h)?;
+    check_budget(&s, "slice", w as u64 * h as u64)?;
     let name = match axis {
         Axis::X => "x",
         Axis::Y => "y",
@@ -237,6 +249,13 @@ pub async fn cut(
             }
         }
     }
+    let spread = |a: [f64; 3]| {
+        (a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+            .sqrt()
+            .clamp(1.0, 8.0)
+    };
+    let work = (w as f64 * h as f64 * spread(u) * spread(v)).ceil() as u64;
+    check_budget(&s, "cut", work)?;
     let plane = CutPlane {
         origin,
         u,
@@ -325,6 +344,7 @@ pub async fn region(
     for (a, name) in ["x", "y", "z"].iter().enumerate() {
         check_extent(name, origin[a], size[a])?;
     }
+    check_budget(&s, "region", voxels)?;
     let region = Region { origin, size };
     region_response(&s, &entry, tex, region, lod, &headers).await
 }
