@@ -250,7 +250,10 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
         .arg("serve")
         .env("SOLIDTEX_ADDR", "127.0.0.1:0")
         .env("SOLIDTEX_DATA_DIR", dir.path())
-        .env("SOLIDTEX_BRICK_SIZE", "48")
+        .env("SOLIDTEX_BRICK_SIZE", "32")
+        .env("SOLIDTEX_WORKER_THREADS", "1")
+        .env("SOLIDTEX_PRECOMPUTE_THREADS", "2")
+        .env("SOLIDTEX_MAX_PRECOMPUTES", "2")
         .env("SOLIDTEX_LOG_FORMAT", "json")
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -271,10 +274,21 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
         .unwrap();
     assert_eq!(v["id"], "default");
     assert_eq!(v["exemplar"]["width"], 128);
-    assert_eq!(v["brick_size"], 48, "configured from the environment");
-    if v["status"] == "pending" {
-        let r = c.get(format!("{base}/readyz")).send().await.unwrap();
-        assert_eq!(r.status().as_u16(), 503);
+    assert_eq!(v["brick_size"], 32, "configured from the environment");
+    // Not ready while it is precomputed.
+    let r = c.get(format!("{base}/readyz")).send().await.unwrap();
+    if r.status().as_u16() == 503 {
+        assert_eq!(r.json::<Value>().await.unwrap()["status"], "starting");
+    } else {
+        let v: Value = c
+            .get(format!("{base}/v1/textures/default"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        assert_eq!(v["status"], "ready");
     }
 
     // A small texture of our own, then a request in flight at SIGTERM.
@@ -320,7 +334,7 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
     // The request in flight is answered in full…
     let r = slow.await.unwrap().expect("in-flight request answered");
     assert_eq!(r.status().as_u16(), 200);
-    assert_eq!(r.bytes().await.unwrap().len(), 48 * 48 * 48 * 3);
+    assert_eq!(r.bytes().await.unwrap().len(), 32 * 32 * 32 * 3);
     // …and the process exits 0 promptly, abandoning the background
     // precompute of the default texture.
     let t0 = Instant::now();

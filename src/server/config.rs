@@ -44,6 +44,11 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_WORKER_THREADS", default_value_t = 0)]
     pub worker_threads: usize,
 
+    /// Threads of the precompute pool, kept apart from the synthesis pool
+    /// so that an upload never starves voxel requests (0: half the cores).
+    #[arg(long, env = "SOLIDTEX_PRECOMPUTE_THREADS", default_value_t = 0)]
+    pub precompute_threads: usize,
+
     /// Threads answering HTTP (the synthesis runs elsewhere).
     #[arg(long, env = "SOLIDTEX_HTTP_THREADS", default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub http_threads: u32,
@@ -103,6 +108,7 @@ impl ServeArgs {
             max_precomputes: 1,
             precompute_queue: 16,
             worker_threads: 0,
+            precompute_threads: 0,
             http_threads: 2,
             max_upload_bytes: 8 << 20,
             brick_size: 64,
@@ -112,6 +118,15 @@ impl ServeArgs {
             log_format: LogFormat::Pretty,
             log: "info".into(),
         }
+    }
+
+    /// Threads of the precompute pool in effect.
+    pub fn resolved_precompute_threads(&self) -> usize {
+        if self.precompute_threads > 0 {
+            return self.precompute_threads;
+        }
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        (cores / 2).max(1)
     }
 
     /// The data directory in effect.

@@ -78,12 +78,18 @@ impl Server {
             usize::try_from(args.cache_bytes).unwrap_or(usize::MAX),
         ));
         let metrics = Arc::new(metrics::Metrics::new(cache.clone()));
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(args.resolved_precompute_threads())
+            .thread_name(|i| format!("precompute-{i}"))
+            .build()
+            .context("starting the precompute pool")?;
         let registry = Arc::new(Registry::new(
             store,
             cache,
             metrics.clone(),
             args.max_precomputes,
             args.precompute_queue,
+            pool,
         ));
         let todo = {
             let r = registry.clone();

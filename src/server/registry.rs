@@ -3,7 +3,8 @@
 //!
 //! A texture is created `pending` by an upload (or found so at start),
 //! precomputed in the background — at most `max_precomputes` at once, on
-//! a blocking thread that drives the rayon pool — and becomes `ready` once
+//! a blocking thread driving a rayon pool of its own, so uploads never
+//! starve voxel requests of synthesis threads — and becomes `ready` once
 //! its candidates are durable in the [`Store`], or `failed` with a reason.
 //! Uploading content that is already known returns the existing texture;
 //! uploading a failed one tries again.
@@ -166,6 +167,7 @@ pub struct Registry {
     cache: Arc<TileCache>,
     metrics: Arc<Metrics>,
     slots: Arc<Semaphore>,
+    pool: rayon::ThreadPool,
     pending: AtomicUsize,
     max_pending: usize,
 }
@@ -178,15 +180,17 @@ fn now() -> u64 {
 }
 
 impl Registry {
-    /// An empty registry over `store`.
+    /// An empty registry over `store`; precomputes run on `pool`.
     pub fn new(
         store: Arc<Store>,
         cache: Arc<TileCache>,
         metrics: Arc<Metrics>,
         max_precomputes: u32,
         precompute_queue: u32,
+        pool: rayon::ThreadPool,
     ) -> Registry {
         Registry {
+            pool,
             map: RwLock::new(HashMap::new()),
             store,
             cache,
@@ -390,7 +394,9 @@ impl Registry {
                 let (name, p) = overall_progress(stage, f);
                 entry.set_progress(name, p);
             };
-            let c = Candidates::compute(&set, &entry.params.analysis, &progress)
+            let c = self
+                .pool
+                .install(|| Candidates::compute(&set, &entry.params.analysis, &progress))
                 .map_err(|e| e.to_string())?;
             let c = Arc::new(c);
             let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
