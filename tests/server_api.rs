@@ -125,6 +125,32 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     let (st, v) = upload(&c, &s, png.clone(), "levels=3&seed=2").await;
     assert_eq!(st, 202);
     assert_ne!(v["id"], id.as_str());
+    // …which shares the candidates instead of precomputing them again.
+    let other = wait_ready(&c, &s, v["id"].as_str().unwrap()).await;
+    assert_eq!(other["params"]["seed"], 2);
+    let text = metrics(&c, &s).await;
+    assert_eq!(
+        metric(&text, r#"solidtex_precomputes_total{outcome="ok"}"#),
+        1.0
+    );
+    assert_eq!(
+        metric(&text, r#"solidtex_precomputes_total{outcome="reused"}"#),
+        1.0
+    );
+    let (_, _, a) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=16&h=16")),
+    )
+    .await;
+    let (_, _, b) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{}/slices/z/0.png?w=16&h=16",
+            other["id"].as_str().unwrap()
+        )),
+    )
+    .await;
+    assert_ne!(a, b, "another seed, other voxels");
 
     let list: Value = c
         .get(s.url("/v1/textures"))

@@ -44,6 +44,8 @@ pub struct Entry {
     pub exemplar: ExemplarInfo,
     /// Parameters.
     pub params: TextureParams,
+    analysis_hash: String,
+    candidates: Mutex<Option<Arc<Candidates>>>,
     planes: Planes,
     status: RwLock<Status>,
     progress: AtomicU32,
@@ -59,9 +61,12 @@ impl Entry {
             Planes::Single(_) => 1,
             Planes::Triple(_) => 3,
         };
+        let analysis_hash = spec.analysis_hash();
         Entry {
             id,
             content_hash,
+            analysis_hash,
+            candidates: Mutex::new(None),
             created,
             exemplar: ExemplarInfo {
                 width,
@@ -84,6 +89,18 @@ impl Entry {
             .read()
             .unwrap_or_else(|e| e.into_inner())
             .clone()
+    }
+
+    fn candidates(&self) -> Option<Arc<Candidates>> {
+        self.candidates
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    fn set_ready(&self, c: Arc<Candidates>, t: Texture) {
+        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = Some(c);
+        self.set_status(Status::Ready(t));
     }
 
     fn set_status(&self, s: Status) {
@@ -374,6 +391,17 @@ impl Registry {
         });
     }
 
+    /// Candidates already in memory for the same pixels and analysis
+    /// parameters (a texture that differs in synthesis parameters only).
+    fn shared_candidates(&self, entry: &Entry) -> Option<Arc<Candidates>> {
+        self.map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .filter(|e| e.analysis_hash == entry.analysis_hash)
+            .find_map(|e| e.candidates())
+    }
+
     /// Runs one precompute to its end (blocking).
     fn precompute(&self, entry: &Arc<Entry>) {
         if entry.deleted.load(Ordering::SeqCst) {
@@ -388,7 +416,14 @@ impl Registry {
             "precompute started"
         );
         let t0 = Instant::now();
+        let shared = self.shared_candidates(entry);
+        let reused = shared.is_some();
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            if let Some(c) = shared {
+                let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+                    .map_err(|e| e.to_string())?;
+                return Ok((c, t));
+            }
             let set = entry.planes.to_set().map_err(|e| e.message)?;
             let progress = |stage: Stage, f: f32| {
                 let (name, p) = overall_progress(stage, f);
@@ -414,7 +449,9 @@ impl Registry {
             .precompute_seconds
             .lock()
             .unwrap_or_else(|e| e.into_inner()) = Some(seconds);
-        self.metrics.precompute_seconds.observe(seconds);
+        if !reused {
+            self.metrics.precompute_seconds.observe(seconds);
+        }
         let _g = self.store.lock();
         if entry.deleted.load(Ordering::SeqCst) {
             tracing::info!("texture deleted during its precompute; result dropped");
@@ -425,16 +462,21 @@ impl Registry {
                 if let Err(e) = self.store.write_candidates(&entry.id, &c) {
                     // Still served from memory; the next start recomputes.
                     tracing::error!(error = %e, "could not store candidates");
-                    entry.set_status(Status::Ready(t));
+                    entry.set_ready(c, t);
                 } else {
-                    entry.set_status(Status::Ready(t));
+                    entry.set_ready(c, t);
                     if let Err(e) = self.store.write_meta(&entry.meta()) {
                         tracing::error!(error = %e, "could not store texture metadata");
                     }
                 }
                 entry.set_progress("done", 1.0);
-                self.count_precompute("ok");
-                tracing::info!(seconds, "precompute finished");
+                if reused {
+                    self.count_precompute("reused");
+                    tracing::info!("candidates shared with a texture of the same exemplars");
+                } else {
+                    self.count_precompute("ok");
+                    tracing::info!(seconds, "precompute finished");
+                }
             }
             Err(why) => {
                 tracing::error!(reason = %why, "precompute failed");
@@ -511,8 +553,8 @@ impl Registry {
                 .unwrap_or_else(|e| e.into_inner()) = meta.precompute_seconds;
             match meta.status {
                 StoredStatus::Ready => match self.load_ready(&entry) {
-                    Ok(t) => {
-                        entry.set_status(Status::Ready(t));
+                    Ok((c, t)) => {
+                        entry.set_ready(c, t);
                         entry.set_progress("done", 1.0);
                         self.metrics.textures_loaded.inc();
                         tracing::info!(id = %meta.id, "texture loaded");
@@ -540,7 +582,12 @@ impl Registry {
         Ok(todo)
     }
 
-    fn load_ready(&self, entry: &Entry) -> Result<Texture, String> {
+    fn load_ready(&self, entry: &Entry) -> Result<(Arc<Candidates>, Texture), String> {
+        if let Some(c) = self.shared_candidates(entry) {
+            let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+                .map_err(|e| e.to_string())?;
+            return Ok((c, t));
+        }
         let bytes = self
             .store
             .read_candidates(&entry.id)
@@ -549,8 +596,10 @@ impl Registry {
         if c.params() != &entry.params.analysis {
             return Err("stored candidates were made with other parameters".into());
         }
-        Texture::new(Arc::new(c), entry.params.synth.clone(), self.cache.clone())
-            .map_err(|e| e.to_string())
+        let c = Arc::new(c);
+        let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+            .map_err(|e| e.to_string())?;
+        Ok((c, t))
     }
 
     fn insert(&self, entry: Arc<Entry>) {

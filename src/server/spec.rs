@@ -164,6 +164,24 @@ impl TextureSpec {
     pub fn content_hash(&self) -> String {
         let mut h = Sha256::new();
         h.update(b"solidtex texture v1\0");
+        self.hash_planes(&mut h);
+        hash_json(&mut h, &self.params.analysis);
+        hash_json(&mut h, &self.params.synth);
+        hex(&h.finalize()[..16])
+    }
+
+    /// What the precomputed candidates depend on: the pixels and the
+    /// analysis parameters only. Textures that differ in synthesis
+    /// parameters alone share their candidates.
+    pub fn analysis_hash(&self) -> String {
+        let mut h = Sha256::new();
+        h.update(b"solidtex candidates v1\0");
+        self.hash_planes(&mut h);
+        hash_json(&mut h, &self.params.analysis);
+        hex(&h.finalize()[..16])
+    }
+
+    fn hash_planes(&self, h: &mut Sha256) {
         let planes: [&Exemplar; 3] = match &self.planes {
             Planes::Single(e) => [e, e, e],
             Planes::Triple(t) => [&t[0], &t[1], &t[2]],
@@ -175,14 +193,13 @@ impl TextureSpec {
                 h.update(p);
             }
         }
-        let a = serde_json::to_string(&self.params.analysis).unwrap_or_default();
-        let s = serde_json::to_string(&self.params.synth).unwrap_or_default();
-        h.update((a.len() as u64).to_le_bytes());
-        h.update(a.as_bytes());
-        h.update((s.len() as u64).to_le_bytes());
-        h.update(s.as_bytes());
-        hex(&h.finalize()[..16])
     }
+}
+
+fn hash_json<T: Serialize>(h: &mut Sha256, v: &T) {
+    let s = serde_json::to_string(v).unwrap_or_default();
+    h.update((s.len() as u64).to_le_bytes());
+    h.update(s.as_bytes());
 }
 
 /// Lowercase hex of bytes.
@@ -307,6 +324,15 @@ mod tests {
             params: spec(img(3), 1).params,
         };
         assert_eq!(a, triple.content_hash());
+        // Candidates depend on pixels and analysis parameters only.
+        assert_eq!(
+            spec(img(3), 1).analysis_hash(),
+            spec(img(3), 2).analysis_hash()
+        );
+        assert_ne!(
+            spec(img(3), 1).analysis_hash(),
+            spec(img(5), 1).analysis_hash()
+        );
     }
 
     #[test]
