@@ -57,6 +57,8 @@ include-method = "DELETE"
 parameters = { "path.id" = "never-stored" }
 TOML
 
+# Run from the temporary directory: schemathesis keeps a cache where it runs.
+cd "$DATA"
 schemathesis --config-file "$DATA/schemathesis.toml" run "$BASE/openapi.yaml" --url "$BASE" \
     --checks not_a_server_error,status_code_conformance,content_type_conformance,response_headers_conformance,response_schema_conformance,negative_data_rejection \
     --phases examples,coverage,fuzzing \
