@@ -40,6 +40,8 @@ enum Command {
     Bench(BenchArgs),
     /// Score synthesized slices against their exemplar, next to baselines.
     Eval(EvalArgs),
+    /// Run the HTTP voxel service.
+    Serve(solidtex::server::ServeArgs),
 }
 
 #[derive(Args)]
@@ -275,6 +277,7 @@ fn write_png(path: &Path, w: u32, h: u32, rgb: Vec<u8>) -> anyhow::Result<()> {
 /// Runs one subcommand.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Serve(a) => return solidtex::server::serve_main(a),
         Command::Precompute(a) => {
             let xy = Exemplar::open(&a.exemplar)?;
             let set = match (&a.yz, &a.zx) {

@@ -18,6 +18,7 @@ pub mod error;
 pub mod eval;
 pub mod exemplar;
 pub mod params;
+pub mod server;
 pub mod stack;
 pub mod synth;
 pub mod texture;

@@ -1,0 +1,211 @@
+//! Configuration of `solidtex serve`: every option is a flag and a
+//! `SOLIDTEX_*` environment variable, with defaults that run a useful
+//! server on a laptop.
+
+use clap::{Args, ValueEnum};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+/// Options of the HTTP service.
+#[derive(Args, Clone, Debug)]
+pub struct ServeArgs {
+    /// Address to listen on (`0.0.0.0:8080` to accept remote clients).
+    #[arg(long, env = "SOLIDTEX_ADDR", default_value = "127.0.0.1:8080")]
+    pub addr: SocketAddr,
+
+    /// Where exemplars and precomputed `.stx` candidate files are kept
+    /// [default: the user's data directory + `/solidtex`, else `./data`].
+    #[arg(long, env = "SOLIDTEX_DATA_DIR")]
+    pub data_dir: Option<PathBuf>,
+
+    /// Bytes of synthesized tiles kept in the shared LRU cache (suffixes
+    /// K, M, G accepted).
+    #[arg(long, env = "SOLIDTEX_CACHE_BYTES", default_value = "512M", value_parser = parse_bytes)]
+    pub cache_bytes: u64,
+
+    /// Synthesis jobs (slices, cuts, regions, bricks) running at once.
+    #[arg(long, env = "SOLIDTEX_MAX_JOBS", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub max_jobs: u32,
+
+    /// Synthesis jobs allowed to wait for a running slot; beyond that a
+    /// request is answered 503 with `Retry-After`.
+    #[arg(long, env = "SOLIDTEX_QUEUE", default_value_t = 64, value_parser = clap::value_parser!(u32).range(0..=100_000))]
+    pub queue: u32,
+
+    /// Precomputations running at once.
+    #[arg(long, env = "SOLIDTEX_MAX_PRECOMPUTES", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub max_precomputes: u32,
+
+    /// Precomputations allowed to wait; a new upload beyond that gets 503.
+    #[arg(long, env = "SOLIDTEX_PRECOMPUTE_QUEUE", default_value_t = 16)]
+    pub precompute_queue: u32,
+
+    /// Threads of the synthesis pool (0: one per core).
+    #[arg(long, env = "SOLIDTEX_WORKER_THREADS", default_value_t = 0)]
+    pub worker_threads: usize,
+
+    /// Threads of the precompute pool, kept apart from the synthesis pool
+    /// so that an upload never starves voxel requests (0: half the cores).
+    #[arg(long, env = "SOLIDTEX_PRECOMPUTE_THREADS", default_value_t = 0)]
+    pub precompute_threads: usize,
+
+    /// Threads answering HTTP (the synthesis runs elsewhere).
+    #[arg(long, env = "SOLIDTEX_HTTP_THREADS", default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub http_threads: u32,
+
+    /// Largest accepted upload in bytes (suffixes K, M, G accepted).
+    #[arg(long, env = "SOLIDTEX_MAX_UPLOAD_BYTES", default_value = "8M", value_parser = parse_bytes)]
+    pub max_upload_bytes: u64,
+
+    /// Edge of the aligned bricks served under `/bricks/` (voxels).
+    #[arg(long, env = "SOLIDTEX_BRICK_SIZE", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub brick_size: u32,
+
+    /// Work budget of one voxel request, in voxels: w·h for slices,
+    /// w·h·d for regions and bricks, w·h·clamp(|u|,1,8)·clamp(|v|,1,8) for
+    /// cuts. Requests over it get 400 `too_large`. The default allows the
+    /// documented caps (4096² slices, 16 Mi-voxel regions); lower it on
+    /// shared servers.
+    #[arg(long, env = "SOLIDTEX_MAX_REQUEST_VOXELS", default_value_t = 16 << 20, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_request_voxels: u64,
+
+    /// Register the bundled exemplar under the id `default` at start.
+    #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
+    pub default_texture: bool,
+
+    /// Seconds to wait for in-flight requests after SIGINT/SIGTERM.
+    #[arg(long, env = "SOLIDTEX_SHUTDOWN_TIMEOUT", default_value_t = 30)]
+    pub shutdown_timeout: u64,
+
+    /// Log format.
+    #[arg(long, env = "SOLIDTEX_LOG_FORMAT", value_enum, default_value_t = LogFormat::Pretty)]
+    pub log_format: LogFormat,
+
+    /// Log filter (tracing `EnvFilter` syntax, e.g. `info,solidtex=debug`).
+    #[arg(long, env = "SOLIDTEX_LOG", default_value = "info")]
+    pub log: String,
+}
+
+/// How log lines are written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum LogFormat {
+    /// Human-readable lines.
+    Pretty,
+    /// One JSON object per line.
+    Json,
+}
+
+impl ServeArgs {
+    /// Defaults for embedding the server (tests, benchmarks): loopback on a
+    /// free port, data under `data_dir`, no default texture.
+    pub fn for_data_dir(data_dir: impl Into<PathBuf>) -> ServeArgs {
+        ServeArgs {
+            addr: SocketAddr::from(([127, 0, 0, 1], 0)),
+            data_dir: Some(data_dir.into()),
+            cache_bytes: 256 << 20,
+            max_jobs: 4,
+            queue: 64,
+            max_precomputes: 1,
+            precompute_queue: 16,
+            worker_threads: 0,
+            precompute_threads: 0,
+            http_threads: 2,
+            max_upload_bytes: 8 << 20,
+            brick_size: 64,
+            max_request_voxels: 16 << 20,
+            default_texture: false,
+            shutdown_timeout: 30,
+            log_format: LogFormat::Pretty,
+            log: "info".into(),
+        }
+    }
+
+    /// Threads of the precompute pool in effect.
+    pub fn resolved_precompute_threads(&self) -> usize {
+        if self.precompute_threads > 0 {
+            return self.precompute_threads;
+        }
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        (cores / 2).max(1)
+    }
+
+    /// The data directory in effect.
+    pub fn resolved_data_dir(&self) -> PathBuf {
+        match &self.data_dir {
+            Some(d) => d.clone(),
+            None => dirs::data_dir()
+                .map(|d| d.join("solidtex"))
+                .unwrap_or_else(|| PathBuf::from("data")),
+        }
+    }
+}
+
+/// Parses a byte count with an optional binary suffix: `1048576`, `512K`,
+/// `64M`, `2G` (also `KiB`, `MB`…, case-insensitive).
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let split = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    let n: u64 = num
+        .parse()
+        .map_err(|_| format!("`{s}` is not a byte count (e.g. 512M)"))?;
+    let shift = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 0,
+        "k" | "kb" | "kib" => 10,
+        "m" | "mb" | "mib" => 20,
+        "g" | "gb" | "gib" => 30,
+        "t" | "tb" | "tib" => 40,
+        other => return Err(format!("unknown byte unit `{other}` (use K, M, G)")),
+    };
+    n.checked_mul(1u64 << shift)
+        .ok_or_else(|| format!("`{s}` is too large"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        serve: ServeArgs,
+    }
+
+    #[test]
+    fn byte_counts() {
+        assert_eq!(parse_bytes("1024"), Ok(1024));
+        assert_eq!(parse_bytes("512M"), Ok(512 << 20));
+        assert_eq!(parse_bytes("2gib"), Ok(2 << 30));
+        assert_eq!(parse_bytes(" 3K "), Ok(3 << 10));
+        assert!(parse_bytes("lots").is_err());
+        assert!(parse_bytes("3Q").is_err());
+        assert!(parse_bytes("99999999999T").is_err());
+    }
+
+    #[test]
+    fn flags_parse_and_default() {
+        let c = Cli::try_parse_from(["x"]).unwrap().serve;
+        assert_eq!(c.addr.port(), 8080);
+        assert_eq!(c.cache_bytes, 512 << 20);
+        assert!(c.default_texture);
+        let c = Cli::try_parse_from([
+            "x",
+            "--addr",
+            "0.0.0.0:9000",
+            "--cache-bytes",
+            "1G",
+            "--default-texture",
+            "false",
+            "--log-format",
+            "json",
+        ])
+        .unwrap()
+        .serve;
+        assert_eq!(c.addr.port(), 9000);
+        assert_eq!(c.cache_bytes, 1 << 30);
+        assert!(!c.default_texture);
+        assert_eq!(c.log_format, LogFormat::Json);
+        assert!(Cli::try_parse_from(["x", "--max-jobs", "0"]).is_err());
+    }
+}

@@ -1,0 +1,250 @@
+//! `solidtex serve`: the HTTP voxel service.
+//!
+//! It keeps precomputed candidates resident and answers requests for
+//! slices, oblique cuts, regions and bricks by synthesizing only their
+//! dependency set, with tiles shared in one byte-bounded cache. The engine
+//! knows nothing about HTTP; this module maps routes onto it:
+//!
+//! - [`config`]: flags and `SOLIDTEX_*` variables ([`ServeArgs`]).
+//! - [`spec`]: what a texture is made of and its content id.
+//! - [`store`]: the data directory, written atomically and durably.
+//! - [`registry`]: textures, their status and background precomputes.
+//! - [`jobs`]: the bounded synthesis queue (backpressure → 503).
+//! - [`routes`]: the router, handlers and middleware.
+//! - [`metrics`], [`error`], [`query`], [`png`]: the supporting pieces.
+//!
+//! [`Server::bind`] loads the data directory before it accepts anything, so
+//! ready textures are served from the first request on; [`Server::run`]
+//! stops accepting when its shutdown future resolves and returns once the
+//! requests in flight have been answered.
+
+pub mod config;
+pub mod error;
+pub mod jobs;
+pub mod metrics;
+pub mod png;
+pub mod query;
+pub mod registry;
+pub mod routes;
+pub mod spec;
+pub mod store;
+
+pub use config::{LogFormat, ServeArgs};
+pub use error::ApiError;
+
+use crate::{Exemplar, TileCache};
+use anyhow::Context;
+use registry::Registry;
+use routes::{AppState, Shared};
+use spec::{Planes, TextureParams, TextureSpec};
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Id under which the bundled exemplar is registered.
+pub const DEFAULT_ID: &str = "default";
+
+/// The bundled exemplar.
+pub const DEFAULT_EXEMPLAR: &[u8] = include_bytes!("../../assets/default.png");
+
+/// A bound, loaded server, ready to run.
+pub struct Server {
+    listener: tokio::net::TcpListener,
+    state: AppState,
+}
+
+impl Server {
+    /// Opens the data directory, brings its textures back, registers the
+    /// bundled exemplar (when configured) and binds the listener.
+    pub async fn bind(args: &ServeArgs) -> anyhow::Result<Server> {
+        let brick_voxels = u64::from(args.brick_size).pow(3);
+        if brick_voxels > args.max_request_voxels {
+            anyhow::bail!(
+                "bricks of edge {} ({brick_voxels} voxels) exceed the request budget of {} voxels",
+                args.brick_size,
+                args.max_request_voxels
+            );
+        }
+        let data_dir = args.resolved_data_dir();
+        let store = {
+            let d = data_dir.clone();
+            tokio::task::spawn_blocking(move || store::Store::open(&d))
+                .await?
+                .with_context(|| format!("opening data directory {}", data_dir.display()))?
+        };
+        let store = Arc::new(store);
+        let cache = Arc::new(TileCache::new(
+            usize::try_from(args.cache_bytes).unwrap_or(usize::MAX),
+        ));
+        let metrics = Arc::new(metrics::Metrics::new(cache.clone()));
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(args.resolved_precompute_threads())
+            .thread_name(|i| format!("precompute-{i}"))
+            .build()
+            .context("starting the precompute pool")?;
+        let registry = Arc::new(Registry::new(
+            store,
+            cache,
+            metrics.clone(),
+            args.max_precomputes,
+            args.precompute_queue,
+            pool,
+        ));
+        let todo = {
+            let r = registry.clone();
+            tokio::task::spawn_blocking(move || r.recover())
+                .await?
+                .context("reading the data directory")?
+        };
+        registry.resume(todo);
+        if args.default_texture {
+            let e = Exemplar::decode(DEFAULT_EXEMPLAR).context("bundled exemplar")?;
+            let spec = TextureSpec {
+                planes: Planes::Single(e),
+                params: TextureParams::default(),
+            };
+            registry
+                .submit(Some(DEFAULT_ID), spec)
+                .await
+                .map_err(|e| anyhow::anyhow!("registering the default texture: {e}"))?;
+        }
+        let jobs = jobs::Jobs::new(args.max_jobs, args.queue, metrics.clone());
+        let listener = tokio::net::TcpListener::bind(args.addr)
+            .await
+            .with_context(|| format!("binding {}", args.addr))?;
+        let state = Arc::new(Shared {
+            registry,
+            jobs,
+            metrics,
+            brick_size: args.brick_size,
+            max_request_voxels: args.max_request_voxels,
+            max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
+        });
+        tracing::info!(
+            addr = %listener.local_addr()?,
+            data_dir = %data_dir.display(),
+            textures = state.registry.list().len(),
+            "server ready"
+        );
+        Ok(Server { listener, state })
+    }
+
+    /// The bound address (useful with port 0).
+    pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
+        self.listener.local_addr()
+    }
+
+    /// The state handlers share (for tests).
+    pub fn state(&self) -> AppState {
+        self.state.clone()
+    }
+
+    /// Serves until `shutdown` resolves, then stops accepting and returns
+    /// once in-flight requests are answered.
+    pub async fn run(
+        self,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> anyhow::Result<()> {
+        let app = routes::router(self.state);
+        axum::serve(self.listener, app)
+            .with_graceful_shutdown(shutdown)
+            .await
+            .context("serving")
+    }
+}
+
+/// Resolves on SIGINT or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        if let Err(e) = tokio::signal::ctrl_c().await {
+            tracing::error!(error = %e, "cannot listen for SIGINT");
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "cannot listen for SIGTERM");
+                std::future::pending::<()>().await;
+            }
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+    tracing::info!("shutdown requested: finishing requests in flight");
+}
+
+fn init_tracing(args: &ServeArgs) {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_new(&args.log).unwrap_or_else(|_| EnvFilter::new("info"));
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    let _ = match args.log_format {
+        LogFormat::Pretty => builder.try_init(),
+        LogFormat::Json => builder
+            .json()
+            .flatten_event(true)
+            .with_current_span(true)
+            .try_init(),
+    };
+}
+
+/// Entry point of `solidtex serve`: sets up logging, the synthesis pool and
+/// the async runtime, serves until SIGINT/SIGTERM, then waits up to the
+/// shutdown timeout for requests in flight. Prints
+/// `solidtex listening on http://ADDR` on stdout once accepting.
+pub fn serve_main(args: ServeArgs) -> anyhow::Result<()> {
+    init_tracing(&args);
+    if args.worker_threads > 0 {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(args.worker_threads)
+            .thread_name(|i| format!("synth-{i}"))
+            .build_global()
+            .context("starting the synthesis pool")?;
+    }
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(args.http_threads as usize)
+        .thread_name("http")
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let timeout = Duration::from_secs(args.shutdown_timeout);
+    let result = runtime.block_on(async move {
+        let server = Server::bind(&args).await?;
+        let addr = server.local_addr()?;
+        println!("solidtex listening on http://{addr}");
+        use std::io::Write;
+        let _ = std::io::stdout().flush();
+        let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+        let serving = tokio::spawn(server.run(async move {
+            let _ = rx.await;
+        }));
+        shutdown_signal().await;
+        let _ = tx.send(());
+        match tokio::time::timeout(timeout, serving).await {
+            Ok(r) => r.context("server task")?,
+            Err(_) => {
+                tracing::warn!(
+                    seconds = timeout.as_secs(),
+                    "requests still in flight at shutdown timeout"
+                );
+                Ok(())
+            }
+        }
+    });
+    // Background precomputes are abandoned (they restart from the data
+    // directory next time); don't wait for them.
+    runtime.shutdown_timeout(Duration::from_millis(100));
+    tracing::info!("stopped");
+    result
+}

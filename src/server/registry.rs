@@ -1,0 +1,641 @@
+//! The textures the server knows: their status, precompute progress and,
+//! once ready, the [`Texture`] that answers requests.
+//!
+//! A texture is created `pending` by an upload (or found so at start),
+//! precomputed in the background — at most `max_precomputes` at once, on
+//! a blocking thread driving a rayon pool of its own, so uploads never
+//! starve voxel requests of synthesis threads — and becomes `ready` once
+//! its candidates are durable in the [`Store`], or `failed` with a reason.
+//! Uploading content that is already known returns the existing texture;
+//! uploading a failed one tries again.
+
+use super::error::{ApiError, panic_message};
+use super::metrics::{Metrics, OutcomeLabels};
+use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
+use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
+use crate::{Candidates, Stage, Texture, TileCache};
+use axum::http::StatusCode;
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use tokio::sync::Semaphore;
+
+/// Where a texture stands.
+#[derive(Clone)]
+pub enum Status {
+    /// Precompute queued or running.
+    Pending,
+    /// Ready to synthesize.
+    Ready(Texture),
+    /// Precompute failed.
+    Failed(String),
+}
+
+/// One texture.
+pub struct Entry {
+    /// Id in URLs.
+    pub id: String,
+    /// Content hash of exemplars and parameters.
+    pub content_hash: String,
+    /// Creation time, seconds since the Unix epoch.
+    pub created: u64,
+    /// Exemplar size and plane count.
+    pub exemplar: ExemplarInfo,
+    /// Parameters.
+    pub params: TextureParams,
+    analysis_hash: String,
+    candidates: Mutex<Option<Arc<Candidates>>>,
+    planes: Planes,
+    status: RwLock<Status>,
+    progress: AtomicU32,
+    stage: Mutex<&'static str>,
+    precompute_seconds: Mutex<Option<f64>>,
+    deleted: AtomicBool,
+}
+
+impl Entry {
+    fn new(id: String, content_hash: String, created: u64, spec: TextureSpec) -> Entry {
+        let (width, height) = spec.planes.size();
+        let planes_n = match spec.planes {
+            Planes::Single(_) => 1,
+            Planes::Triple(_) => 3,
+        };
+        let analysis_hash = spec.analysis_hash();
+        Entry {
+            id,
+            content_hash,
+            analysis_hash,
+            candidates: Mutex::new(None),
+            created,
+            exemplar: ExemplarInfo {
+                width,
+                height,
+                planes: planes_n,
+            },
+            params: spec.params,
+            planes: spec.planes,
+            status: RwLock::new(Status::Pending),
+            progress: AtomicU32::new(0f32.to_bits()),
+            stage: Mutex::new("queued"),
+            precompute_seconds: Mutex::new(None),
+            deleted: AtomicBool::new(false),
+        }
+    }
+
+    /// Current status.
+    pub fn status(&self) -> Status {
+        self.status
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    fn candidates(&self) -> Option<Arc<Candidates>> {
+        self.candidates
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    fn set_ready(&self, c: Arc<Candidates>, t: Texture) {
+        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = Some(c);
+        self.set_status(Status::Ready(t));
+    }
+
+    fn set_status(&self, s: Status) {
+        *self.status.write().unwrap_or_else(|e| e.into_inner()) = s;
+    }
+
+    /// Precompute progress 0..=1 (1 once ready).
+    pub fn progress(&self) -> f32 {
+        f32::from_bits(self.progress.load(Ordering::Relaxed))
+    }
+
+    /// Current precompute stage name.
+    pub fn stage(&self) -> &'static str {
+        *self.stage.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Seconds the precompute took, when it ran in this process or was
+    /// recorded by an earlier one.
+    pub fn precompute_seconds(&self) -> Option<f64> {
+        *self
+            .precompute_seconds
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn set_progress(&self, stage: &'static str, fraction: f32) {
+        *self.stage.lock().unwrap_or_else(|e| e.into_inner()) = stage;
+        // Never goes back (stages report their own fractions).
+        let new = fraction.clamp(0.0, 1.0);
+        let _ = self
+            .progress
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |old| {
+                (new > f32::from_bits(old)).then_some(new.to_bits())
+            });
+    }
+
+    fn meta(&self) -> StoredMeta {
+        let (status, reason) = match self.status() {
+            Status::Pending => (StoredStatus::Pending, None),
+            Status::Ready(_) => (StoredStatus::Ready, None),
+            Status::Failed(r) => (StoredStatus::Failed, Some(r)),
+        };
+        StoredMeta {
+            version: META_VERSION,
+            id: self.id.clone(),
+            content_hash: self.content_hash.clone(),
+            created: self.created,
+            exemplar: self.exemplar,
+            params: self.params.to_flat(),
+            status,
+            reason,
+            precompute_seconds: self.precompute_seconds(),
+        }
+    }
+}
+
+/// Overall progress from a stage and its fraction (stages weighted by their
+/// usual share of the time).
+fn overall_progress(stage: Stage, f: f32) -> (&'static str, f32) {
+    let (name, start, span) = match stage {
+        Stage::Analysis => ("analysis", 0.0, 0.1),
+        Stage::Search => ("search", 0.1, 0.6),
+        Stage::Coherence => ("coherence", 0.7, 0.1),
+        Stage::Finish => ("finish", 0.8, 0.2),
+    };
+    (name, (start + span * f.clamp(0.0, 1.0)).min(0.999))
+}
+
+/// What an upload found.
+pub enum Submitted {
+    /// The texture exists and is ready.
+    Known(Arc<Entry>),
+    /// The texture is (now) being precomputed.
+    Pending(Arc<Entry>),
+}
+
+/// All textures of a server.
+pub struct Registry {
+    map: RwLock<HashMap<String, Arc<Entry>>>,
+    store: Arc<Store>,
+    cache: Arc<TileCache>,
+    metrics: Arc<Metrics>,
+    slots: Arc<Semaphore>,
+    pool: rayon::ThreadPool,
+    pending: AtomicUsize,
+    max_pending: usize,
+}
+
+fn now() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0)
+}
+
+impl Registry {
+    /// An empty registry over `store`; precomputes run on `pool`.
+    pub fn new(
+        store: Arc<Store>,
+        cache: Arc<TileCache>,
+        metrics: Arc<Metrics>,
+        max_precomputes: u32,
+        precompute_queue: u32,
+        pool: rayon::ThreadPool,
+    ) -> Registry {
+        Registry {
+            pool,
+            map: RwLock::new(HashMap::new()),
+            store,
+            cache,
+            metrics,
+            slots: Arc::new(Semaphore::new(max_precomputes.max(1) as usize)),
+            pending: AtomicUsize::new(0),
+            max_pending: (max_precomputes + precompute_queue) as usize,
+        }
+    }
+
+    /// The shared tile cache.
+    pub fn cache(&self) -> &Arc<TileCache> {
+        &self.cache
+    }
+
+    /// The texture `id`, if known.
+    pub fn get(&self, id: &str) -> Option<Arc<Entry>> {
+        self.map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(id)
+            .cloned()
+    }
+
+    /// Every texture, oldest first.
+    pub fn list(&self) -> Vec<Arc<Entry>> {
+        let mut v: Vec<Arc<Entry>> = self
+            .map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .cloned()
+            .collect();
+        v.sort_by(|a, b| (a.created, &a.id).cmp(&(b.created, &b.id)));
+        v
+    }
+
+    /// The texture `id` ready to synthesize: 404 when unknown, 409 with
+    /// `Retry-After` while pending, 409 when failed.
+    pub fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
+        let e = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
+        match e.status() {
+            Status::Ready(t) => Ok((e, t)),
+            Status::Pending => Err(ApiError::new(
+                StatusCode::CONFLICT,
+                "texture_pending",
+                format!(
+                    "texture `{id}` is still being precomputed ({:.0}%)",
+                    e.progress() * 100.0
+                ),
+            )
+            .retry_after(1)),
+            Status::Failed(r) => Err(ApiError::new(
+                StatusCode::CONFLICT,
+                "texture_failed",
+                format!("texture `{id}` failed to precompute: {r}"),
+            )),
+        }
+    }
+
+    fn update_gauges(&self) {
+        let (mut p, mut r, mut f) = (0, 0, 0);
+        for e in self.map.read().unwrap_or_else(|e| e.into_inner()).values() {
+            match e.status() {
+                Status::Pending => p += 1,
+                Status::Ready(_) => r += 1,
+                Status::Failed(_) => f += 1,
+            }
+        }
+        self.metrics.set_textures(p, r, f);
+    }
+
+    /// Registers an upload under its content hash (or under `id` when
+    /// given, as for `default`) and starts its precompute unless it is
+    /// known already. Fails with 503 when too many precomputes wait.
+    pub async fn submit(
+        self: &Arc<Self>,
+        id: Option<&str>,
+        spec: TextureSpec,
+    ) -> Result<Submitted, ApiError> {
+        let hash = spec.content_hash();
+        let fixed_id = id.is_some();
+        let id = id.map(str::to_string).unwrap_or_else(|| hash.clone());
+        let entry = {
+            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            if let Some(e) = map.get(&id).filter(|e| e.content_hash == hash) {
+                match e.status() {
+                    Status::Ready(_) => return Ok(Submitted::Known(e.clone())),
+                    Status::Pending => return Ok(Submitted::Pending(e.clone())),
+                    Status::Failed(_) => {}
+                }
+            }
+            // Server-chosen ids (the bundled default) are never refused.
+            if !fixed_id && self.pending.load(Ordering::SeqCst) >= self.max_pending {
+                self.metrics.jobs_rejected.inc();
+                return Err(ApiError::overloaded("precompute"));
+            }
+            if let Some(old) = map.get(&id) {
+                old.deleted.store(true, Ordering::SeqCst);
+            }
+            let e = Arc::new(Entry::new(id.clone(), hash, now(), spec));
+            map.insert(id.clone(), e.clone());
+            e
+        };
+        self.update_gauges();
+        let store = self.store.clone();
+        let meta = entry.meta();
+        let planes = entry.planes.clone();
+        let written = tokio::task::spawn_blocking(move || {
+            let _g = store.lock();
+            store.create(&meta, &planes)
+        })
+        .await;
+        let failure = match written {
+            Ok(Ok(())) => None,
+            Ok(Err(e)) => Some(e.to_string()),
+            Err(e) => Some(e.to_string()),
+        };
+        if let Some(why) = failure {
+            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
+                map.remove(&id);
+            }
+            drop(map);
+            self.update_gauges();
+            return Err(ApiError::internal(format!(
+                "could not store the texture: {why}"
+            )));
+        }
+        self.start_precompute(entry.clone());
+        Ok(Submitted::Pending(entry))
+    }
+
+    /// Removes texture `id` and its files; 404 when unknown.
+    pub async fn delete(self: &Arc<Self>, id: &str) -> Result<(), ApiError> {
+        let entry = {
+            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            let e = map
+                .remove(id)
+                .ok_or_else(|| ApiError::unknown_texture(id))?;
+            e.deleted.store(true, Ordering::SeqCst);
+            e
+        };
+        self.update_gauges();
+        let this = self.clone();
+        let id = id.to_string();
+        tokio::task::spawn_blocking(move || {
+            let _g = this.store.lock();
+            // A re-upload of the same content may own the directory by now.
+            if this.get(&id).is_some() {
+                return Ok(());
+            }
+            this.store.remove(&id)
+        })
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))?
+        .map_err(|e| ApiError::internal(format!("could not remove the texture's files: {e}")))?;
+        drop(entry);
+        Ok(())
+    }
+
+    fn start_precompute(self: &Arc<Self>, entry: Arc<Entry>) {
+        self.pending.fetch_add(1, Ordering::SeqCst);
+        self.metrics.precomputes_pending.inc();
+        let this = self.clone();
+        tokio::spawn(async move {
+            let permit = this.slots.clone().acquire_owned().await;
+            let worker = this.clone();
+            let e = entry.clone();
+            let done = tokio::task::spawn_blocking(move || {
+                let _permit = permit;
+                worker.precompute(&e);
+            })
+            .await;
+            if let Err(err) = done {
+                entry.set_status(Status::Failed(format!("precompute aborted: {err}")));
+            }
+            this.pending.fetch_sub(1, Ordering::SeqCst);
+            this.metrics.precomputes_pending.dec();
+            this.update_gauges();
+        });
+    }
+
+    /// Candidates already in memory for the same pixels and analysis
+    /// parameters (a texture that differs in synthesis parameters only).
+    fn shared_candidates(&self, entry: &Entry) -> Option<Arc<Candidates>> {
+        self.map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .filter(|e| e.analysis_hash == entry.analysis_hash)
+            .find_map(|e| e.candidates())
+    }
+
+    /// Runs one precompute to its end (blocking).
+    fn precompute(&self, entry: &Arc<Entry>) {
+        if entry.deleted.load(Ordering::SeqCst) {
+            return;
+        }
+        let span = tracing::info_span!("precompute", texture = %entry.id);
+        let _s = span.enter();
+        tracing::info!(
+            width = entry.exemplar.width,
+            height = entry.exemplar.height,
+            planes = entry.exemplar.planes,
+            "precompute started"
+        );
+        let t0 = Instant::now();
+        let shared = self.shared_candidates(entry);
+        let reused = shared.is_some();
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            if let Some(c) = shared {
+                let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+                    .map_err(|e| e.to_string())?;
+                return Ok((c, t));
+            }
+            let set = entry.planes.to_set().map_err(|e| e.message)?;
+            let progress = |stage: Stage, f: f32| {
+                let (name, p) = overall_progress(stage, f);
+                entry.set_progress(name, p);
+            };
+            let c = self
+                .pool
+                .install(|| Candidates::compute(&set, &entry.params.analysis, &progress))
+                .map_err(|e| e.to_string())?;
+            let c = Arc::new(c);
+            let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+                .map_err(|e| e.to_string())?;
+            Ok::<_, String>((c, t))
+        }))
+        .unwrap_or_else(|p| {
+            Err(format!(
+                "precompute panicked: {}",
+                panic_message(p.as_ref())
+            ))
+        });
+        let seconds = t0.elapsed().as_secs_f64();
+        *entry
+            .precompute_seconds
+            .lock()
+            .unwrap_or_else(|e| e.into_inner()) = Some(seconds);
+        if !reused {
+            self.metrics.precompute_seconds.observe(seconds);
+        }
+        let _g = self.store.lock();
+        if entry.deleted.load(Ordering::SeqCst) {
+            tracing::info!("texture deleted during its precompute; result dropped");
+            return;
+        }
+        match result {
+            Ok((c, t)) => {
+                if let Err(e) = self.store.write_candidates(&entry.id, &c) {
+                    // Still served from memory; the next start recomputes.
+                    tracing::error!(error = %e, "could not store candidates");
+                    entry.set_ready(c, t);
+                } else {
+                    entry.set_ready(c, t);
+                    if let Err(e) = self.store.write_meta(&entry.meta()) {
+                        tracing::error!(error = %e, "could not store texture metadata");
+                    }
+                }
+                entry.set_progress("done", 1.0);
+                if reused {
+                    self.count_precompute("reused");
+                    tracing::info!("candidates shared with a texture of the same exemplars");
+                } else {
+                    self.count_precompute("ok");
+                    tracing::info!(seconds, "precompute finished");
+                }
+            }
+            Err(why) => {
+                tracing::error!(reason = %why, "precompute failed");
+                entry.set_status(Status::Failed(why));
+                entry.set_progress("failed", entry.progress());
+                if let Err(e) = self.store.write_meta(&entry.meta()) {
+                    tracing::error!(error = %e, "could not store texture metadata");
+                }
+                self.count_precompute("failed");
+            }
+        }
+    }
+
+    fn count_precompute(&self, outcome: &str) {
+        self.metrics
+            .precomputes
+            .get_or_create(&OutcomeLabels {
+                outcome: outcome.into(),
+            })
+            .inc();
+    }
+
+    /// Brings back every texture of the data directory (blocking): ready
+    /// ones are loaded from their `.stx` without recomputation, interrupted
+    /// or unreadable ones are queued for a new precompute (or marked failed
+    /// when their exemplars are gone), failed ones stay failed. Returns the
+    /// entries to precompute; start them with [`Registry::resume`].
+    pub fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
+        let mut todo = Vec::new();
+        for Found { meta, dir } in self.store.scan()? {
+            let params = match TextureParams::from_flat(&meta.params) {
+                Ok(p) => p,
+                Err(e) => {
+                    tracing::warn!(dir = %dir.display(), error = %e, "skipping texture with unreadable parameters");
+                    continue;
+                }
+            };
+            let planes = match self.store.read_planes(&meta) {
+                Ok(p) => p,
+                Err(e) => {
+                    tracing::warn!(id = %meta.id, error = %e, "texture exemplars unreadable; marking failed");
+                    // Keep something to report: a 16×16 black placeholder.
+                    let blank = crate::Exemplar::from_rgb(16, 16, &[0; 16 * 16 * 3])
+                        .expect("valid placeholder");
+                    let entry = Arc::new(Entry::new(
+                        meta.id.clone(),
+                        meta.content_hash.clone(),
+                        meta.created,
+                        TextureSpec {
+                            planes: Planes::Single(blank),
+                            params,
+                        },
+                    ));
+                    let why = format!("stored exemplars unreadable: {e}");
+                    entry.set_status(Status::Failed(why));
+                    let _ = self.store.write_meta(&StoredMeta {
+                        exemplar: meta.exemplar,
+                        ..entry.meta()
+                    });
+                    self.insert(entry);
+                    continue;
+                }
+            };
+            let spec = TextureSpec { planes, params };
+            let entry = Arc::new(Entry::new(
+                meta.id.clone(),
+                meta.content_hash.clone(),
+                meta.created,
+                spec,
+            ));
+            *entry
+                .precompute_seconds
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = meta.precompute_seconds;
+            match meta.status {
+                StoredStatus::Ready => match self.load_ready(&entry) {
+                    Ok((c, t)) => {
+                        entry.set_ready(c, t);
+                        entry.set_progress("done", 1.0);
+                        self.metrics.textures_loaded.inc();
+                        tracing::info!(id = %meta.id, "texture loaded");
+                    }
+                    Err(e) => {
+                        tracing::warn!(id = %meta.id, error = %e, "stored candidates unusable; recomputing");
+                        todo.push(entry.clone());
+                    }
+                },
+                StoredStatus::Pending => {
+                    tracing::info!(id = %meta.id, "precompute was interrupted; recomputing");
+                    todo.push(entry.clone());
+                }
+                StoredStatus::Failed => {
+                    entry.set_status(Status::Failed(
+                        meta.reason
+                            .clone()
+                            .unwrap_or_else(|| "precompute failed".into()),
+                    ));
+                }
+            }
+            self.insert(entry);
+        }
+        self.update_gauges();
+        Ok(todo)
+    }
+
+    fn load_ready(&self, entry: &Entry) -> Result<(Arc<Candidates>, Texture), String> {
+        if let Some(c) = self.shared_candidates(entry) {
+            let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+                .map_err(|e| e.to_string())?;
+            return Ok((c, t));
+        }
+        let bytes = self
+            .store
+            .read_candidates(&entry.id)
+            .map_err(|e| e.to_string())?;
+        let c = Candidates::load(&bytes).map_err(|e| e.to_string())?;
+        if c.params() != &entry.params.analysis {
+            return Err("stored candidates were made with other parameters".into());
+        }
+        let c = Arc::new(c);
+        let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+            .map_err(|e| e.to_string())?;
+        Ok((c, t))
+    }
+
+    fn insert(&self, entry: Arc<Entry>) {
+        self.map
+            .write()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(entry.id.clone(), entry);
+    }
+
+    /// Starts the precomputes [`Registry::recover`] found necessary.
+    pub fn resume(self: &Arc<Self>, todo: Vec<Arc<Entry>>) {
+        for e in todo {
+            self.start_precompute(e);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_is_monotone_over_stages() {
+        let mut last = -1.0;
+        for s in [
+            Stage::Analysis,
+            Stage::Search,
+            Stage::Coherence,
+            Stage::Finish,
+        ] {
+            for f in [0.0, 0.5, 1.0] {
+                let (_, p) = overall_progress(s, f);
+                assert!(p >= last - 1e-6);
+                assert!(p < 1.0);
+                last = p;
+            }
+        }
+    }
+}

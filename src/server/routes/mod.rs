@@ -1,0 +1,230 @@
+//! The HTTP surface: the route table, the shared state handlers see, and
+//! the middleware stack every request passes through.
+//!
+//! Outermost first: CORS → tracing span → metrics → panic catcher → JSON
+//! error shape → handler. Handlers only parse, call the registry or the job
+//! queue, and shape responses; no synthesis logic lives here.
+
+mod ops;
+mod textures;
+mod voxels;
+
+use super::error::{ApiError, json_errors, panic_response};
+use super::jobs::Jobs;
+use super::metrics::Metrics;
+use super::registry::Registry;
+use axum::Router;
+use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
+use axum::http::{HeaderName, Method, StatusCode};
+use axum::middleware::{self, Next};
+use axum::response::Response;
+use axum::routing::get;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tower_http::catch_panic::CatchPanicLayer;
+use tower_http::cors::{Any, CorsLayer};
+use tower_http::trace::{DefaultOnResponse, TraceLayer};
+
+/// Every route as (method, path in OpenAPI notation). The router below
+/// serves exactly these; a test checks them against `openapi.yaml`.
+pub const ROUTES: &[(&str, &str)] = &[
+    ("GET", "/healthz"),
+    ("GET", "/readyz"),
+    ("GET", "/metrics"),
+    ("GET", "/openapi.yaml"),
+    ("GET", "/v1/textures"),
+    ("POST", "/v1/textures"),
+    ("GET", "/v1/textures/{id}"),
+    ("DELETE", "/v1/textures/{id}"),
+    ("GET", "/v1/textures/{id}/slices/{axis}/{at}.png"),
+    ("GET", "/v1/textures/{id}/cut.png"),
+    ("GET", "/v1/textures/{id}/region.raw"),
+    ("GET", "/v1/textures/{id}/bricks/{lod}/{bx}_{by}_{bz}.raw"),
+];
+
+/// What handlers share.
+pub struct Shared {
+    /// The textures.
+    pub registry: Arc<Registry>,
+    /// The synthesis job queue.
+    pub jobs: Jobs,
+    /// Metrics.
+    pub metrics: Arc<Metrics>,
+    /// Edge of served bricks.
+    pub brick_size: u32,
+    /// Work budget of one voxel request (see [`crate::server::ServeArgs`]).
+    pub max_request_voxels: u64,
+    /// Largest accepted upload, bytes.
+    pub max_upload_bytes: usize,
+}
+
+/// Handler state: cheap to clone.
+pub type AppState = Arc<Shared>;
+
+/// Response headers a browser may read across origins.
+const EXPOSED: [&str; 8] = [
+    "etag",
+    "retry-after",
+    "location",
+    "x-solidtex-width",
+    "x-solidtex-height",
+    "x-solidtex-depth",
+    "x-solidtex-origin",
+    "x-solidtex-lod",
+];
+
+/// The complete service.
+pub fn router(state: AppState) -> Router {
+    let upload_limit = state.max_upload_bytes;
+    let routes = Router::new()
+        .route("/healthz", get(ops::healthz))
+        .route("/readyz", get(ops::readyz))
+        .route("/metrics", get(ops::metrics))
+        .route("/openapi.yaml", get(ops::openapi))
+        .route(
+            "/v1/textures",
+            get(textures::list)
+                .post(textures::create)
+                .layer(DefaultBodyLimit::max(upload_limit)),
+        )
+        .route(
+            "/v1/textures/{id}",
+            get(textures::show).delete(textures::remove),
+        )
+        .route("/v1/textures/{id}/slices/{axis}/{at}", get(voxels::slice))
+        .route("/v1/textures/{id}/cut.png", get(voxels::cut))
+        .route("/v1/textures/{id}/region.raw", get(voxels::region))
+        .route("/v1/textures/{id}/bricks/{lod}/{brick}", get(voxels::brick));
+    with_middleware(routes, state)
+}
+
+/// Wraps routes in the middleware stack and the JSON 404 fallback.
+fn with_middleware(routes: Router<AppState>, state: AppState) -> Router {
+    let cors = CorsLayer::new()
+        .allow_origin(Any)
+        .allow_methods([
+            Method::GET,
+            Method::POST,
+            Method::DELETE,
+            Method::HEAD,
+            Method::OPTIONS,
+        ])
+        .allow_headers(Any)
+        .expose_headers(EXPOSED.map(HeaderName::from_static))
+        .max_age(Duration::from_secs(86400));
+    let trace = TraceLayer::new_for_http()
+        .make_span_with(|req: &Request| {
+            let route = req
+                .extensions()
+                .get::<MatchedPath>()
+                .map(|m| m.as_str().to_string())
+                .unwrap_or_else(|| "unmatched".into());
+            tracing::info_span!(
+                "request",
+                method = %req.method(),
+                route = %route,
+                uri = %req.uri(),
+                texture = tracing::field::Empty,
+                voxels = tracing::field::Empty,
+                tiles_computed = tracing::field::Empty,
+                tiles_cached = tracing::field::Empty,
+            )
+        })
+        .on_response(
+            DefaultOnResponse::new()
+                .level(tracing::Level::INFO)
+                .latency_unit(tower_http::LatencyUnit::Micros),
+        );
+    routes
+        .fallback(no_route)
+        .layer(middleware::from_fn(json_errors))
+        .layer(CatchPanicLayer::custom(panic_response))
+        .layer(middleware::from_fn_with_state(state.clone(), track))
+        .layer(trace)
+        .layer(cors)
+        .with_state(state)
+}
+
+async fn no_route(req: Request) -> ApiError {
+    ApiError::new(
+        StatusCode::NOT_FOUND,
+        "no_route",
+        format!("no route for {} {}", req.method(), req.uri().path()),
+    )
+}
+
+/// Counts requests and their latency per route template.
+async fn track(State(s): State<AppState>, req: Request, next: Next) -> Response {
+    let route = req
+        .extensions()
+        .get::<MatchedPath>()
+        .map(|m| m.as_str().to_string())
+        .unwrap_or_else(|| "unmatched".into());
+    let method = req.method().clone();
+    let t0 = Instant::now();
+    let res = next.run(req).await;
+    s.metrics.observe_request(
+        &route,
+        method.as_str(),
+        res.status().as_u16(),
+        t0.elapsed().as_secs_f64(),
+    );
+    res
+}
+
+/// `Cache-Control` of responses that never change.
+pub const IMMUTABLE: &str = "public, max-age=31536000, immutable";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::server::{ServeArgs, Server};
+    use axum::body::Body;
+    use tower::ServiceExt;
+
+    async fn boom() -> StatusCode {
+        let v: Vec<u8> = Vec::new();
+        if v.is_empty() {
+            panic!("boom");
+        }
+        StatusCode::OK
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_panicking_handler_is_a_json_500_and_the_server_goes_on() {
+        let dir = tempfile::tempdir().unwrap();
+        let server = Server::bind(&ServeArgs::for_data_dir(dir.path()))
+            .await
+            .unwrap();
+        let state = server.state();
+        let routes = Router::new()
+            .route("/boom", get(boom))
+            .route("/healthz", get(ops::healthz));
+        let app = with_middleware(routes, state.clone());
+        let call = |uri: &'static str| {
+            let app = app.clone();
+            async move {
+                let res = app
+                    .oneshot(axum::http::Request::get(uri).body(Body::empty()).unwrap())
+                    .await
+                    .unwrap();
+                let status = res.status();
+                let body = axum::body::to_bytes(res.into_body(), 1 << 16)
+                    .await
+                    .unwrap();
+                (
+                    status,
+                    serde_json::from_slice::<serde_json::Value>(&body).unwrap(),
+                )
+            }
+        };
+        let (status, v) = call("/boom").await;
+        assert_eq!(status, StatusCode::INTERNAL_SERVER_ERROR);
+        assert_eq!(v["error"]["code"], "internal");
+        let (status, _) = call("/healthz").await;
+        assert_eq!(status, StatusCode::OK);
+        assert!(state.metrics.encode().contains(
+            r#"solidtex_http_requests_total{route="/boom",method="GET",status="500"} 1"#
+        ));
+    }
+}

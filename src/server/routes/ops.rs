@@ -1,0 +1,60 @@
+//! Operational endpoints: liveness, readiness, metrics and the API document.
+
+use super::AppState;
+use crate::server::registry::Status;
+use axum::Json;
+use axum::extract::State;
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde_json::json;
+
+/// The OpenAPI document of this service.
+pub const OPENAPI_YAML: &str = include_str!("../../../openapi.yaml");
+
+/// `GET /healthz`: the process answers.
+pub async fn healthz() -> Json<serde_json::Value> {
+    Json(json!({ "status": "ok" }))
+}
+
+/// `GET /readyz`: 200 once the bundled texture (when registered) is ready
+/// and the synthesis queue has room; 503 otherwise.
+pub async fn readyz(State(s): State<AppState>) -> Response {
+    let starting = s
+        .registry
+        .get(crate::server::DEFAULT_ID)
+        .is_some_and(|e| matches!(e.status(), Status::Pending));
+    let (code, status) = if starting {
+        (StatusCode::SERVICE_UNAVAILABLE, "starting")
+    } else if s.jobs.is_full() {
+        (StatusCode::SERVICE_UNAVAILABLE, "overloaded")
+    } else {
+        (StatusCode::OK, "ready")
+    };
+    let mut res = (code, Json(json!({ "status": status }))).into_response();
+    if code != StatusCode::OK {
+        res.headers_mut()
+            .insert(header::RETRY_AFTER, header::HeaderValue::from_static("1"));
+    }
+    res
+}
+
+/// `GET /metrics`: Prometheus text exposition.
+pub async fn metrics(State(s): State<AppState>) -> Response {
+    (
+        [(
+            header::CONTENT_TYPE,
+            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+        )],
+        s.metrics.encode(),
+    )
+        .into_response()
+}
+
+/// `GET /openapi.yaml`.
+pub async fn openapi() -> Response {
+    (
+        [(header::CONTENT_TYPE, "application/yaml; charset=utf-8")],
+        OPENAPI_YAML,
+    )
+        .into_response()
+}

@@ -1,0 +1,297 @@
+//! `/v1/textures`: upload exemplars, list, inspect and delete textures.
+
+use super::AppState;
+use crate::Exemplar;
+use crate::server::error::ApiError;
+use crate::server::query::Query;
+use crate::server::registry::{Entry, Status, Submitted};
+use crate::server::spec::{Planes, TextureParams, TextureSpec, valid_id};
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Multipart, Path, Request, State};
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde_json::{Map, Value, json};
+use std::sync::Arc;
+
+/// The JSON view of a texture.
+pub fn view(e: &Entry, brick_size: u32) -> Value {
+    let mut v = json!({
+        "id": e.id,
+        "status": "pending",
+        "progress": e.progress(),
+        "stage": e.stage(),
+        "created": e.created,
+        "exemplar": e.exemplar,
+        "params": Value::Object(e.params.to_flat()),
+        "brick_size": brick_size,
+    });
+    match e.status() {
+        Status::Pending => {}
+        Status::Ready(t) => {
+            v["status"] = "ready".into();
+            v["max_lod"] = t.max_lod().into();
+        }
+        Status::Failed(r) => {
+            v["status"] = "failed".into();
+            v["reason"] = r.into();
+        }
+    }
+    if let Some(s) = e.precompute_seconds() {
+        v["precompute_seconds"] = s.into();
+    }
+    v
+}
+
+/// `GET /v1/textures`.
+pub async fn list(State(s): State<AppState>) -> Json<Value> {
+    let all: Vec<Value> = s
+        .registry
+        .list()
+        .iter()
+        .map(|e| view(e, s.brick_size))
+        .collect();
+    Json(json!({ "textures": all }))
+}
+
+fn checked_id(id: &str) -> Result<(), ApiError> {
+    if valid_id(id) {
+        Ok(())
+    } else {
+        Err(ApiError::unknown_texture(id))
+    }
+}
+
+/// `GET /v1/textures/{id}`.
+pub async fn show(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, ApiError> {
+    checked_id(&id)?;
+    tracing::Span::current().record("texture", id.as_str());
+    let e = s
+        .registry
+        .get(&id)
+        .ok_or_else(|| ApiError::unknown_texture(&id))?;
+    Ok(Json(view(&e, s.brick_size)))
+}
+
+/// `DELETE /v1/textures/{id}`.
+pub async fn remove(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    checked_id(&id)?;
+    tracing::Span::current().record("texture", id.as_str());
+    s.registry.delete(&id).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Exemplar images as uploaded, before decoding.
+enum RawPlanes {
+    Single(Bytes),
+    Triple([Bytes; 3]),
+}
+
+/// `POST /v1/textures`: a PNG body, or multipart `xy`/`yz`/`zx` (or one
+/// `image`) with optional JSON `params`; parameters may also be given in
+/// the query string.
+pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response, ApiError> {
+    let query = Query::parse(req.uri().query())?;
+    let mut flat = TextureParams::flat_from_pairs(query.pairs());
+    let content_type = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string();
+    let essence = content_type
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    let limit = s.max_upload_bytes;
+    let raw = match essence.as_str() {
+        "image/png" => RawPlanes::Single(read_body(req, limit).await?),
+        "multipart/form-data" => read_multipart(req, &mut flat).await?,
+        "" => {
+            return Err(unsupported(
+                "missing Content-Type (send image/png or multipart/form-data)",
+            ));
+        }
+        other => {
+            return Err(unsupported(&format!(
+                "unsupported Content-Type `{other}` (send image/png or multipart/form-data)"
+            )));
+        }
+    };
+    let params = TextureParams::from_flat(&flat)?;
+    let spec = tokio::task::spawn_blocking(move || decode(raw, params))
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))??;
+    let submitted = s.registry.submit(None, spec).await?;
+    let (entry, status) = match submitted {
+        Submitted::Known(e) => (e, StatusCode::CREATED),
+        Submitted::Pending(e) => (e, StatusCode::ACCEPTED),
+    };
+    tracing::Span::current().record("texture", entry.id.as_str());
+    Ok(created_response(&entry, status, s.brick_size))
+}
+
+fn created_response(entry: &Arc<Entry>, status: StatusCode, brick_size: u32) -> Response {
+    let mut res = (status, Json(view(entry, brick_size))).into_response();
+    if let Ok(loc) = HeaderValue::from_str(&format!("/v1/textures/{}", entry.id)) {
+        res.headers_mut().insert(header::LOCATION, loc);
+    }
+    if status == StatusCode::ACCEPTED {
+        res.headers_mut()
+            .insert(header::RETRY_AFTER, HeaderValue::from_static("1"));
+    }
+    res
+}
+
+fn unsupported(message: &str) -> ApiError {
+    ApiError::new(
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "unsupported_media_type",
+        message,
+    )
+}
+
+fn too_large(limit: usize) -> ApiError {
+    ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "payload_too_large",
+        format!("upload larger than {limit} bytes"),
+    )
+}
+
+async fn read_body(req: Request, limit: usize) -> Result<Bytes, ApiError> {
+    let declared = req
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if declared.is_some_and(|n| n > limit as u64) {
+        return Err(too_large(limit));
+    }
+    axum::body::to_bytes(req.into_body(), limit)
+        .await
+        .map_err(|_| too_large(limit))
+}
+
+fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
+    let status = e.status();
+    let code = match status {
+        StatusCode::PAYLOAD_TOO_LARGE => "payload_too_large",
+        _ => "malformed_multipart",
+    };
+    ApiError::new(status, code, e.body_text())
+}
+
+async fn read_multipart(
+    req: Request,
+    flat: &mut Map<String, Value>,
+) -> Result<RawPlanes, ApiError> {
+    let mut mp = Multipart::from_request(req, &()).await.map_err(|e| {
+        ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "malformed_multipart",
+            e.body_text(),
+        )
+    })?;
+    let (mut single, mut xy, mut yz, mut zx) = (None, None, None, None);
+    while let Some(field) = mp.next_field().await.map_err(multipart_error)? {
+        let name = field.name().unwrap_or("").to_string();
+        let data = field.bytes().await.map_err(multipart_error)?;
+        let slot = match name.as_str() {
+            "image" | "exemplar" => &mut single,
+            "xy" => &mut xy,
+            "yz" => &mut yz,
+            "zx" => &mut zx,
+            "params" => {
+                let text = std::str::from_utf8(&data).map_err(|_| {
+                    ApiError::new(
+                        StatusCode::BAD_REQUEST,
+                        "invalid_params",
+                        "`params` is not UTF-8",
+                    )
+                })?;
+                match serde_json::from_str::<Value>(text) {
+                    Ok(Value::Object(m)) => flat.extend(m),
+                    _ => {
+                        return Err(ApiError::new(
+                            StatusCode::BAD_REQUEST,
+                            "invalid_params",
+                            "`params` must be a JSON object",
+                        ));
+                    }
+                }
+                continue;
+            }
+            other => {
+                return Err(ApiError::new(
+                    StatusCode::BAD_REQUEST,
+                    "invalid_request",
+                    format!(
+                        "unknown form field `{other}` (expected xy, yz, zx or image, and params)"
+                    ),
+                ));
+            }
+        };
+        if slot.replace(data).is_some() {
+            return Err(ApiError::new(
+                StatusCode::BAD_REQUEST,
+                "invalid_request",
+                format!("form field `{name}` given more than once"),
+            ));
+        }
+    }
+    match (single, xy, yz, zx) {
+        (Some(one), None, None, None) => Ok(RawPlanes::Single(one)),
+        (None, Some(a), Some(b), Some(c)) => Ok(RawPlanes::Triple([a, b, c])),
+        (None, None, None, None) => Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "missing_exemplar",
+            "no exemplar: send fields xy, yz and zx, or one field image",
+        )),
+        _ => Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "missing_exemplar",
+            "send either all of xy, yz and zx, or one field image",
+        )),
+    }
+}
+
+fn decode_one(name: &str, bytes: &[u8]) -> Result<Exemplar, ApiError> {
+    if bytes.is_empty() {
+        return Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "malformed_image",
+            format!("{name}: empty image"),
+        ));
+    }
+    Exemplar::decode(bytes).map_err(|e| {
+        let mut a = ApiError::from(e);
+        a.message = format!("{name}: {}", a.message);
+        a
+    })
+}
+
+fn decode(raw: RawPlanes, params: TextureParams) -> Result<TextureSpec, ApiError> {
+    let planes = match raw {
+        RawPlanes::Single(b) => Planes::Single(decode_one("image", &b)?),
+        RawPlanes::Triple([a, b, c]) => {
+            let t = [
+                decode_one("xy", &a)?,
+                decode_one("yz", &b)?,
+                decode_one("zx", &c)?,
+            ];
+            let p = Planes::Triple(Box::new(t));
+            p.to_set()?;
+            p
+        }
+    };
+    Ok(TextureSpec { planes, params })
+}

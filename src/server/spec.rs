@@ -1,0 +1,345 @@
+//! What a texture is made of: its exemplars and parameters, and the content
+//! id derived from them.
+//!
+//! Clients give parameters as one flat JSON object (`{"seed": 7,
+//! "neighbourhood": 5, "scheme": "dual-grid"}`); each key belongs either to
+//! the analysis ([`AnalysisParams`]) or to the synthesis ([`SynthParams`]).
+//! The id hashes the decoded pixels and the *complete* parameters after
+//! defaults are filled in, so an upload is idempotent whatever the encoding
+//! of the PNG and whichever defaults were spelled out.
+
+use super::error::ApiError;
+use crate::{AnalysisParams, Exemplar, ExemplarSet, SynthParams};
+use axum::http::StatusCode;
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+use sha2::{Digest, Sha256};
+
+/// Analysis and synthesis parameters of one texture.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TextureParams {
+    /// Shapes the precomputed candidates.
+    pub analysis: AnalysisParams,
+    /// Shapes the voxels synthesized from them.
+    pub synth: SynthParams,
+}
+
+fn keys_of<T: Serialize + Default>() -> Vec<String> {
+    match serde_json::to_value(T::default()) {
+        Ok(Value::Object(m)) => m.keys().cloned().collect(),
+        _ => Vec::new(),
+    }
+}
+
+impl TextureParams {
+    /// Splits a flat object of parameters into analysis and synthesis
+    /// parameters, rejecting unknown keys, wrong types and out-of-range
+    /// values.
+    pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, ApiError> {
+        let analysis_keys = keys_of::<AnalysisParams>();
+        let synth_keys = keys_of::<SynthParams>();
+        let mut a = Map::new();
+        let mut s = Map::new();
+        for (k, v) in obj {
+            if analysis_keys.contains(k) {
+                a.insert(k.clone(), v.clone());
+            } else if synth_keys.contains(k) {
+                s.insert(k.clone(), v.clone());
+            } else {
+                let mut known: Vec<&String> = analysis_keys.iter().chain(&synth_keys).collect();
+                known.sort();
+                let known: Vec<&str> = known.iter().map(|k| k.as_str()).collect();
+                return Err(invalid_params(format!(
+                    "unknown parameter `{k}` (known: {})",
+                    known.join(", ")
+                )));
+            }
+        }
+        let analysis: AnalysisParams =
+            serde_json::from_value(Value::Object(a)).map_err(|e| invalid_params(e.to_string()))?;
+        let synth: SynthParams =
+            serde_json::from_value(Value::Object(s)).map_err(|e| invalid_params(e.to_string()))?;
+        analysis.validate()?;
+        synth.validate()?;
+        Ok(TextureParams { analysis, synth })
+    }
+
+    /// Parses a JSON text holding a flat object of parameters.
+    pub fn from_json(text: &str) -> Result<TextureParams, ApiError> {
+        match serde_json::from_str::<Value>(text) {
+            Ok(Value::Object(m)) => Self::from_flat(&m),
+            Ok(_) => Err(invalid_params("`params` must be a JSON object".into())),
+            Err(e) => Err(invalid_params(format!("`params` is not JSON: {e}"))),
+        }
+    }
+
+    /// Parameters from query-string pairs: each value is read as a JSON
+    /// scalar when it is one (`seed=7`, `jitter=0.5`, `correct_init_level=false`)
+    /// and as a string otherwise (`scheme=dual-grid`).
+    pub fn flat_from_pairs<'a>(
+        pairs: impl Iterator<Item = (&'a str, &'a str)>,
+    ) -> Map<String, Value> {
+        pairs
+            .map(|(k, v)| {
+                let value = match serde_json::from_str::<Value>(v) {
+                    Ok(j) if !j.is_object() && !j.is_array() => j,
+                    _ => Value::String(v.to_string()),
+                };
+                (k.to_string(), value)
+            })
+            .collect()
+    }
+
+    /// All parameters as one flat object.
+    pub fn to_flat(&self) -> Map<String, Value> {
+        let mut m = Map::new();
+        for v in [
+            serde_json::to_value(&self.analysis),
+            serde_json::to_value(&self.synth),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            if let Value::Object(o) = v {
+                m.extend(o);
+            }
+        }
+        m
+    }
+}
+
+fn invalid_params(message: String) -> ApiError {
+    ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)
+}
+
+/// The exemplars of an upload: one image for all planes or three.
+#[derive(Clone, Debug)]
+pub enum Planes {
+    /// One exemplar for xy, yz and zx.
+    Single(Exemplar),
+    /// One exemplar per plane: xy, yz, zx.
+    Triple(Box<[Exemplar; 3]>),
+}
+
+impl Planes {
+    /// The exemplar set the engine works on.
+    pub fn to_set(&self) -> Result<ExemplarSet, ApiError> {
+        match self {
+            Planes::Single(e) => Ok(ExemplarSet::single(e.clone())),
+            Planes::Triple(t) => {
+                let [xy, yz, zx] = (**t).clone();
+                Ok(ExemplarSet::triple(xy, yz, zx)?)
+            }
+        }
+    }
+
+    /// Every stored image with its plane name.
+    pub fn named(&self) -> Vec<(&'static str, &Exemplar)> {
+        match self {
+            Planes::Single(e) => vec![("exemplar", e)],
+            Planes::Triple(t) => vec![("xy", &t[0]), ("yz", &t[1]), ("zx", &t[2])],
+        }
+    }
+
+    /// Width and height of every plane.
+    pub fn size(&self) -> (u32, u32) {
+        let e = self.named()[0].1;
+        (e.width(), e.height())
+    }
+}
+
+/// Everything a texture is made of.
+#[derive(Clone, Debug)]
+pub struct TextureSpec {
+    /// Exemplar images.
+    pub planes: Planes,
+    /// Parameters.
+    pub params: TextureParams,
+}
+
+impl TextureSpec {
+    /// The content hash: SHA-256 over a version tag, the pixels of the xy,
+    /// yz and zx exemplars (a single exemplar counts for all three) and the
+    /// canonical JSON of the complete parameters; 32 hex digits.
+    pub fn content_hash(&self) -> String {
+        let mut h = Sha256::new();
+        h.update(b"solidtex texture v1\0");
+        self.hash_planes(&mut h);
+        hash_json(&mut h, &self.params.analysis);
+        hash_json(&mut h, &self.params.synth);
+        hex(&h.finalize()[..16])
+    }
+
+    /// What the precomputed candidates depend on: the pixels and the
+    /// analysis parameters only. Textures that differ in synthesis
+    /// parameters alone share their candidates.
+    pub fn analysis_hash(&self) -> String {
+        let mut h = Sha256::new();
+        h.update(b"solidtex candidates v1\0");
+        self.hash_planes(&mut h);
+        hash_json(&mut h, &self.params.analysis);
+        hex(&h.finalize()[..16])
+    }
+
+    fn hash_planes(&self, h: &mut Sha256) {
+        let planes: [&Exemplar; 3] = match &self.planes {
+            Planes::Single(e) => [e, e, e],
+            Planes::Triple(t) => [&t[0], &t[1], &t[2]],
+        };
+        for e in planes {
+            h.update(e.width().to_le_bytes());
+            h.update(e.height().to_le_bytes());
+            for p in e.pixels() {
+                h.update(p);
+            }
+        }
+    }
+}
+
+fn hash_json<T: Serialize>(h: &mut Sha256, v: &T) {
+    let s = serde_json::to_string(v).unwrap_or_default();
+    h.update((s.len() as u64).to_le_bytes());
+    h.update(s.as_bytes());
+}
+
+/// Lowercase hex of bytes.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// True for strings that can be a texture id: 1 to 64 characters of
+/// `[A-Za-z0-9_-]` (content ids are 32 hex digits; `default` is the other).
+pub fn valid_id(id: &str) -> bool {
+    (1..=64).contains(&id.len())
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+}
+
+/// Serializable form of an exemplar's size, for metadata.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+pub struct ExemplarInfo {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// 1 (one image for all planes) or 3.
+    pub planes: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn img(seed: u8) -> Exemplar {
+        let rgb: Vec<u8> = (0..16 * 16 * 3)
+            .map(|i| (i as u8).wrapping_mul(seed))
+            .collect();
+        Exemplar::from_rgb(16, 16, &rgb).unwrap()
+    }
+
+    #[test]
+    fn flat_params_split() {
+        let p =
+            TextureParams::from_json(r#"{"seed": 9, "neighbourhood": 7, "scheme": "standard"}"#)
+                .unwrap();
+        assert_eq!(p.synth.seed, 9);
+        assert_eq!(p.analysis.neighbourhood, 7);
+        assert_eq!(p.synth.scheme, crate::Scheme::Standard);
+        let flat = p.to_flat();
+        assert_eq!(flat["seed"], 9);
+        assert_eq!(flat["levels"], AnalysisParams::default().levels);
+        assert_eq!(TextureParams::from_flat(&flat).unwrap(), p);
+    }
+
+    #[test]
+    fn bad_params() {
+        assert_eq!(
+            TextureParams::from_json(r#"{"sed": 1}"#).unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"seed": "x"}"#)
+                .unwrap_err()
+                .code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json("[1]").unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json("{").unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"passes": 99}"#)
+                .unwrap_err()
+                .code,
+            "out_of_range"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"neighbourhood": 4}"#)
+                .unwrap_err()
+                .code,
+            "invalid_request"
+        );
+    }
+
+    #[test]
+    fn query_pairs_typed() {
+        let pairs = [
+            ("seed", "7"),
+            ("scheme", "dual-grid"),
+            ("jitter", "0.5"),
+            ("correct_init_level", "false"),
+        ];
+        let flat = TextureParams::flat_from_pairs(pairs.into_iter());
+        let p = TextureParams::from_flat(&flat).unwrap();
+        assert_eq!(p.synth.seed, 7);
+        assert_eq!(p.synth.jitter, 0.5);
+        assert!(!p.synth.correct_init_level);
+    }
+
+    #[test]
+    fn ids_are_content_hashes() {
+        let spec = |e: Exemplar, seed| TextureSpec {
+            planes: Planes::Single(e),
+            params: TextureParams {
+                synth: SynthParams {
+                    seed,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+        };
+        let a = spec(img(3), 1).content_hash();
+        assert_eq!(a.len(), 32);
+        assert!(valid_id(&a));
+        assert_eq!(a, spec(img(3), 1).content_hash());
+        assert_ne!(a, spec(img(5), 1).content_hash());
+        assert_ne!(a, spec(img(3), 2).content_hash());
+        let triple = TextureSpec {
+            planes: Planes::Triple(Box::new([img(3), img(3), img(3)])),
+            params: spec(img(3), 1).params,
+        };
+        assert_eq!(a, triple.content_hash());
+        // Candidates depend on pixels and analysis parameters only.
+        assert_eq!(
+            spec(img(3), 1).analysis_hash(),
+            spec(img(3), 2).analysis_hash()
+        );
+        assert_ne!(
+            spec(img(3), 1).analysis_hash(),
+            spec(img(5), 1).analysis_hash()
+        );
+    }
+
+    #[test]
+    fn id_syntax() {
+        assert!(valid_id("default"));
+        assert!(!valid_id(""));
+        assert!(!valid_id("../etc"));
+        assert!(!valid_id(&"a".repeat(65)));
+    }
+}

@@ -1,0 +1,381 @@
+//! The data directory: exemplars, metadata and `.stx` candidate files of
+//! every texture, so that a restart serves the same textures without
+//! recomputing them.
+//!
+//! ```text
+//! <data-dir>/textures/<id>/meta.json       status, params, exemplar size
+//!                         /exemplar.png    (or xy.png, yz.png, zx.png)
+//!                         /candidates.stx  written once the precompute ends
+//! ```
+//!
+//! Every file is written to a temporary name, fsynced, renamed over its
+//! final name and the directory fsynced, so a crash leaves either the old
+//! or the new file, never a torn one. `meta.json` is written last on
+//! creation (a directory without it is debris) and flips to `ready` only
+//! after `candidates.stx` is durable, so a texture whose precompute was
+//! interrupted is found `pending` at start and computed again. A mutex
+//! serialises directory-level changes (create, delete, final writes) so a
+//! delete racing a re-upload of the same content cannot remove the new
+//! files.
+
+use super::spec::{ExemplarInfo, Planes, valid_id};
+use crate::{Candidates, Exemplar};
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+use std::fs::{self, File};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
+
+/// Version of the metadata layout.
+pub const META_VERSION: u32 = 1;
+const TMP_SUFFIX: &str = ".tmp";
+
+/// Status as persisted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StoredStatus {
+    /// Precompute not finished (or interrupted).
+    Pending,
+    /// `candidates.stx` is complete.
+    Ready,
+    /// Precompute failed for good.
+    Failed,
+}
+
+/// The persisted `meta.json` of a texture.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct StoredMeta {
+    /// Layout version.
+    pub version: u32,
+    /// Texture id (the content hash, or `default`).
+    pub id: String,
+    /// Content hash of exemplars and parameters.
+    pub content_hash: String,
+    /// Creation time, seconds since the Unix epoch.
+    pub created: u64,
+    /// Exemplar size and plane count.
+    pub exemplar: ExemplarInfo,
+    /// Complete flat parameters.
+    pub params: Map<String, Value>,
+    /// Status.
+    pub status: StoredStatus,
+    /// Why the precompute failed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// Seconds the precompute took.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub precompute_seconds: Option<f64>,
+}
+
+/// A texture found in the data directory at start.
+pub struct Found {
+    /// Its metadata.
+    pub meta: StoredMeta,
+    /// Its directory.
+    pub dir: PathBuf,
+}
+
+/// The data directory.
+pub struct Store {
+    root: PathBuf,
+    lock: Mutex<()>,
+}
+
+impl Store {
+    /// Opens (creating) `root` and clears debris of interrupted writes:
+    /// temporary files and texture directories without metadata.
+    pub fn open(root: &Path) -> io::Result<Store> {
+        let textures = root.join("textures");
+        fs::create_dir_all(&textures)?;
+        let store = Store {
+            root: root.to_path_buf(),
+            lock: Mutex::new(()),
+        };
+        for entry in fs::read_dir(&textures)? {
+            let entry = entry?;
+            let path = entry.path();
+            let name = entry.file_name().to_string_lossy().to_string();
+            if !entry.file_type()?.is_dir() || !valid_id(&name) {
+                tracing::warn!(path = %path.display(), "removing stray entry in data directory");
+                remove_any(&path)?;
+                continue;
+            }
+            for f in fs::read_dir(&path)? {
+                let f = f?;
+                if f.file_name().to_string_lossy().ends_with(TMP_SUFFIX) {
+                    fs::remove_file(f.path())?;
+                }
+            }
+            if !path.join("meta.json").exists() {
+                tracing::warn!(id = %name, "removing texture directory without metadata");
+                fs::remove_dir_all(&path)?;
+            }
+        }
+        Ok(store)
+    }
+
+    /// The data directory.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// The directory of texture `id`.
+    pub fn dir(&self, id: &str) -> PathBuf {
+        self.root.join("textures").join(id)
+    }
+
+    /// Serialises directory-level changes.
+    pub fn lock(&self) -> MutexGuard<'_, ()> {
+        self.lock.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Writes a new texture's exemplars then its metadata (replacing any
+    /// leftover directory of the same id). Caller holds [`Store::lock`].
+    pub fn create(&self, meta: &StoredMeta, planes: &Planes) -> io::Result<()> {
+        let dir = self.dir(&meta.id);
+        if dir.exists() {
+            fs::remove_dir_all(&dir)?;
+        }
+        fs::create_dir_all(&dir)?;
+        for (name, e) in planes.named() {
+            let png = super::png::encode(e.width(), e.height(), &e.to_rgb_bytes())
+                .map_err(io::Error::other)?;
+            write_atomic(&dir.join(format!("{name}.png")), &png)?;
+        }
+        self.write_meta(meta)?;
+        sync_dir(&self.root.join("textures"))
+    }
+
+    /// Replaces a texture's metadata atomically.
+    pub fn write_meta(&self, meta: &StoredMeta) -> io::Result<()> {
+        let json = serde_json::to_vec_pretty(meta).map_err(io::Error::other)?;
+        write_atomic(&self.dir(&meta.id).join("meta.json"), &json)
+    }
+
+    /// Writes `candidates.stx` atomically.
+    pub fn write_candidates(&self, id: &str, c: &Candidates) -> io::Result<()> {
+        write_atomic_with(&self.dir(id).join("candidates.stx"), |w| {
+            c.save(w).map_err(|e| match e {
+                crate::Error::Io(e) => e,
+                other => io::Error::other(other.to_string()),
+            })
+        })
+    }
+
+    /// Reads `candidates.stx`.
+    pub fn read_candidates(&self, id: &str) -> io::Result<Vec<u8>> {
+        fs::read(self.dir(id).join("candidates.stx"))
+    }
+
+    /// Reads a texture's exemplars back.
+    pub fn read_planes(&self, meta: &StoredMeta) -> crate::Result<Planes> {
+        let dir = self.dir(&meta.id);
+        let open = |n: &str| Exemplar::open(dir.join(format!("{n}.png")));
+        if meta.exemplar.planes == 1 {
+            Ok(Planes::Single(open("exemplar")?))
+        } else {
+            Ok(Planes::Triple(Box::new([
+                open("xy")?,
+                open("yz")?,
+                open("zx")?,
+            ])))
+        }
+    }
+
+    /// Removes a texture's directory. Caller holds [`Store::lock`].
+    pub fn remove(&self, id: &str) -> io::Result<()> {
+        let dir = self.dir(id);
+        if !dir.exists() {
+            return Ok(());
+        }
+        // Rename first so that a crash mid-way leaves no half directory
+        // under a valid id (the `.tmp` name is cleared at the next start).
+        let trash = self
+            .root
+            .join("textures")
+            .join(format!("{id}.deleting{TMP_SUFFIX}"));
+        fs::rename(&dir, &trash)?;
+        sync_dir(&self.root.join("textures"))?;
+        fs::remove_dir_all(&trash)
+    }
+
+    /// Every texture with readable metadata. A directory whose metadata
+    /// cannot be read is reported and skipped.
+    pub fn scan(&self) -> io::Result<Vec<Found>> {
+        let mut out = Vec::new();
+        for entry in fs::read_dir(self.root.join("textures"))? {
+            let dir = entry?.path();
+            let meta_path = dir.join("meta.json");
+            let meta = fs::read(&meta_path)
+                .map_err(|e| e.to_string())
+                .and_then(|b| serde_json::from_slice::<StoredMeta>(&b).map_err(|e| e.to_string()));
+            match meta {
+                Ok(meta) if meta.version == META_VERSION && dir.ends_with(&meta.id) => {
+                    out.push(Found { meta, dir })
+                }
+                Ok(meta) => tracing::warn!(
+                    path = %meta_path.display(),
+                    version = meta.version,
+                    "skipping texture with foreign metadata"
+                ),
+                Err(e) => {
+                    tracing::warn!(path = %meta_path.display(), error = %e, "skipping unreadable texture metadata")
+                }
+            }
+        }
+        out.sort_by(|a, b| (a.meta.created, &a.meta.id).cmp(&(b.meta.created, &b.meta.id)));
+        Ok(out)
+    }
+}
+
+fn remove_any(path: &Path) -> io::Result<()> {
+    if path.is_dir() {
+        fs::remove_dir_all(path)
+    } else {
+        fs::remove_file(path)
+    }
+}
+
+/// Writes `bytes` to `path` atomically and durably.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    write_atomic_with(path, |w| w.write_all(bytes))
+}
+
+/// Writes `path` atomically and durably through `fill`: a temporary file in
+/// the same directory is written, fsynced and renamed over `path`, then the
+/// directory is fsynced.
+pub fn write_atomic_with(
+    path: &Path,
+    fill: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> io::Result<()> {
+    let dir = path
+        .parent()
+        .ok_or_else(|| io::Error::other("path has no parent"))?;
+    let name = path
+        .file_name()
+        .ok_or_else(|| io::Error::other("path has no file name"))?
+        .to_string_lossy();
+    let tmp = dir.join(format!(".{name}.{}{TMP_SUFFIX}", std::process::id()));
+    let result = (|| {
+        let mut w = BufWriter::new(File::create(&tmp)?);
+        fill(&mut w)?;
+        let f = w.into_inner().map_err(|e| e.into_error())?;
+        f.sync_all()?;
+        drop(f);
+        fs::rename(&tmp, path)?;
+        sync_dir(dir)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Fsyncs a directory so a rename in it is durable.
+pub fn sync_dir(dir: &Path) -> io::Result<()> {
+    #[cfg(unix)]
+    {
+        File::open(dir)?.sync_all()
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn meta(id: &str, status: StoredStatus) -> StoredMeta {
+        StoredMeta {
+            version: META_VERSION,
+            id: id.into(),
+            content_hash: id.into(),
+            created: 5,
+            exemplar: ExemplarInfo {
+                width: 16,
+                height: 16,
+                planes: 1,
+            },
+            params: Map::new(),
+            status,
+            reason: None,
+            precompute_seconds: None,
+        }
+    }
+
+    fn planes() -> Planes {
+        let rgb: Vec<u8> = (0..16 * 16 * 3).map(|i| (i * 7) as u8).collect();
+        Planes::Single(Exemplar::from_rgb(16, 16, &rgb).unwrap())
+    }
+
+    #[test]
+    fn atomic_write_replaces() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("f");
+        write_atomic(&p, b"one").unwrap();
+        write_atomic(&p, b"two").unwrap();
+        assert_eq!(fs::read(&p).unwrap(), b"two");
+        assert_eq!(
+            fs::read_dir(d.path()).unwrap().count(),
+            1,
+            "no temporary left"
+        );
+        let err = write_atomic_with(&p, |w| {
+            w.write_all(b"partial")?;
+            Err(io::Error::other("fail"))
+        });
+        assert!(err.is_err());
+        assert_eq!(
+            fs::read(&p).unwrap(),
+            b"two",
+            "failed write leaves the old file"
+        );
+        assert_eq!(fs::read_dir(d.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn create_scan_remove() {
+        let d = tempfile::tempdir().unwrap();
+        let s = Store::open(d.path()).unwrap();
+        let m = meta("abc", StoredStatus::Pending);
+        s.create(&m, &planes()).unwrap();
+        let found = s.scan().unwrap();
+        assert_eq!(found.len(), 1);
+        assert_eq!(found[0].meta, m);
+        let back = s.read_planes(&m).unwrap();
+        assert_eq!(back.named()[0].1, planes().named()[0].1);
+        s.remove("abc").unwrap();
+        assert!(s.scan().unwrap().is_empty());
+    }
+
+    #[test]
+    fn open_clears_debris() {
+        let d = tempfile::tempdir().unwrap();
+        let s = Store::open(d.path()).unwrap();
+        s.create(&meta("keep", StoredStatus::Ready), &planes())
+            .unwrap();
+        fs::write(s.dir("keep").join(".candidates.stx.1.tmp"), b"half").unwrap();
+        fs::create_dir_all(s.dir("nometa")).unwrap();
+        fs::write(s.dir("nometa").join("exemplar.png"), b"x").unwrap();
+        fs::create_dir_all(d.path().join("textures").join("x.deleting.tmp")).unwrap();
+        drop(s);
+        let s = Store::open(d.path()).unwrap();
+        let ids: Vec<String> = s.scan().unwrap().into_iter().map(|f| f.meta.id).collect();
+        assert_eq!(ids, vec!["keep".to_string()]);
+        assert!(!s.dir("keep").join(".candidates.stx.1.tmp").exists());
+        assert!(!s.dir("nometa").exists());
+    }
+
+    #[test]
+    fn unreadable_meta_is_skipped() {
+        let d = tempfile::tempdir().unwrap();
+        let s = Store::open(d.path()).unwrap();
+        fs::create_dir_all(s.dir("bad")).unwrap();
+        fs::write(s.dir("bad").join("meta.json"), b"{not json").unwrap();
+        assert!(s.scan().unwrap().is_empty());
+    }
+}

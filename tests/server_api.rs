@@ -1,0 +1,868 @@
+//! The HTTP API against a real server on a loopback port: every route,
+//! every error class, ETag/304, CORS, idempotent uploads and overload.
+
+mod server_support;
+
+use serde_json::Value;
+use server_support::*;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn operations_endpoints() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+
+    let (st, h, b) = get(&c, &s.url("/healthz")).await;
+    assert_eq!(st, 200);
+    assert_eq!(h["content-type"], "application/json");
+    assert_eq!(serde_json::from_slice::<Value>(&b).unwrap()["status"], "ok");
+
+    let (st, _, b) = get(&c, &s.url("/readyz")).await;
+    assert_eq!(st, 200);
+    assert_eq!(
+        serde_json::from_slice::<Value>(&b).unwrap()["status"],
+        "ready"
+    );
+
+    let (st, h, b) = get(&c, &s.url("/openapi.yaml")).await;
+    assert_eq!(st, 200);
+    assert!(
+        h["content-type"]
+            .to_str()
+            .unwrap()
+            .starts_with("application/yaml")
+    );
+    assert!(String::from_utf8(b).unwrap().starts_with("openapi: 3."));
+
+    let (st, _, b) = get(&c, &s.url("/v1/textures")).await;
+    assert_eq!(st, 200);
+    assert_eq!(
+        serde_json::from_slice::<Value>(&b).unwrap()["textures"],
+        serde_json::json!([])
+    );
+
+    let text = metrics(&c, &s).await;
+    assert!(
+        text.contains("# TYPE solidtex_http_requests counter"),
+        "{text}"
+    );
+    assert_eq!(
+        metric(
+            &text,
+            r#"solidtex_http_requests_total{route="/healthz",method="GET",status="200"}"#
+        ),
+        1.0
+    );
+    for name in [
+        "solidtex_cache_hits_total",
+        "solidtex_cache_misses_total",
+        "solidtex_cache_bytes",
+        "solidtex_cache_evictions_total",
+        "solidtex_jobs_queued",
+        "solidtex_jobs_running",
+        "solidtex_http_request_duration_seconds_bucket",
+        "solidtex_precompute_duration_seconds_count",
+    ] {
+        assert!(text.contains(name), "missing {name}");
+    }
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn upload_is_idempotent_and_voxel_routes_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+
+    // First upload: accepted, computing.
+    let png = exemplar_png(32, 1);
+    let r = c
+        .post(s.url(&format!("/v1/textures?{SMALL_PARAMS}")))
+        .header("content-type", "image/png")
+        .body(png.clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 202);
+    assert!(r.headers().contains_key("retry-after"));
+    let location = r.headers()["location"].to_str().unwrap().to_string();
+    let v: Value = r.json().await.unwrap();
+    let id = v["id"].as_str().unwrap().to_string();
+    assert_eq!(id.len(), 32);
+    assert_eq!(location, format!("/v1/textures/{id}"));
+    assert_eq!(v["status"], "pending");
+    assert_eq!(v["params"]["levels"], 3);
+    assert_eq!(
+        v["exemplar"],
+        serde_json::json!({"width": 32, "height": 32, "planes": 1})
+    );
+
+    let ready = wait_ready(&c, &s, &id).await;
+    assert_eq!(ready["progress"], 1.0);
+    assert_eq!(ready["brick_size"], 16);
+    let max_lod = ready["max_lod"].as_u64().unwrap();
+    assert_eq!(max_lod, 2);
+
+    // Same pixels re-encoded, same params spelled differently: same texture, 201.
+    let (_, _, pixels) = decode_png(&png);
+    let mut other_encoding = Vec::new();
+    {
+        use image::ImageEncoder;
+        image::codecs::png::PngEncoder::new_with_quality(
+            &mut other_encoding,
+            image::codecs::png::CompressionType::Best,
+            image::codecs::png::FilterType::Paeth,
+        )
+        .write_image(&pixels, 32, 32, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    }
+    assert_ne!(other_encoding, png);
+    let (st, v) = upload(&c, &s, other_encoding, "levels=3&seed=1&scheme=dual-grid").await;
+    assert_eq!(st, 201);
+    assert_eq!(v["id"], id.as_str());
+    assert_eq!(v["status"], "ready");
+    // Another seed is another texture.
+    let (st, v) = upload(&c, &s, png.clone(), "levels=3&seed=2").await;
+    assert_eq!(st, 202);
+    assert_ne!(v["id"], id.as_str());
+    // …which shares the candidates instead of precomputing them again.
+    let other = wait_ready(&c, &s, v["id"].as_str().unwrap()).await;
+    assert_eq!(other["params"]["seed"], 2);
+    let text = metrics(&c, &s).await;
+    assert_eq!(
+        metric(&text, r#"solidtex_precomputes_total{outcome="ok"}"#),
+        1.0
+    );
+    assert_eq!(
+        metric(&text, r#"solidtex_precomputes_total{outcome="reused"}"#),
+        1.0
+    );
+    let (_, _, a) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=16&h=16")),
+    )
+    .await;
+    let (_, _, b) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{}/slices/z/0.png?w=16&h=16",
+            other["id"].as_str().unwrap()
+        )),
+    )
+    .await;
+    assert_ne!(a, b, "another seed, other voxels");
+
+    let list: Value = c
+        .get(s.url("/v1/textures"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let ids: Vec<&str> = list["textures"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["id"].as_str().unwrap())
+        .collect();
+    assert!(ids.contains(&id.as_str()));
+    assert_eq!(ids.len(), 2);
+
+    // A region: the reference all other routes are checked against.
+    let (x0, y0, z0) = (-5i64, 7i64, 3i64);
+    let (w, h, d) = (12u32, 10u32, 6u32);
+    let url = s.url(&format!(
+        "/v1/textures/{id}/region.raw?x={x0}&y={y0}&z={z0}&w={w}&h={h}&d={d}"
+    ));
+    let (st, hd, region) = get(&c, &url).await;
+    assert_eq!(st, 200);
+    assert_eq!(hd["content-type"], "application/octet-stream");
+    assert_eq!(hd["x-solidtex-width"], "12");
+    assert_eq!(hd["x-solidtex-height"], "10");
+    assert_eq!(hd["x-solidtex-depth"], "6");
+    assert_eq!(hd["x-solidtex-origin"], "-5,7,3");
+    assert_eq!(hd["x-solidtex-lod"], "0");
+    assert_eq!(hd["cache-control"], "public, max-age=31536000, immutable");
+    assert_eq!(region.len(), (w * h * d * 3) as usize);
+    let voxel = |x: i64, y: i64, z: i64| -> [u8; 3] {
+        let (i, j, k) = ((x - x0) as usize, (y - y0) as usize, (z - z0) as usize);
+        let o = ((k * h as usize + j) * w as usize + i) * 3;
+        [region[o], region[o + 1], region[o + 2]]
+    };
+    let pixel = |rgb: &[u8], width: u32, i: usize, j: usize| -> [u8; 3] {
+        let o = (j * width as usize + i) * 3;
+        [rgb[o], rgb[o + 1], rgb[o + 2]]
+    };
+
+    // Slices: z → (u, v) = (x, y); x → (y, z); y → (z, x).
+    let (st, hd, z_png) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}",
+            z0 + 2
+        )),
+    )
+    .await;
+    assert_eq!(st, 200);
+    assert_eq!(hd["content-type"], "image/png");
+    let (pw, ph, z_rgb) = decode_png(&z_png);
+    assert_eq!((pw, ph), (w, h));
+    for j in 0..h as usize {
+        for i in 0..w as usize {
+            assert_eq!(
+                pixel(&z_rgb, w, i, j),
+                voxel(x0 + i as i64, y0 + j as i64, z0 + 2)
+            );
+        }
+    }
+    let (st, _, x_png) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/slices/x/{}.png?u0={y0}&v0={z0}&w={h}&h={d}",
+            x0 + 4
+        )),
+    )
+    .await;
+    assert_eq!(st, 200);
+    let (_, _, x_rgb) = decode_png(&x_png);
+    for j in 0..d as usize {
+        for i in 0..h as usize {
+            assert_eq!(
+                pixel(&x_rgb, h, i, j),
+                voxel(x0 + 4, y0 + i as i64, z0 + j as i64)
+            );
+        }
+    }
+    let (st, _, y_png) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/slices/y/{}.png?u0={z0}&v0={x0}&w={d}&h={w}",
+            y0 + 1
+        )),
+    )
+    .await;
+    assert_eq!(st, 200);
+    let (_, _, y_rgb) = decode_png(&y_png);
+    for j in 0..w as usize {
+        for i in 0..d as usize {
+            assert_eq!(
+                pixel(&y_rgb, d, i, j),
+                voxel(x0 + j as i64, y0 + 1, z0 + i as i64)
+            );
+        }
+    }
+
+    // An axis-aligned cut with integer steps is the z slice.
+    let (st, _, cut_png) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/cut.png?origin={x0},{y0},{}&u=1,0,0&v=0,1,0&w={w}&h={h}",
+            z0 + 2
+        )),
+    )
+    .await;
+    assert_eq!(st, 200);
+    assert_eq!(decode_png(&cut_png).2, z_rgb);
+    // An oblique trilinear cut has the asked size.
+    let (st, _, obl) = get(&c, &s.url(&format!("/v1/textures/{id}/cut.png?origin=0.5,1,2&u=0.7,0.7,0&v=0,0.6,0.8&w=9&h=7&filter=trilinear"))).await;
+    assert_eq!(st, 200);
+    assert_eq!(decode_png(&obl).0, 9);
+
+    // A brick is the aligned region of edge 16.
+    let (st, hd, brick) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/bricks/0/-1_0_2.raw")),
+    )
+    .await;
+    assert_eq!(st, 200);
+    assert_eq!(hd["x-solidtex-origin"], "-16,0,32");
+    assert_eq!(brick.len(), 16 * 16 * 16 * 3);
+    let (_, _, same) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/region.raw?x=-16&y=0&z=32&w=16&h=16&d=16"
+        )),
+    )
+    .await;
+    assert_eq!(brick, same);
+
+    // Coarser levels of detail.
+    for lod in 1..=max_lod {
+        let (st, _, b) = get(
+            &c,
+            &s.url(&format!("/v1/textures/{id}/bricks/{lod}/0_0_0.raw")),
+        )
+        .await;
+        assert_eq!(st, 200);
+        assert_eq!(b.len(), 16 * 16 * 16 * 3);
+        let (st, _, p) = get(
+            &c,
+            &s.url(&format!(
+                "/v1/textures/{id}/slices/z/0.png?w=8&h=8&lod={lod}"
+            )),
+        )
+        .await;
+        assert_eq!(st, 200);
+        assert_eq!(decode_png(&p).0, 8);
+    }
+
+    // ETag and 304.
+    let slice_url = s.url(&format!(
+        "/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}",
+        z0 + 2
+    ));
+    let (_, h1, b1) = get(&c, &slice_url).await;
+    let tag = h1["etag"].to_str().unwrap().to_string();
+    assert!(tag.starts_with('"') && tag.ends_with('"') && !tag.starts_with("W/"));
+    assert_eq!(b1, z_png, "same request, same bytes");
+    let r = c
+        .get(&slice_url)
+        .header("if-none-match", &tag)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 304);
+    assert_eq!(r.headers()["etag"].to_str().unwrap(), tag);
+    assert_eq!(
+        r.headers()["cache-control"],
+        "public, max-age=31536000, immutable"
+    );
+    assert!(r.bytes().await.unwrap().is_empty());
+    let r = c
+        .get(&slice_url)
+        .header("if-none-match", "\"other\"")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+    let (_, h2, _) = get(
+        &c,
+        &s.url(&format!(
+            "/v1/textures/{id}/slices/z/{}.png?u0={x0}&v0={y0}&w={w}&h={h}",
+            z0 + 3
+        )),
+    )
+    .await;
+    assert_ne!(h2["etag"], tag.as_str());
+    let brick_url = s.url(&format!("/v1/textures/{id}/bricks/0/-1_0_2.raw"));
+    let (_, hb, _) = get(&c, &brick_url).await;
+    let r = c
+        .get(&brick_url)
+        .header("if-none-match", hb["etag"].to_str().unwrap())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 304);
+
+    // Metrics saw the synthesis.
+    let text = metrics(&c, &s).await;
+    assert!(metric(&text, r#"solidtex_synth_voxels_total{level="0"}"#) > 0.0);
+    assert!(metric(&text, "solidtex_cache_hits_total") > 0.0);
+    assert!(metric(&text, r#"solidtex_precomputes_total{outcome="ok"}"#) >= 1.0);
+    assert_eq!(metric(&text, "solidtex_jobs_running"), 0.0);
+
+    // Delete: gone, files gone, second delete 404.
+    let r = c
+        .delete(s.url(&format!("/v1/textures/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 204);
+    assert!(!dir.path().join("textures").join(&id).exists());
+    let (st, hd, b) = get(&c, &s.url(&format!("/v1/textures/{id}"))).await;
+    assert_error(st, &hd, &b, 404, "unknown_texture");
+    let r = c
+        .delete(s.url(&format!("/v1/textures/{id}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 404);
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn multipart_uploads() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let part = |b: Vec<u8>| {
+        reqwest::multipart::Part::bytes(b)
+            .file_name("e.png")
+            .mime_str("image/png")
+            .unwrap()
+    };
+
+    let form = reqwest::multipart::Form::new()
+        .part("xy", part(exemplar_png(32, 1)))
+        .part("yz", part(exemplar_png(32, 2)))
+        .part("zx", part(exemplar_png(32, 3)))
+        .text("params", r#"{"levels": 3, "seed": 5}"#);
+    let r = c
+        .post(s.url("/v1/textures"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 202);
+    let v: Value = r.json().await.unwrap();
+    assert_eq!(v["exemplar"]["planes"], 3);
+    assert_eq!(v["params"]["seed"], 5);
+    let id = v["id"].as_str().unwrap().to_string();
+    let ready = wait_ready(&c, &s, &id).await;
+    assert_eq!(ready["status"], "ready");
+    let (st, _, b) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/y/0.png?w=8&h=8&lod=1")),
+    )
+    .await;
+    assert_eq!(st, 200);
+    assert_eq!(decode_png(&b).0, 8);
+
+    // One image in a form is the same texture as the raw PNG upload.
+    let form = reqwest::multipart::Form::new()
+        .part("image", part(exemplar_png(32, 4)))
+        .text("params", r#"{"levels": 3}"#);
+    let r = c
+        .post(s.url("/v1/textures"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 202);
+    let v: Value = r.json().await.unwrap();
+    let (_, raw) = upload(&c, &s, exemplar_png(32, 4), "levels=3").await;
+    assert_eq!(v["id"], raw["id"]);
+
+    // Form errors.
+    let cases: Vec<(reqwest::multipart::Form, u16, &str)> = vec![
+        (
+            reqwest::multipart::Form::new().text("params", "{}"),
+            400,
+            "missing_exemplar",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("xy", part(exemplar_png(32, 1)))
+                .part("yz", part(exemplar_png(32, 2))),
+            400,
+            "missing_exemplar",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("xy", part(exemplar_png(32, 1)))
+                .part("yz", part(exemplar_png(16, 2)))
+                .part("zx", part(exemplar_png(32, 3))),
+            400,
+            "size_mismatch",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 1)))
+                .text("params", "{nope"),
+            400,
+            "invalid_params",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 1)))
+                .text("params", r#"{"passes": 100}"#),
+            400,
+            "out_of_range",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 1)))
+                .text("colour", "red"),
+            400,
+            "invalid_request",
+        ),
+        (
+            reqwest::multipart::Form::new().part("image", part(b"not a png".to_vec())),
+            400,
+            "malformed_image",
+        ),
+    ];
+    for (form, status, code) in cases {
+        let r = c
+            .post(s.url("/v1/textures"))
+            .multipart(form)
+            .send()
+            .await
+            .unwrap();
+        let st = r.status().as_u16();
+        let h = r.headers().clone();
+        let b = r.bytes().await.unwrap();
+        assert_error(st, &h, &b, status, code);
+    }
+    s.stop().await;
+}
+
+/// A PNG whose header claims a huge image over a tiny compressed body.
+fn bomb_png() -> Vec<u8> {
+    fn chunk(out: &mut Vec<u8>, kind: &[u8], data: &[u8]) {
+        out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+        let mut crc = crc32fast::Hasher::new();
+        crc.update(kind);
+        crc.update(data);
+        out.extend_from_slice(kind);
+        out.extend_from_slice(data);
+        out.extend_from_slice(&crc.finalize().to_be_bytes());
+    }
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend_from_slice(&100_000u32.to_be_bytes());
+    ihdr.extend_from_slice(&100_000u32.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
+    chunk(&mut out, b"IHDR", &ihdr);
+    // A zlib stream of zeros: a few KiB that would inflate to gigabytes.
+    let mut z = vec![0x78, 0x9c];
+    z.extend(std::iter::repeat_n(0u8, 4096));
+    chunk(&mut out, b"IDAT", &z);
+    chunk(&mut out, b"IEND", &[]);
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_error_class_is_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 7).await;
+    let t = |p: &str| s.url(&format!("/v1/textures/{id}{p}"));
+
+    let cases: Vec<(String, u16, &str)> = vec![
+        // Unknown texture and routes.
+        (
+            s.url("/v1/textures/0123456789abcdef0123456789abcdef"),
+            404,
+            "unknown_texture",
+        ),
+        (
+            s.url("/v1/textures/nope/slices/z/0.png"),
+            404,
+            "unknown_texture",
+        ),
+        (
+            s.url("/v1/textures/nope/bricks/0/0_0_0.raw"),
+            404,
+            "unknown_texture",
+        ),
+        (s.url("/v1/nothing"), 404, "no_route"),
+        (t("/slices/z/0.jpg"), 404, "no_route"),
+        (t("/bricks/0/0_0_0.bin"), 404, "no_route"),
+        // Bad axis, non-numeric and out-of-range parameters.
+        (t("/slices/w/0.png"), 400, "invalid_axis"),
+        (t("/slices/z/abc.png"), 400, "invalid_parameter"),
+        (t("/slices/z/0.png?u0=left"), 400, "invalid_parameter"),
+        (t("/slices/z/0.png?w=8.5"), 400, "invalid_parameter"),
+        (t("/slices/z/0.png?w=8&w=9"), 400, "invalid_parameter"),
+        (t("/slices/z/2147483649.png"), 400, "out_of_range"),
+        (
+            t("/slices/z/99999999999999999999999.png"),
+            400,
+            "out_of_range",
+        ),
+        (t("/slices/z/0.png?u0=2147483647&w=8"), 400, "out_of_range"),
+        (t("/slices/z/0.png?lod=3"), 400, "out_of_range"),
+        (t("/slices/z/0.png?lod=-1"), 400, "out_of_range"),
+        (t("/cut.png?origin=1,2"), 400, "invalid_parameter"),
+        (t("/cut.png?u=a,b,c"), 400, "invalid_parameter"),
+        (t("/cut.png?u=inf,0,0"), 400, "invalid_parameter"),
+        (t("/cut.png?filter=cubic"), 400, "invalid_parameter"),
+        (
+            t("/cut.png?origin=2147483000,0,0&u=1000,0,0&w=4&h=4"),
+            400,
+            "out_of_range",
+        ),
+        (t("/region.raw?x=zero"), 400, "invalid_parameter"),
+        (t("/bricks/x/0_0_0.raw"), 400, "invalid_parameter"),
+        (t("/bricks/0/0_0.raw"), 400, "invalid_parameter"),
+        (t("/bricks/0/a_0_0.raw"), 400, "invalid_parameter"),
+        (t("/bricks/0/134217728_0_0.raw"), 400, "out_of_range"),
+        (t("/bricks/9/0_0_0.raw"), 400, "out_of_range"),
+        // Zero and oversize requests.
+        (t("/slices/z/0.png?w=0"), 400, "out_of_range"),
+        (t("/slices/z/0.png?h=4097"), 400, "out_of_range"),
+        (t("/cut.png?w=5000"), 400, "out_of_range"),
+        (t("/region.raw?d=0"), 400, "out_of_range"),
+        (t("/region.raw?w=512&h=512&d=512"), 400, "too_large"),
+    ];
+    for (url, status, code) in cases {
+        let (st, h, b) = get(&c, &url).await;
+        assert_eq!(st, status, "{url}: {}", String::from_utf8_lossy(&b));
+        assert_error(st, &h, &b, status, code);
+    }
+
+    // Method not allowed keeps the JSON shape and the Allow header.
+    let r = c.put(s.url("/healthz")).send().await.unwrap();
+    let st = r.status().as_u16();
+    let h = r.headers().clone();
+    assert!(h.contains_key("allow"));
+    assert_error(st, &h, &r.bytes().await.unwrap(), 405, "method_not_allowed");
+
+    // Uploads: malformed image, wrong sizes, decompression bomb, wrong or
+    // missing content type, too large, bad parameters.
+    let post = |body: Vec<u8>, ct: Option<&str>, query: &str| {
+        let mut r = c.post(s.url(&format!("/v1/textures{query}"))).body(body);
+        if let Some(ct) = ct {
+            r = r.header("content-type", ct);
+        }
+        r.send()
+    };
+    let tiny = {
+        let rgb = vec![9u8; 8 * 8 * 3];
+        encode_png(8, 8, &rgb)
+    };
+    let huge_side = {
+        let rgb = vec![9u8; 600 * 16 * 3];
+        encode_png(600, 16, &rgb)
+    };
+    // (body, content type, query, status, code)
+    type UploadCase<'a> = (Vec<u8>, Option<&'a str>, &'a str, u16, &'a str);
+    let cases: Vec<UploadCase> = vec![
+        (
+            b"GIF89a not really".to_vec(),
+            Some("image/png"),
+            "",
+            400,
+            "malformed_image",
+        ),
+        (
+            exemplar_png(32, 1)[..60].to_vec(),
+            Some("image/png"),
+            "",
+            400,
+            "malformed_image",
+        ),
+        (Vec::new(), Some("image/png"), "", 400, "malformed_image"),
+        (tiny, Some("image/png"), "", 400, "image_size"),
+        (huge_side, Some("image/png"), "", 400, "image_size"),
+        (bomb_png(), Some("image/png"), "", 400, "image_size"),
+        (
+            exemplar_png(32, 1),
+            Some("text/plain"),
+            "",
+            415,
+            "unsupported_media_type",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("application/json"),
+            "",
+            415,
+            "unsupported_media_type",
+        ),
+        (exemplar_png(32, 1), None, "", 415, "unsupported_media_type"),
+        (
+            vec![0u8; 300 << 10],
+            Some("image/png"),
+            "",
+            413,
+            "payload_too_large",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("image/png"),
+            "?sed=4",
+            400,
+            "invalid_params",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("image/png"),
+            "?seed=-4",
+            400,
+            "invalid_params",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("image/png"),
+            "?jitter=9",
+            400,
+            "out_of_range",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("image/png"),
+            "?scheme=fancy",
+            400,
+            "invalid_params",
+        ),
+        (
+            exemplar_png(32, 1),
+            Some("multipart/form-data"),
+            "",
+            400,
+            "malformed_multipart",
+        ),
+    ];
+    for (body, ct, query, status, code) in cases {
+        let r = post(body, ct, query).await.unwrap();
+        let st = r.status().as_u16();
+        let h = r.headers().clone();
+        let b = r.bytes().await.unwrap();
+        assert_error(st, &h, &b, status, code);
+    }
+
+    // Not ready: with one precompute slot, the second upload waits behind
+    // the first and answers 409 with Retry-After meanwhile.
+    let (_, a) = upload(&c, &s, exemplar_png(32, 20), SMALL_PARAMS).await;
+    let (st, b) = upload(&c, &s, exemplar_png(32, 21), SMALL_PARAMS).await;
+    assert_eq!(st, 202);
+    let pending = b["id"].as_str().unwrap();
+    let (st, h, body) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{pending}/slices/z/0.png?w=4&h=4")),
+    )
+    .await;
+    assert_error(st, &h, &body, 409, "texture_pending");
+    assert_eq!(h["retry-after"], "1");
+    wait_ready(&c, &s, a["id"].as_str().unwrap()).await;
+    wait_ready(&c, &s, pending).await;
+
+    // Nothing above was a server error.
+    let text = metrics(&c, &s).await;
+    assert!(
+        !text
+            .lines()
+            .any(|l| l.starts_with("solidtex_http_requests_total") && l.contains("status=\"5")),
+        "{text}"
+    );
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cors_headers() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let r = c
+        .request(
+            reqwest::Method::OPTIONS,
+            s.url("/v1/textures/default/slices/z/0.png"),
+        )
+        .header("origin", "https://viewer.example")
+        .header("access-control-request-method", "GET")
+        .header("access-control-request-headers", "if-none-match")
+        .send()
+        .await
+        .unwrap();
+    assert!(r.status().is_success(), "{}", r.status());
+    assert_eq!(r.headers()["access-control-allow-origin"], "*");
+    assert!(
+        r.headers()["access-control-allow-methods"]
+            .to_str()
+            .unwrap()
+            .contains("GET")
+    );
+    let r = c
+        .get(s.url("/healthz"))
+        .header("origin", "https://viewer.example")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["access-control-allow-origin"], "*");
+    let exposed = r.headers()["access-control-expose-headers"]
+        .to_str()
+        .unwrap()
+        .to_string();
+    for h in ["etag", "retry-after", "x-solidtex-width"] {
+        assert!(exposed.contains(h), "{exposed}");
+    }
+    // Errors carry CORS headers too.
+    let r = c
+        .get(s.url("/nope"))
+        .header("origin", "https://viewer.example")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 404);
+    assert_eq!(r.headers()["access-control-allow-origin"], "*");
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn full_queue_answers_503_with_retry_after() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.max_jobs = 1;
+    args.queue = 0;
+    let s = TestServer::start(args).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 9).await;
+    // Distinct bricks, so no request is served from another's tiles.
+    let mut tasks = Vec::new();
+    for i in 0..8 {
+        let c = c.clone();
+        let url = s.url(&format!(
+            "/v1/textures/{id}/bricks/0/{}_{}_0.raw",
+            i * 7,
+            i * 3
+        ));
+        tasks.push(tokio::spawn(async move {
+            let r = c.get(url).send().await.unwrap();
+            let st = r.status().as_u16();
+            let h = r.headers().clone();
+            (st, h, r.bytes().await.unwrap())
+        }));
+    }
+    let mut ok = 0;
+    let mut refused = 0;
+    for t in tasks {
+        let (st, h, b) = t.await.unwrap();
+        match st {
+            200 => ok += 1,
+            503 => {
+                assert_error(st, &h, &b, 503, "overloaded");
+                assert_eq!(h["retry-after"], "1");
+                refused += 1;
+            }
+            other => panic!("unexpected {other}"),
+        }
+    }
+    assert!(ok >= 1 && refused >= 1, "ok {ok}, refused {refused}");
+    let text = metrics(&c, &s).await;
+    assert_eq!(
+        metric(&text, "solidtex_jobs_rejected_total"),
+        refused as f64
+    );
+    // The server is still fine afterwards.
+    let (st, _, _) = get(&c, &s.url(&format!("/v1/textures/{id}/bricks/0/0_0_0.raw"))).await;
+    assert_eq!(st, 200);
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn request_budget_is_enforced() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.max_request_voxels = 4096;
+    let s = TestServer::start(args).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 10).await;
+    let t = |p: &str| s.url(&format!("/v1/textures/{id}{p}"));
+    for (path, status) in [
+        ("/slices/z/0.png?w=64&h=64", 200),
+        ("/slices/z/0.png?w=65&h=64", 400),
+        ("/region.raw?w=16&h=16&d=16", 200),
+        ("/region.raw?w=16&h=16&d=17", 400),
+        ("/bricks/0/0_0_0.raw", 200),
+        ("/cut.png?w=16&h=16&u=2,0,0&v=0,2,0", 200),
+        ("/cut.png?w=16&h=16&u=100,0,0&v=0,100,0", 400),
+    ] {
+        let (st, h, b) = get(&c, &t(path)).await;
+        if status == 200 {
+            assert_eq!(st, 200, "{path}");
+        } else {
+            assert_error(st, &h, &b, 400, "too_large");
+        }
+    }
+    s.stop().await;
+
+    // Bricks larger than the budget are a configuration error.
+    let mut args = test_args(dir.path());
+    args.max_request_voxels = 1000;
+    let err = solidtex::server::Server::bind(&args).await.err().unwrap();
+    assert!(err.to_string().contains("budget"), "{err}");
+}

@@ -1,0 +1,224 @@
+//! Shared fixtures of the server tests: small generated exemplars, a real
+//! server on a free loopback port, and helpers to poll and read metrics.
+#![allow(dead_code)]
+
+use serde_json::Value;
+use solidtex::server::{ServeArgs, Server};
+use std::net::SocketAddr;
+use std::path::Path;
+use std::time::{Duration, Instant};
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+
+/// A small PNG with structure (blobs and stripes), different per seed.
+pub fn exemplar_png(side: u32, seed: u32) -> Vec<u8> {
+    let mut rgb = Vec::with_capacity((side * side * 3) as usize);
+    let mut state = seed.wrapping_mul(2654435761).wrapping_add(12345);
+    for y in 0..side {
+        for x in 0..side {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            let stripe = ((x + y * 2 + seed * 3) % 8 < 4) as u32;
+            let blob =
+                (((x as f32 * 0.4 + seed as f32).sin() * (y as f32 * 0.3).cos()) * 60.0) as i32;
+            rgb.push((60 + stripe * 120 + (state % 16)) as u8);
+            rgb.push((120 + blob).clamp(0, 255) as u8);
+            rgb.push((40 + (state >> 8) % 64 + seed * 20 % 100) as u8);
+        }
+    }
+    encode_png(side, side, &rgb)
+}
+
+/// Encodes RGB8 as PNG.
+pub fn encode_png(w: u32, h: u32, rgb: &[u8]) -> Vec<u8> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    out
+}
+
+/// Decodes a PNG to (width, height, RGB8).
+pub fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
+    let img = image::load_from_memory(bytes).unwrap().to_rgb8();
+    (img.width(), img.height(), img.into_raw())
+}
+
+/// Fast analysis parameters for a 32² exemplar (precompute well under a
+/// second).
+pub const SMALL_PARAMS: &str = "levels=3";
+
+/// Server options for tests: loopback port 0, data in `dir`, small bricks.
+pub fn test_args(dir: &Path) -> ServeArgs {
+    let mut a = ServeArgs::for_data_dir(dir);
+    a.brick_size = 16;
+    a.cache_bytes = 64 << 20;
+    a.max_upload_bytes = 256 << 10;
+    a
+}
+
+/// A server running in this process.
+pub struct TestServer {
+    /// `http://127.0.0.1:PORT`
+    pub base: String,
+    /// Bound address.
+    pub addr: SocketAddr,
+    /// Handler state.
+    pub state: solidtex::server::routes::AppState,
+    stop: Option<oneshot::Sender<()>>,
+    handle: Option<JoinHandle<anyhow::Result<()>>>,
+}
+
+impl TestServer {
+    /// Binds and runs a server.
+    pub async fn start(args: ServeArgs) -> TestServer {
+        let server = Server::bind(&args).await.expect("server binds");
+        let addr = server.local_addr().unwrap();
+        assert!(addr.ip().is_loopback());
+        let state = server.state();
+        let (tx, rx) = oneshot::channel::<()>();
+        let handle = tokio::spawn(server.run(async move {
+            let _ = rx.await;
+        }));
+        TestServer {
+            base: format!("http://{addr}"),
+            addr,
+            state,
+            stop: Some(tx),
+            handle: Some(handle),
+        }
+    }
+
+    /// Absolute URL of `path`.
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{}", self.base, path)
+    }
+
+    /// Stops accepting and waits for in-flight requests.
+    pub async fn stop(mut self) {
+        if let Some(tx) = self.stop.take() {
+            let _ = tx.send(());
+        }
+        if let Some(h) = self.handle.take() {
+            h.await.unwrap().unwrap();
+        }
+    }
+}
+
+/// An HTTP client without connection reuse surprises.
+pub fn client() -> reqwest::Client {
+    reqwest::Client::builder()
+        .no_proxy()
+        .timeout(Duration::from_secs(120))
+        .build()
+        .unwrap()
+}
+
+/// Uploads a PNG with query parameters; returns (status, body).
+pub async fn upload(
+    c: &reqwest::Client,
+    s: &TestServer,
+    png: Vec<u8>,
+    query: &str,
+) -> (u16, Value) {
+    let r = c
+        .post(s.url(&format!("/v1/textures?{query}")))
+        .header("content-type", "image/png")
+        .body(png)
+        .send()
+        .await
+        .unwrap();
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap())
+}
+
+/// Polls a texture until it is ready (panics if it fails or takes too long).
+pub async fn wait_ready(c: &reqwest::Client, s: &TestServer, id: &str) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let v: Value = c
+            .get(s.url(&format!("/v1/textures/{id}")))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        match v["status"].as_str() {
+            Some("ready") => return v,
+            Some("pending") => {}
+            other => panic!("texture {id} is {other:?}: {v}"),
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "precompute too slow"
+        );
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+}
+
+/// Uploads a small exemplar and waits until it is ready; returns its id.
+pub async fn ready_texture(c: &reqwest::Client, s: &TestServer, seed: u32) -> String {
+    let (status, v) = upload(c, s, exemplar_png(32, seed), SMALL_PARAMS).await;
+    assert!(status == 201 || status == 202, "{status} {v}");
+    let id = v["id"].as_str().unwrap().to_string();
+    wait_ready(c, s, &id).await;
+    id
+}
+
+/// GETs a URL and returns (status, headers, body).
+pub async fn get(c: &reqwest::Client, url: &str) -> (u16, reqwest::header::HeaderMap, Vec<u8>) {
+    let r = c.get(url).send().await.unwrap();
+    let status = r.status().as_u16();
+    let headers = r.headers().clone();
+    (status, headers, r.bytes().await.unwrap().to_vec())
+}
+
+/// Asserts an error response: status, JSON shape and code.
+pub fn assert_error(
+    status: u16,
+    headers: &reqwest::header::HeaderMap,
+    body: &[u8],
+    want_status: u16,
+    want_code: &str,
+) {
+    let v: Value = serde_json::from_slice(body)
+        .unwrap_or_else(|_| panic!("error body is not JSON: {}", String::from_utf8_lossy(body)));
+    assert_eq!(status, want_status, "{v}");
+    assert_eq!(
+        headers.get("content-type").unwrap().to_str().unwrap(),
+        "application/json"
+    );
+    assert_eq!(v["error"]["code"], want_code, "{v}");
+    assert!(
+        v["error"]["message"]
+            .as_str()
+            .is_some_and(|m| !m.is_empty()),
+        "{v}"
+    );
+}
+
+/// The value of a metric sample in Prometheus text (`name{labels}` as
+/// written), 0 when absent.
+pub fn metric(text: &str, sample: &str) -> f64 {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .find_map(|l| {
+            let (k, v) = l.rsplit_once(' ')?;
+            (k == sample).then(|| v.parse().unwrap())
+        })
+        .unwrap_or(0.0)
+}
+
+/// Scrapes `/metrics`.
+pub async fn metrics(c: &reqwest::Client, s: &TestServer) -> String {
+    c.get(s.url("/metrics"))
+        .send()
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap()
+}
