@@ -139,6 +139,28 @@ pub fn dot(a: &[f32], b: &[f32]) -> f32 {
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
+/// Squared L2 distance with eight independent accumulators (SIMD-friendly,
+/// fixed summation order so results do not depend on the caller).
+#[inline]
+pub fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0f32; 8];
+    let mut ca = a.chunks_exact(8);
+    let mut cb = b.chunks_exact(8);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for l in 0..8 {
+            let e = x[l] - y[l];
+            acc[l] += e * e;
+        }
+    }
+    let mut tail = 0f32;
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        tail += (x - y) * (x - y);
+    }
+    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+}
+
 /// Gathers the N×N neighbourhood of (x, y) at level `k` (spacing 2^k) as
 /// RGB triplets, row by row (v outer, u inner).
 pub fn neighbourhood(stack: &GaussianStack, k: usize, n: u32, x: i64, y: i64, out: &mut [f32]) {

@@ -6,7 +6,7 @@
 //! pairwise strip differences).
 
 use super::geometry::Dims;
-use crate::appearance::Pca;
+use crate::appearance::{Pca, sq_dist};
 use crate::stack::{GaussianStack, spacing};
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
@@ -63,19 +63,6 @@ impl Strips {
     fn v(&self, c: u32) -> &[f32] {
         &self.v[c as usize * self.len..(c as usize + 1) * self.len]
     }
-}
-
-/// Squared distance of two padded strips, eight lanes at a time.
-#[inline]
-fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0f32; 8];
-    for (x, y) in a.chunks_exact(8).zip(b.chunks_exact(8)) {
-        for l in 0..8 {
-            let e = x[l] - y[l];
-            acc[l] += e * e;
-        }
-    }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]))
 }
 
 /// Squared L2 crossbar error of a triple (pixel indices in xy, yz, zx):

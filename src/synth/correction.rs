@@ -10,6 +10,7 @@
 //! 3-neighbourhoods.
 
 use super::grid::{Box3, Grid};
+use crate::appearance::sq_dist;
 use crate::candidates::geometry::{AXES, Dims};
 use crate::candidates::{Candidates, Level, quantise};
 use crate::stack::spacing;
@@ -219,28 +220,6 @@ pub fn for_class(b: &Box3, phase: [i64; 3], side: i64, mut f: impl FnMut([i64; 3
         }
         z += side;
     }
-}
-
-/// Squared L2 distance with eight independent accumulators (SIMD-friendly,
-/// fixed summation order).
-#[inline]
-fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
-    let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
-    let mut acc = [0f32; 8];
-    let mut ca = a.chunks_exact(8);
-    let mut cb = b.chunks_exact(8);
-    for (x, y) in (&mut ca).zip(&mut cb) {
-        for l in 0..8 {
-            let e = x[l] - y[l];
-            acc[l] += e * e;
-        }
-    }
-    let mut tail = 0f32;
-    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
-        tail += (x - y) * (x - y);
-    }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
 /// Squared L2 distance between quantised vectors, in integers.
