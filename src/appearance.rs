@@ -94,6 +94,18 @@ impl Pca {
         }
     }
 
+    /// Projects many vectors (`input` floats each) into `out` (`dims`
+    /// floats each), with the same arithmetic as [`Pca::project_with`].
+    pub fn project_many(&self, vs: &[f32], out: &mut [f32]) {
+        let offsets = self.mean_offsets();
+        for (v, o) in vs
+            .chunks_exact(self.input)
+            .zip(out.chunks_exact_mut(self.dims))
+        {
+            self.project_with(&offsets, v, o);
+        }
+    }
+
     /// Like [`Pca::project`] with `offsets` = the projected mean, saving
     /// half the work when many vectors share one basis.
     #[inline]
@@ -123,17 +135,16 @@ impl Pca {
 #[inline]
 pub fn dot(a: &[f32], b: &[f32]) -> f32 {
     let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
+    let (ca, ta) = a[..n].as_chunks::<8>();
+    let (cb, tb) = b[..n].as_chunks::<8>();
     let mut acc = [0f32; 8];
-    let mut ca = a.chunks_exact(8);
-    let mut cb = b.chunks_exact(8);
-    for (x, y) in (&mut ca).zip(&mut cb) {
+    for (x, y) in ca.iter().zip(cb) {
         for l in 0..8 {
             acc[l] += x[l] * y[l];
         }
     }
     let mut tail = 0f32;
-    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+    for (x, y) in ta.iter().zip(tb) {
         tail += x * y;
     }
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
@@ -144,18 +155,17 @@ pub fn dot(a: &[f32], b: &[f32]) -> f32 {
 #[inline]
 pub fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
     let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
+    let (ca, ta) = a[..n].as_chunks::<8>();
+    let (cb, tb) = b[..n].as_chunks::<8>();
     let mut acc = [0f32; 8];
-    let mut ca = a.chunks_exact(8);
-    let mut cb = b.chunks_exact(8);
-    for (x, y) in (&mut ca).zip(&mut cb) {
+    for (x, y) in ca.iter().zip(cb) {
         for l in 0..8 {
             let e = x[l] - y[l];
             acc[l] += e * e;
         }
     }
     let mut tail = 0f32;
-    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+    for (x, y) in ta.iter().zip(tb) {
         tail += (x - y) * (x - y);
     }
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
@@ -209,12 +219,7 @@ pub fn all_neighbourhoods(stack: &GaussianStack, k: usize, n: u32) -> Vec<f32> {
 pub fn project_all(stack: &GaussianStack, k: usize, n: u32, pca: &Pca) -> AppearanceLevel {
     let all = all_neighbourhoods(stack, k, n);
     let mut vectors = vec![0f32; (all.len() / pca.input) * pca.dims];
-    for (src, dst) in all
-        .chunks_exact(pca.input)
-        .zip(vectors.chunks_exact_mut(pca.dims))
-    {
-        pca.project(src, dst);
-    }
+    pca.project_many(&all, &mut vectors);
     AppearanceLevel {
         pca: pca.clone(),
         vectors,

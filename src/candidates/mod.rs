@@ -141,6 +141,12 @@ pub struct Level {
     /// Quantised 3-neighbourhood vector of every candidate, per plane,
     /// `joint_dims` bytes each, in candidate order.
     pub vectors: [Vec<u8>; 3],
+    /// The appearance vectors of each pixel's 2D similarity set, quantised
+    /// and stored beside the set, so that one correction reads one cache
+    /// line per neighbour instead of chasing every similar pixel.
+    similar_vectors: [Vec<[i16; SIMILAR_DIMS]>; 3],
+    /// Scale of [`Level::similar_vectors`] per plane (see [`quantise_wide`]).
+    similar_scale: [f32; 3],
 }
 
 impl Level {
@@ -153,6 +159,25 @@ impl Level {
     pub fn similar(&self, p: usize, c: u32) -> &[u32] {
         let k2 = self.stored.k2;
         &self.stored.similar[p][c as usize * k2..(c as usize + 1) * k2]
+    }
+
+    /// Quantised appearance vectors of the similarity set of pixel `c` in
+    /// plane `p`, in the order of [`Level::similar`].
+    #[inline]
+    pub fn similar_vectors(&self, p: usize, c: u32) -> &[[i16; SIMILAR_DIMS]] {
+        let k2 = self.stored.k2;
+        &self.similar_vectors[p][c as usize * k2..(c as usize + 1) * k2]
+    }
+
+    /// Quantises an appearance vector of plane `p` like
+    /// [`Level::similar_vectors`] (the first [`SIMILAR_DIMS`] dimensions).
+    #[inline]
+    pub fn quantise_appearance(&self, p: usize, v: &[f32]) -> [i16; SIMILAR_DIMS] {
+        let mut q = [0i16; SIMILAR_DIMS];
+        for (o, &x) in q.iter_mut().zip(v) {
+            *o = quantise_wide(x, self.similar_scale[p]);
+        }
+        q
     }
 
     /// Dimensions of the quantised 3-neighbourhood vectors.
@@ -193,8 +218,20 @@ impl std::fmt::Debug for Candidates {
     }
 }
 
-/// Appearance dimensions used by the similarity k-d tree.
-const SIMILAR_DIMS: usize = 8;
+/// Appearance dimensions used by the similarity k-d tree and the first
+/// stage of correction.
+pub const SIMILAR_DIMS: usize = 8;
+
+/// Largest magnitude of a [`quantise_wide`] value: squared differences of
+/// [`SIMILAR_DIMS`] such values fit an `i32` sum.
+const WIDE_MAX: f32 = 4095.0;
+
+/// Quantises an appearance coordinate to a 13-bit signed integer.
+#[inline]
+pub fn quantise_wide(v: f32, scale: f32) -> i16 {
+    // Rounds half up through a non-negative truncation (see [`quantise`]).
+    ((v * scale).clamp(-WIDE_MAX, WIDE_MAX) + (WIDE_MAX + 0.5)) as i32 as i16 - WIDE_MAX as i16
+}
 
 impl Candidates {
     /// Runs the whole precomputation; `progress(stage, fraction 0..1)` is
@@ -540,10 +577,13 @@ fn quant_scale(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], pc
     127.0 / max
 }
 
-/// Quantises a projected vector: byte = round(v·scale) + 128, clamped.
+/// Quantises a projected vector: byte = round(v·scale) + 128 (halves up),
+/// clamped.
 #[inline]
 pub fn quantise(v: f32, scale: f32) -> u8 {
-    ((v * scale).round() + 128.0).clamp(0.0, 255.0) as u8
+    // Rounds half up by truncating a non-negative value: no libm call in
+    // the correction's inner loop.
+    (v * scale + 128.5).clamp(0.0, 255.0) as u8
 }
 
 fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) -> Vec<Level> {
@@ -572,10 +612,34 @@ fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) 
                     );
                 bytes
             });
+            let similar_scale = [0, 1, 2].map(|p| {
+                let d = appearance[p].pca.dims.min(SIMILAR_DIMS);
+                let max = appearance[p]
+                    .vectors
+                    .chunks_exact(appearance[p].pca.dims)
+                    .flat_map(|v| &v[..d])
+                    .fold(1e-6f32, |m, v| m.max(v.abs()));
+                WIDE_MAX / max
+            });
+            let similar_vectors = [0, 1, 2].map(|p| {
+                let d = appearance[p].pca.dims.min(SIMILAR_DIMS);
+                s.similar[p]
+                    .iter()
+                    .map(|&c| {
+                        let mut q = [0i16; SIMILAR_DIMS];
+                        for (o, &x) in q.iter_mut().zip(&appearance[p].vector(c as usize)[..d]) {
+                            *o = quantise_wide(x, similar_scale[p]);
+                        }
+                        q
+                    })
+                    .collect()
+            });
             Level {
                 stored: s,
                 appearance,
                 vectors,
+                similar_vectors,
+                similar_scale,
             }
         })
         .collect()

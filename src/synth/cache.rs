@@ -1,8 +1,10 @@
 //! The tile cache: synthesized cells of every level and correction step,
 //! kept in an LRU bounded in bytes and shared by all textures and threads.
-//! A tile is claimed before it is computed, so concurrent requests for the
-//! same missing tile compute it once: the others wait for it. A tile's bytes
-//! never depend on cache state, so evicting and recomputing it is harmless.
+//! A tile may hold only some of its voxels (those a request depended on),
+//! marked in a 64-bit mask; later requests add to it. A tile is claimed
+//! before it is computed, so concurrent requests for the same missing
+//! voxels compute them once: the others wait. A voxel's value never depends
+//! on cache state, so evicting, recomputing and merging are harmless.
 
 use super::grid::Grid;
 use lru::LruCache;
@@ -22,8 +24,37 @@ pub struct TileKey {
     pub cell: [i64; 3],
 }
 
-/// A synthesized tile: the triples of one cell.
-pub type Tile = Arc<Grid<[u32; 3]>>;
+/// The voxels of one cell that are known, and their triples.
+#[derive(Clone, Debug)]
+pub struct TileData {
+    /// Triples of the cell (meaningful where `mask` is set).
+    pub grid: Grid<[u32; 3]>,
+    /// Bit i set: voxel i of the cell (x fastest) is known.
+    pub mask: u64,
+}
+
+impl TileData {
+    /// Whether every voxel of `want` is known.
+    #[inline]
+    pub fn covers(&self, want: u64) -> bool {
+        self.mask & want == want
+    }
+
+    /// The union of two partial tiles of the same cell.
+    pub fn merged(&self, other: &TileData) -> TileData {
+        let mut out = self.clone();
+        for i in 0..out.grid.data.len() {
+            if other.mask >> i & 1 == 1 {
+                out.grid.data[i] = other.grid.data[i];
+            }
+        }
+        out.mask |= other.mask;
+        out
+    }
+}
+
+/// A synthesized tile, shared.
+pub type Tile = Arc<TileData>;
 
 /// Cache counters.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -101,7 +132,7 @@ impl Waiter {
 }
 
 fn tile_bytes(t: &Tile) -> usize {
-    t.data.len() * std::mem::size_of::<[u32; 3]>() + 128
+    t.grid.data.len() * std::mem::size_of::<[u32; 3]>() + 136
 }
 
 impl TileCache {
@@ -133,10 +164,11 @@ impl TileCache {
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Looks a tile up, claiming it if nobody has it or is computing it.
-    pub fn claim(self: &Arc<Self>, key: TileKey) -> Claim {
+    /// Looks up the voxels `want` of a tile, claiming the tile if it lacks
+    /// some of them and nobody is computing it.
+    pub fn claim(self: &Arc<Self>, key: TileKey, want: u64) -> Claim {
         let mut g = self.lock();
-        if let Some(t) = g.lru.get(&key) {
+        if let Some(t) = g.lru.get(&key).filter(|t| t.covers(want)) {
             let t = t.clone();
             g.stats.hits += 1;
             return Claim::Ready(t);
@@ -157,12 +189,17 @@ impl TileCache {
         })
     }
 
-    /// Stores a computed tile and wakes its waiters.
+    /// Stores a computed tile (merged with what the cache already knows
+    /// of it) and wakes its waiters with the merged tile.
     pub fn publish(&self, mut ticket: Ticket, tile: Tile) {
         ticket.published = true;
-        {
+        let tile = {
             let mut g = self.lock();
             g.flights.remove(&ticket.key);
+            let tile = match g.lru.peek(&ticket.key) {
+                Some(old) if !tile.covers(old.mask) => Arc::new(old.merged(&tile)),
+                _ => tile,
+            };
             let bytes = tile_bytes(&tile);
             if bytes <= self.max_bytes {
                 if let Some(old) = g.lru.put(ticket.key, tile.clone()) {
@@ -180,7 +217,8 @@ impl TileCache {
                 }
             }
             g.stats.entries = g.lru.len() as u64;
-        }
+            tile
+        };
         let mut done = ticket.flight.done.lock().unwrap_or_else(|e| e.into_inner());
         *done = Some(Some(tile));
         ticket.flight.cv.notify_all();

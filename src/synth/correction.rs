@@ -10,10 +10,10 @@
 //! 3-neighbourhoods.
 
 use super::grid::{Box3, Grid};
-use crate::appearance::sq_dist;
 use crate::candidates::geometry::{AXES, Dims};
-use crate::candidates::{Candidates, Level, quantise};
+use crate::candidates::{Candidates, Level, SIMILAR_DIMS, quantise};
 use crate::stack::spacing;
+use rayon::prelude::*;
 
 const MAX_NEIGHBOURHOOD: usize = 9 * 9 * 3;
 const MAX_DIMS: usize = 16;
@@ -45,9 +45,12 @@ impl Work {
     /// Wraps triples and computes their colours.
     pub fn new(c: &Candidates, k: usize, triples: Grid<[u32; 3]>) -> Work {
         let mut colours = Grid::new(triples.bounds);
-        for (dst, t) in colours.data.iter_mut().zip(&triples.data) {
-            *dst = colour(c, k, *t);
-        }
+        colours
+            .data
+            .par_iter_mut()
+            .zip(&triples.data)
+            .with_min_len(4096)
+            .for_each(|(dst, t)| *dst = colour(c, k, *t));
         Work { triples, colours }
     }
 }
@@ -79,7 +82,14 @@ pub struct Corrector<'a> {
     dims: Dims,
     offsets: [Vec<f32>; 3],
     joint_offsets: Vec<f32>,
+    /// 3D candidates tried per pixel (best crossbar error first).
+    max_3d: usize,
 }
+
+/// 3D candidates tried per exemplar pixel at the finest level, where
+/// neighbourhoods are already coherent (Dong et al.: 4 there, all 12 at
+/// coarser levels).
+const FINE_3D_CANDIDATES: usize = 4;
 
 impl<'a> Corrector<'a> {
     /// A corrector for level `k`.
@@ -91,6 +101,11 @@ impl<'a> Corrector<'a> {
             dims: cands.dims(),
             offsets: [0, 1, 2].map(|p| cands.level(k).appearance[p].pca.mean_offsets()),
             joint_offsets: cands.level(k).joint_pca().mean_offsets(),
+            max_3d: if k == 0 {
+                FINE_3D_CANDIDATES
+            } else {
+                usize::MAX
+            },
         }
     }
 
@@ -147,7 +162,8 @@ impl<'a> Corrector<'a> {
                 &s.neigh[..o],
                 &mut s.app[plane][..dims],
             );
-            let mut best = (f32::INFINITY, u32::MAX);
+            let query = self.level.quantise_appearance(plane, &s.app[plane][..dims]);
+            let mut best = (u32::MAX, u32::MAX);
             // Coherent neighbours usually point at the same pixel: visit
             // each base pixel once.
             let mut seen = [u32::MAX; 9];
@@ -162,8 +178,10 @@ impl<'a> Corrector<'a> {
                     }
                     seen[seen_n] = base;
                     seen_n += 1;
-                    for &cand in self.level.similar(plane, base) {
-                        let d = sq_dist(&s.app[plane][..dims], app.vector(cand as usize));
+                    let ids = self.level.similar(plane, base);
+                    let vectors = self.level.similar_vectors(plane, base);
+                    for (&cand, v) in ids.iter().zip(vectors) {
+                        let d = sq_dist_i16(&query, v);
                         if d < best.0 || (d == best.0 && cand < best.1) {
                             best = (d, cand);
                         }
@@ -191,7 +209,9 @@ impl<'a> Corrector<'a> {
         for (plane, &pixel) in best2d.iter().enumerate() {
             let cands = self.level.candidates(plane);
             let vectors = &self.level.vectors[plane];
-            for ci in cands.range(pixel) {
+            let range = cands.range(pixel);
+            let range = range.start..range.end.min(range.start.saturating_add(self.max_3d));
+            for ci in range {
                 let d = sq_dist_u8(&query[..jd], &vectors[ci * jd..(ci + 1) * jd]);
                 let t = cands.triples[ci];
                 if d < best.0 || (d == best.0 && t < best.1) {
@@ -232,4 +252,20 @@ fn sq_dist_u8(a: &[u8], b: &[u8]) -> u32 {
             (e * e) as u32
         })
         .sum()
+}
+
+/// Squared L2 distance between wide-quantised appearance vectors. Values
+/// lie within ±4095, so differences fit an `i16` and the products sum in
+/// pairs (one `pmaddwd` per vector).
+#[inline]
+fn sq_dist_i16(a: &[i16; SIMILAR_DIMS], b: &[i16; SIMILAR_DIMS]) -> u32 {
+    let mut e = [0i16; SIMILAR_DIMS];
+    for l in 0..SIMILAR_DIMS {
+        e[l] = a[l].wrapping_sub(b[l]);
+    }
+    let mut sum = [0i32; SIMILAR_DIMS / 2];
+    for l in 0..SIMILAR_DIMS / 2 {
+        sum[l] = e[2 * l] as i32 * e[2 * l] as i32 + e[2 * l + 1] as i32 * e[2 * l + 1] as i32;
+    }
+    sum.iter().sum::<i32>() as u32
 }

@@ -31,16 +31,20 @@ use crate::candidates::Candidates;
 use crate::error::Result;
 use crate::params::{Scheme, SynthParams};
 use crate::texture::{CutPlane, Filter, Region, SynthStats};
-use cache::{Claim, Tile, TileCache, TileKey};
+use cache::{Claim, Tile, TileCache, TileData, TileKey};
 use correction::{Corrector, Scratch, Work, colour};
 use grid::{Box3, Grid};
 use rayon::prelude::*;
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-/// Side of the final-version tiles cached per level.
+/// Side of the final-version tiles cached per level (TILE³ = 64 voxels,
+/// one bit each in a tile's mask).
 pub const TILE: i64 = 4;
+
+/// Voxels wanted per tile: cell → mask of its voxels.
+type Wanted = BTreeMap<[i64; 3], u64>;
 
 /// Most tiles synthesized together in one group (bounds working memory).
 const MAX_GROUP_TILES: usize = 8192;
@@ -182,14 +186,31 @@ impl Engine {
         Box3::new(t.map(|v| v * TILE), [TILE; 3])
     }
 
-    fn tiles_covering(b: &Box3) -> BTreeSet<[i64; 3]> {
+    /// Bit of voxel `p` in its tile's mask.
+    #[inline]
+    fn bit_of(p: [i64; 3]) -> u64 {
+        let l = p.map(|v| v.rem_euclid(TILE));
+        1 << (l[0] + TILE * (l[1] + TILE * l[2]))
+    }
+
+    /// The voxels of `b`, tile by tile.
+    fn wanted_box(b: &Box3) -> Wanted {
         let lo = Self::tile_of(b.lo);
         let hi = Self::tile_of(b.hi.map(|v| v - 1));
-        let mut out = BTreeSet::new();
+        let mut out = Wanted::new();
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
-                    out.insert([x, y, z]);
+                    let t = Self::tile_box([x, y, z]).intersect(b);
+                    let mut mask = 0u64;
+                    for pz in t.lo[2]..t.hi[2] {
+                        for py in t.lo[1]..t.hi[1] {
+                            for px in t.lo[0]..t.hi[0] {
+                                mask |= Self::bit_of([px, py, pz]);
+                            }
+                        }
+                    }
+                    out.insert([x, y, z], mask);
                 }
             }
         }
@@ -198,30 +219,31 @@ impl Engine {
 
     /// Final triples of level `k` over `b`.
     pub(crate) fn level_box(&self, k: usize, b: &Box3, acc: &Acc) -> Grid<[u32; 3]> {
-        let tiles = self.tiles(k, Self::tiles_covering(b), acc);
+        let tiles = self.tiles(k, Self::wanted_box(b), acc);
         let mut g = Grid::new(*b);
         for t in tiles.values() {
-            g.copy_from(t);
+            g.copy_from(&t.grid);
         }
         g
     }
 
-    /// Final tiles of level `k`, from the cache or computed; a tile another
-    /// request is computing is waited for (outside rayon).
-    fn tiles(&self, k: usize, cells: BTreeSet<[i64; 3]>, acc: &Acc) -> HashMap<[i64; 3], Tile> {
+    /// Final tiles of level `k` holding at least the wanted voxels, from
+    /// the cache or computed; a tile another request is computing is
+    /// waited for (outside rayon).
+    fn tiles(&self, k: usize, wanted: Wanted, acc: &Acc) -> HashMap<[i64; 3], Tile> {
         let mut out = HashMap::new();
         let mut mine = Vec::new();
         let mut theirs = Vec::new();
         let in_pool = rayon::current_thread_index().is_some();
         let mut unclaimed = Vec::new();
-        for c in cells {
+        for (&c, &want) in &wanted {
             let key = TileKey {
                 texture: self.key,
                 level: k as u8,
                 step: 0,
                 cell: c,
             };
-            match self.cache.claim(key) {
+            match self.cache.claim(key, want) {
                 Claim::Ready(t) => {
                     acc.cached.fetch_add(1, Ordering::Relaxed);
                     out.insert(c, t);
@@ -229,11 +251,14 @@ impl Engine {
                 Claim::Mine(ticket) => mine.push(ticket),
                 // Blocking a rayon worker on another computation could
                 // deadlock the pool, so inside it we compute instead.
-                Claim::Wait(_) if in_pool => unclaimed.push(c),
+                Claim::Wait(_) if in_pool => unclaimed.push((c, want)),
                 Claim::Wait(w) => theirs.push(w),
             }
         }
-        let mut todo: Vec<[i64; 3]> = mine.iter().map(|t| t.key().cell).collect();
+        let mut todo: Vec<([i64; 3], u64)> = mine
+            .iter()
+            .map(|t| (t.key().cell, wanted[&t.key().cell]))
+            .collect();
         todo.extend(&unclaimed);
         if !todo.is_empty() {
             let mut computed = self.compute(k, &todo, acc);
@@ -249,13 +274,14 @@ impl Engine {
         }
         for w in theirs {
             let c = w.key().cell;
-            match self.cache.wait(w) {
+            let want = wanted[&c];
+            match self.cache.wait(w).filter(|t| t.covers(want)) {
                 Some(t) => {
                     acc.cached.fetch_add(1, Ordering::Relaxed);
                     out.insert(c, t);
                 }
                 None => {
-                    let mut t = self.compute(k, &[c], acc);
+                    let mut t = self.compute(k, &[(c, want)], acc);
                     acc.computed.fetch_add(1, Ordering::Relaxed);
                     out.insert(c, t.remove(&c).expect("one tile"));
                 }
@@ -264,24 +290,35 @@ impl Engine {
         out
     }
 
-    /// Synthesizes final tiles of level `k` (no cache lookups for them;
-    /// their prerequisites go through the cache). Tiles are processed in
-    /// compact groups so memory stays bounded and scattered tiles never pull
-    /// in the space between them.
-    fn compute(&self, k: usize, tiles: &[[i64; 3]], acc: &Acc) -> HashMap<[i64; 3], Tile> {
+    /// Synthesizes the wanted voxels of tiles of level `k` (no cache
+    /// lookups for them; their prerequisites go through the cache). Tiles
+    /// are processed in compact groups so memory stays bounded and
+    /// scattered tiles never pull in the space between them. Only the
+    /// wanted voxels and their exact dependency chain are computed.
+    fn compute(&self, k: usize, tiles: &[([i64; 3], u64)], acc: &Acc) -> HashMap<[i64; 3], Tile> {
+        let masks: HashMap<[i64; 3], u64> = tiles.iter().copied().collect();
+        let cells: Vec<[i64; 3]> = tiles.iter().map(|t| t.0).collect();
         let mut out = HashMap::new();
-        for group in plan::group_cells(tiles, MAX_GROUP_TILES) {
+        for group in plan::group_cells(&cells, MAX_GROUP_TILES) {
+            let group: Vec<([i64; 3], u64)> = group.into_iter().map(|c| (c, masks[&c])).collect();
             out.extend(self.compute_group(k, &group, acc));
         }
         out
     }
 
-    fn compute_group(&self, k: usize, tiles: &[[i64; 3]], acc: &Acc) -> Vec<([i64; 3], Tile)> {
+    fn compute_group(
+        &self,
+        k: usize,
+        tiles: &[([i64; 3], u64)],
+        acc: &Acc,
+    ) -> Vec<([i64; 3], Tile)> {
         let mut targets = Vec::with_capacity(tiles.len() * (TILE * TILE * TILE) as usize);
-        for &t in tiles {
+        for &(t, mask) in tiles {
             let b = Self::tile_box(t);
             for i in 0..b.volume() as usize {
-                targets.push(position(&b, i));
+                if mask >> i & 1 == 1 {
+                    targets.push(position(&b, i));
+                }
             }
         }
         let steps = self.steps_at(k);
@@ -307,33 +344,33 @@ impl Engine {
                 let offset = steps[*si].offset;
                 let start = step_start.as_ref().map(|s| &s.1);
                 let w = &work;
-                let new: Vec<[u32; 3]> = voxels
+                let new: Vec<(usize, [u32; 3], [f32; 3])> = voxels
                     .par_iter()
                     .map_init(Scratch::default, |s, &p| {
                         let barrier = barrier_cell.map(|m| {
                             let c = p.map(|v| (v - offset).div_euclid(m) * m + offset);
                             Box3::new(c, [m; 3])
                         });
-                        match (start, barrier) {
+                        let t = match (start, barrier) {
                             (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p, s),
                             _ => corrector.correct(w, None, p, s),
-                        }
+                        };
+                        (w.triples.index(p), t, colour(&self.cands, k, t))
                     })
                     .collect();
-                for (&p, t) in voxels.iter().zip(new) {
-                    let i = work.triples.index(p);
+                for (i, t, c) in new {
                     work.triples.data[i] = t;
-                    work.colours.data[i] = colour(&self.cands, k, t);
+                    work.colours.data[i] = c;
                 }
             }
             work.triples
         };
         tiles
-            .iter()
-            .map(|&t| {
-                let mut g = Grid::new(Self::tile_box(t));
-                g.copy_from(&triples);
-                (t, Arc::new(g))
+            .par_iter()
+            .map(|&(t, mask)| {
+                let mut grid = Grid::new(Self::tile_box(t));
+                grid.copy_from(&triples);
+                (t, Arc::new(TileData { grid, mask }))
             })
             .collect()
     }
@@ -363,10 +400,39 @@ impl Engine {
                 });
             return g;
         }
-        let mut parent_tiles = BTreeSet::new();
-        for p in need.positions() {
-            parent_tiles.insert(Self::tile_of(p.map(|v| v.div_euclid(2))));
+        // Parents of the needed voxels, as tile masks over a dense grid of
+        // the parent tiles, gathered layer by layer in parallel.
+        let tile_box = {
+            let lo = Self::tile_of(b.lo.map(|v| v.div_euclid(2)));
+            let hi = Self::tile_of(b.hi.map(|v| (v - 1).div_euclid(2)));
+            Box3::new(lo, [0, 1, 2].map(|a| hi[a] - lo[a] + 1))
+        };
+        let tile_index = |c: [i64; 3]| {
+            let s = tile_box.size();
+            (((c[2] - tile_box.lo[2]) * s[1] + (c[1] - tile_box.lo[1])) * s[0]
+                + (c[0] - tile_box.lo[0])) as usize
+        };
+        let touched: Vec<Vec<(usize, u64)>> = zs
+            .par_iter()
+            .map(|&z| {
+                need.layer(z)
+                    .map(|p| {
+                        let q = p.map(|v| v.div_euclid(2));
+                        (tile_index(Self::tile_of(q)), Self::bit_of(q))
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut masks = vec![0u64; tile_box.volume() as usize];
+        for (i, bit) in touched.into_iter().flatten() {
+            masks[i] |= bit;
         }
+        let parent_tiles: Wanted = masks
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| **m != 0)
+            .map(|(i, m)| (position(&tile_box, i), *m))
+            .collect();
         let parents = self.tiles(k + 1, parent_tiles, acc);
         if acc.dry {
             return g;
@@ -377,7 +443,7 @@ impl Engine {
             .for_each(|(dst, &z)| {
                 for p in need.layer(z) {
                     let q = p.map(|v| v.div_euclid(2));
-                    let parent = parents[&Self::tile_of(q)].get(q);
+                    let parent = parents[&Self::tile_of(q)].grid.get(q);
                     let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
                     dst[i] = init::upsample(&self.cands, parent, k, p);
                 }
@@ -449,11 +515,14 @@ impl Engine {
     /// Final triples at arbitrary voxels of level `k`, fetched tile by tile
     /// so scattered points never pull in their bounding box.
     fn triples_at(&self, k: usize, points: &[[i64; 3]], acc: &Acc) -> Vec<[u32; 3]> {
-        let cells: BTreeSet<[i64; 3]> = points.iter().map(|p| Self::tile_of(*p)).collect();
-        let tiles = self.tiles(k, cells, acc);
+        let mut wanted = Wanted::new();
+        for p in points {
+            *wanted.entry(Self::tile_of(*p)).or_default() |= Self::bit_of(*p);
+        }
+        let tiles = self.tiles(k, wanted, acc);
         points
             .iter()
-            .map(|p| tiles[&Self::tile_of(*p)].get(*p))
+            .map(|p| tiles[&Self::tile_of(*p)].grid.get(*p))
             .collect()
     }
 
