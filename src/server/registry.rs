@@ -459,6 +459,16 @@ impl Registry {
         }
         match result {
             Ok((c, t)) => {
+                // Progress and counters are final before the status turns
+                // ready, so no reader sees a ready texture in progress.
+                entry.set_progress("done", 1.0);
+                if reused {
+                    self.count_precompute("reused");
+                    tracing::info!("candidates shared with a texture of the same exemplars");
+                } else {
+                    self.count_precompute("ok");
+                    tracing::info!(seconds, "precompute finished");
+                }
                 if let Err(e) = self.store.write_candidates(&entry.id, &c) {
                     // Still served from memory; the next start recomputes.
                     tracing::error!(error = %e, "could not store candidates");
@@ -468,14 +478,6 @@ impl Registry {
                     if let Err(e) = self.store.write_meta(&entry.meta()) {
                         tracing::error!(error = %e, "could not store texture metadata");
                     }
-                }
-                entry.set_progress("done", 1.0);
-                if reused {
-                    self.count_precompute("reused");
-                    tracing::info!("candidates shared with a texture of the same exemplars");
-                } else {
-                    self.count_precompute("ok");
-                    tracing::info!(seconds, "precompute finished");
                 }
             }
             Err(why) => {
@@ -554,8 +556,8 @@ impl Registry {
             match meta.status {
                 StoredStatus::Ready => match self.load_ready(&entry) {
                     Ok((c, t)) => {
-                        entry.set_ready(c, t);
                         entry.set_progress("done", 1.0);
+                        entry.set_ready(c, t);
                         self.metrics.textures_loaded.inc();
                         tracing::info!(id = %meta.id, "texture loaded");
                     }
