@@ -13,7 +13,7 @@ const server = await startServer();
 let browser = null;
 const errors = [];
 try {
-  browser = await launch();
+  browser = await launch({ width: 820, height: 540 });
   const page = await browser.context.newPage();
   page.on("console", (m) => { if (m.type() === "error") errors.push(m.text()); });
   page.on("pageerror", (e) => errors.push(String(e)));
