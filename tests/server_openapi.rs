@@ -96,6 +96,12 @@ fn instantiate(path: &str) -> String {
         .replace("{bx}", "1")
         .replace("{by}", "2")
         .replace("{bz}", "3")
+        .replace("{scale}", "0")
+        .replace("{chunk}", "0-32_0-32_0-32")
+        .replace("{cz}", "1")
+        .replace("{cy}", "2")
+        .replace("{cx}", "3")
+        .replace("{cc}", "0")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -18,7 +18,7 @@ command -v schemathesis >/dev/null || python3 -m pip install --quiet 'schemathes
 
 DATA=$(mktemp -d)
 "$BIN" serve --addr 127.0.0.1:0 --data-dir "$DATA/data" --max-request-voxels 4096 \
-    --brick-size 16 --log warn >"$DATA/stdout" 2>"$DATA/stderr" &
+    --brick-size 16 --chunk-size 16 --log warn >"$DATA/stdout" 2>"$DATA/stderr" &
 PID=$!
 cleanup() {
     kill "$PID" 2>/dev/null || true

@@ -61,6 +61,12 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_BRICK_SIZE", default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub brick_size: u32,
 
+    /// Edge of the chunks of the Neuroglancer precomputed and Zarr views
+    /// (voxels; a power of two from 8 to 256). Smaller chunks arrive
+    /// sooner; larger ones amortise the synthesis of their borders.
+    #[arg(long, env = "SOLIDTEX_CHUNK_SIZE", default_value_t = 32, value_parser = parse_chunk_size)]
+    pub chunk_size: u32,
+
     /// Work budget of one voxel request, in voxels: w·h for slices,
     /// w·h·d for regions and bricks, w·h·clamp(|u|,1,8)·clamp(|v|,1,8) for
     /// cuts. Requests over it get 400 `too_large`. The default allows the
@@ -112,6 +118,7 @@ impl ServeArgs {
             http_threads: 2,
             max_upload_bytes: 8 << 20,
             brick_size: 64,
+            chunk_size: 32,
             max_request_voxels: 16 << 20,
             default_texture: false,
             shutdown_timeout: 30,
@@ -138,6 +145,19 @@ impl ServeArgs {
                 .unwrap_or_else(|| PathBuf::from("data")),
         }
     }
+}
+
+/// Parses a chunk edge: a power of two from 8 to 256, so that chunks tile
+/// the served window (2^20 voxels per side) exactly at every level.
+pub fn parse_chunk_size(s: &str) -> Result<u32, String> {
+    let n: u32 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not an integer"))?;
+    if !(8..=256).contains(&n) || !n.is_power_of_two() {
+        return Err(format!("{n} is not a power of two from 8 to 256"));
+    }
+    Ok(n)
 }
 
 /// Parses a byte count with an optional binary suffix: `1048576`, `512K`,
@@ -181,6 +201,16 @@ mod tests {
         assert!(parse_bytes("lots").is_err());
         assert!(parse_bytes("3Q").is_err());
         assert!(parse_bytes("99999999999T").is_err());
+    }
+
+    #[test]
+    fn chunk_sizes() {
+        assert_eq!(parse_chunk_size("32"), Ok(32));
+        assert_eq!(parse_chunk_size("256"), Ok(256));
+        assert!(parse_chunk_size("48").is_err());
+        assert!(parse_chunk_size("4").is_err());
+        assert!(parse_chunk_size("512").is_err());
+        assert!(parse_chunk_size("x").is_err());
     }
 
     #[test]

@@ -66,6 +66,14 @@ impl Server {
                 args.max_request_voxels
             );
         }
+        let chunk_voxels = u64::from(args.chunk_size).pow(3);
+        if chunk_voxels > args.max_request_voxels {
+            anyhow::bail!(
+                "chunks of edge {} ({chunk_voxels} voxels) exceed the request budget of {} voxels",
+                args.chunk_size,
+                args.max_request_voxels
+            );
+        }
         let data_dir = args.resolved_data_dir();
         let store = {
             let d = data_dir.clone();
@@ -118,6 +126,7 @@ impl Server {
             jobs,
             metrics,
             brick_size: args.brick_size,
+            chunk_size: args.chunk_size,
             max_request_voxels: args.max_request_voxels,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
         });

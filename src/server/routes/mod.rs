@@ -7,7 +7,11 @@
 
 mod ops;
 mod textures;
+mod viewer;
+mod volumes;
 mod voxels;
+
+pub use volumes::{WINDOW_LOG2, window};
 
 use super::error::{ApiError, json_errors, panic_response};
 use super::jobs::Jobs;
@@ -40,6 +44,13 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/textures/{id}/cut.png"),
     ("GET", "/v1/textures/{id}/region.raw"),
     ("GET", "/v1/textures/{id}/bricks/{lod}/{bx}_{by}_{bz}.raw"),
+    ("GET", "/v1/textures/{id}/precomputed/info"),
+    ("GET", "/v1/textures/{id}/precomputed/{scale}/{chunk}"),
+    ("GET", "/v1/textures/{id}/zarr/zarr.json"),
+    ("GET", "/v1/textures/{id}/zarr/{lod}/zarr.json"),
+    ("GET", "/v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}"),
+    ("GET", "/"),
+    ("GET", "/viewer.js"),
 ];
 
 /// What handlers share.
@@ -52,6 +63,8 @@ pub struct Shared {
     pub metrics: Arc<Metrics>,
     /// Edge of served bricks.
     pub brick_size: u32,
+    /// Edge of the chunks of the precomputed and Zarr views.
+    pub chunk_size: u32,
     /// Work budget of one voxel request (see [`crate::server::ServeArgs`]).
     pub max_request_voxels: u64,
     /// Largest accepted upload, bytes.
@@ -94,7 +107,29 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/textures/{id}/slices/{axis}/{at}", get(voxels::slice))
         .route("/v1/textures/{id}/cut.png", get(voxels::cut))
         .route("/v1/textures/{id}/region.raw", get(voxels::region))
-        .route("/v1/textures/{id}/bricks/{lod}/{brick}", get(voxels::brick));
+        .route("/v1/textures/{id}/bricks/{lod}/{brick}", get(voxels::brick))
+        .route(
+            "/v1/textures/{id}/precomputed/info",
+            get(volumes::precomputed_info_route),
+        )
+        .route(
+            "/v1/textures/{id}/precomputed/{scale}/{chunk}",
+            get(volumes::precomputed_chunk),
+        )
+        .route(
+            "/v1/textures/{id}/zarr/zarr.json",
+            get(volumes::zarr_group_route),
+        )
+        .route(
+            "/v1/textures/{id}/zarr/{lod}/zarr.json",
+            get(volumes::zarr_array_route),
+        )
+        .route(
+            "/v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}",
+            get(volumes::zarr_chunk),
+        )
+        .route("/", get(viewer::page))
+        .route("/viewer.js", get(viewer::script));
     with_middleware(routes, state)
 }
 

@@ -27,7 +27,7 @@ const DEFAULT_SIDE: u32 = 256;
 const DEFAULT_REGION_SIDE: u32 = 64;
 
 /// The texture of a voxel request, ready; the span records its id.
-fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
+pub(super) fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
     if !valid_id(id) {
         return Err(ApiError::unknown_texture(id));
     }
@@ -45,7 +45,7 @@ fn coord(q: &Query, name: &str) -> Result<i64, ApiError> {
 }
 
 /// Checks a request's work against the server's budget.
-fn check_budget(s: &AppState, what: &str, voxels: u64) -> Result<(), ApiError> {
+pub(super) fn check_budget(s: &AppState, what: &str, voxels: u64) -> Result<(), ApiError> {
     if voxels > s.max_request_voxels {
         return Err(ApiError::too_large(format!(
             "{what} costs {voxels} voxels; this server's budget per request is {}",
@@ -71,7 +71,7 @@ fn check_extent(name: &str, start: i64, len: u32) -> Result<(), ApiError> {
 
 /// Strong validator of a response: the texture's content, the engine
 /// version and the normalised request.
-fn etag(entry: &Entry, key: &str) -> String {
+pub(super) fn etag(entry: &Entry, key: &str) -> String {
     let mut h = Sha256::new();
     h.update(b"solidtex etag v1\0");
     h.update(env!("CARGO_PKG_VERSION").as_bytes());
@@ -83,7 +83,7 @@ fn etag(entry: &Entry, key: &str) -> String {
 }
 
 /// True when `If-None-Match` lists `etag` (weak comparison) or `*`.
-fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+pub(super) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
     headers
         .get_all(header::IF_NONE_MATCH)
         .iter()
@@ -93,7 +93,7 @@ fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
         .any(|t| t == "*" || t.strip_prefix("W/").unwrap_or(t) == etag)
 }
 
-fn cache_headers(res: &mut Response, etag: &str) {
+pub(super) fn cache_headers(res: &mut Response, etag: &str) {
     let h = res.headers_mut();
     if let Ok(v) = HeaderValue::from_str(etag) {
         h.insert(header::ETAG, v);
@@ -101,14 +101,14 @@ fn cache_headers(res: &mut Response, etag: &str) {
     h.insert(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE));
 }
 
-fn not_modified_response(etag: &str) -> Response {
+pub(super) fn not_modified_response(etag: &str) -> Response {
     let mut res = Response::new(Body::empty());
     *res.status_mut() = StatusCode::NOT_MODIFIED;
     cache_headers(&mut res, etag);
     res
 }
 
-fn body_response(bytes: Vec<u8>, content_type: &'static str, etag: &str) -> Response {
+pub(super) fn body_response(bytes: Vec<u8>, content_type: &'static str, etag: &str) -> Response {
     let mut res = Response::new(Body::from(bytes));
     res.headers_mut()
         .insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
@@ -146,7 +146,7 @@ async fn png_job(
     Ok(png)
 }
 
-async fn raw_job(
+pub(super) async fn raw_job(
     s: &AppState,
     f: impl FnOnce() -> crate::Result<(Vec<u8>, SynthStats)> + Send + 'static,
 ) -> Result<Vec<u8>, ApiError> {
