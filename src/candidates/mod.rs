@@ -147,6 +147,11 @@ pub struct Level {
     similar_vectors: [Vec<[i16; SIMILAR_DIMS]>; 3],
     /// Scale of [`Level::similar_vectors`] per plane (see [`quantise_wide`]).
     similar_scale: [f32; 3],
+    /// Each pixel's share of the joint projection, per plane (`joint_dims`
+    /// floats per pixel): the joint vector of any triple is the sum of its
+    /// three shares less the projected mean, so triples that are not
+    /// precomputed candidates (coherent ones) are scored cheaply.
+    joint_shares: [Vec<f32>; 3],
 }
 
 impl Level {
@@ -178,6 +183,13 @@ impl Level {
             *o = quantise_wide(x, self.similar_scale[p]);
         }
         q
+    }
+
+    /// Plane `p`'s share of the joint projection of pixel `c`.
+    #[inline]
+    pub fn joint_share(&self, p: usize, c: u32) -> &[f32] {
+        let d = self.stored.joint_pca.dims;
+        &self.joint_shares[p][c as usize * d..(c as usize + 1) * d]
     }
 
     /// Dimensions of the quantised 3-neighbourhood vectors.
@@ -539,6 +551,26 @@ fn joint_dims(k: usize, levels: usize) -> usize {
     8 + (4 * k + (levels - 1) / 2) / (levels - 1)
 }
 
+/// Plane `p`'s block of the joint basis applied to every pixel's
+/// appearance vector.
+fn joint_shares(appearance: &[AppearanceLevel; 3], joint: &Pca, p: usize) -> Vec<f32> {
+    let start: usize = appearance[..p].iter().map(|a| a.pca.dims).sum();
+    let app = &appearance[p];
+    let d = app.pca.dims;
+    let pixels = app.vectors.len() / d;
+    let mut out = vec![0f32; pixels * joint.dims];
+    out.par_chunks_mut(joint.dims)
+        .enumerate()
+        .for_each(|(c, dst)| {
+            let v = app.vector(c);
+            for (j, o) in dst.iter_mut().enumerate() {
+                let row = &joint.basis[j * joint.input + start..j * joint.input + start + d];
+                *o = appearance::dot(v, row);
+            }
+        });
+    out
+}
+
 fn concat(appearance: &[AppearanceLevel], t: [u32; 3], out: &mut Vec<f32>) {
     out.clear();
     for (p, a) in appearance.iter().enumerate() {
@@ -634,12 +666,14 @@ fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) 
                     })
                     .collect()
             });
+            let joint_shares = [0, 1, 2].map(|p| joint_shares(&appearance, &s.joint_pca, p));
             Level {
                 stored: s,
                 appearance,
                 vectors,
                 similar_vectors,
                 similar_scale,
+                joint_shares,
             }
         })
         .collect()
