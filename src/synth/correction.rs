@@ -237,13 +237,11 @@ impl<'a> Corrector<'a> {
                     }
                     seen[seen_n] = t;
                     seen_n += 1;
+                    let shares = [0, 1, 2].map(|p| self.level.joint_share(p, t[p]));
                     let mut dist = 0u32;
-                    for j in 0..jd {
-                        let v = self.level.joint_share(0, t[0])[j]
-                            + self.level.joint_share(1, t[1])[j]
-                            + self.level.joint_share(2, t[2])[j]
-                            - self.joint_offsets[j];
-                        let e = quantise(v, scale) as i32 - query[j] as i32;
+                    for (j, &q) in query[..jd].iter().enumerate() {
+                        let v = shares[0][j] + shares[1][j] + shares[2][j] - self.joint_offsets[j];
+                        let e = quantise(v, scale) as i32 - q as i32;
                         dist += (e * e) as u32;
                     }
                     let dist = dist * COHERENT_WEIGHT / 256;
