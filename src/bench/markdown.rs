@@ -138,9 +138,11 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
     } else {
         let _ = writeln!(
             w,
-            "A server in the benchmark's process (default settings: 4 jobs at once, \
-             64 queued, 2 HTTP threads, rayon on every core) loaded by `solidtex loadtest` \
-             over loopback; the client shares the cores with the server.\n"
+            "`solidtex serve` in a child process (default settings: 4 jobs at once, \
+             64 queued, 2 HTTP threads, rayon on every core, 512 MiB cache), restarted \
+             cold for each run, loaded by `solidtex loadtest` over loopback; the client \
+             shares the cores with the server. RSS is the server process's peak resident \
+             memory, sampled twice a second.\n"
         );
         let _ = write!(w, "{}", super::service::table(&r.load));
     }

@@ -1,17 +1,19 @@
-//! The service under load, for the benchmark page: a server in this
-//! process with default settings (its data in a temporary directory), the
-//! synthesis exemplar uploaded over HTTP as a user would, then three
-//! `solidtex loadtest` runs from a cold cache each — one client, many
-//! clients, and an interactive plane sweep.
+//! The service under load, for the benchmark page: `solidtex serve` in a
+//! child process with default settings (its data in a temporary
+//! directory), the synthesis exemplar uploaded over HTTP as a user would,
+//! then three `solidtex loadtest` runs, each against a freshly started
+//! server (cold cache) — one client, many clients, and an interactive
+//! plane sweep.
 
 use anyhow::{Context, bail};
 use serde::Serialize;
 use solidtex::loadtest::report::{KindSummary, Report};
 use solidtex::loadtest::workload::{Kind, SweepPlane};
 use solidtex::loadtest::{self, LoadConfig};
-use solidtex::server::{ServeArgs, Server};
 use std::fmt::Write;
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// How the service is loaded.
@@ -55,45 +57,93 @@ impl Drop for TempDir {
     }
 }
 
-/// Runs the three load tests against a fresh in-process server.
+/// A `solidtex serve` child process, killed when dropped. A process of its
+/// own gives the server its own resident memory to measure, untouched by
+/// the benchmark's earlier allocations.
+struct ServerProcess {
+    child: Child,
+    base: String,
+}
+
+impl ServerProcess {
+    fn start(data_dir: &Path, o: &LoadOptions) -> anyhow::Result<ServerProcess> {
+        let mut child = Command::new(std::env::current_exe()?)
+            .arg("serve")
+            .env("SOLIDTEX_ADDR", "127.0.0.1:0")
+            .env("SOLIDTEX_DATA_DIR", data_dir)
+            .env("SOLIDTEX_DEFAULT_TEXTURE", "false")
+            .env("SOLIDTEX_CACHE_BYTES", o.cache_bytes.to_string())
+            .env("SOLIDTEX_BRICK_SIZE", o.brick_size.to_string())
+            .env("SOLIDTEX_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .context("starting `solidtex serve`")?;
+        let out = child.stdout.take();
+        // Owned from here on, so a failure below still kills the child.
+        let mut server = ServerProcess {
+            child,
+            base: String::new(),
+        };
+        let mut line = String::new();
+        BufReader::new(out.context("server stdout")?).read_line(&mut line)?;
+        match line.trim().strip_prefix("solidtex listening on ") {
+            Some(base) => {
+                server.base = base.to_string();
+                Ok(server)
+            }
+            None => bail!("the server did not start: {line:?}"),
+        }
+    }
+}
+
+impl Drop for ServerProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs the three load tests, each against a fresh server process (cold
+/// cache, the texture loaded from the data directory).
 pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<Vec<LoadRow>> {
     let dir = TempDir(std::env::temp_dir().join(format!("solidtex-bench-{}", std::process::id())));
+    std::fs::create_dir_all(&dir.0)?;
     let png = std::fs::read(exemplar).with_context(|| format!("reading {}", exemplar.display()))?;
-    let mut args = ServeArgs::for_data_dir(&dir.0);
-    args.cache_bytes = o.cache_bytes;
-    args.brick_size = o.brick_size;
     let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(args.http_threads as usize)
+        .worker_threads(2)
         .enable_all()
         .build()?;
-    runtime.block_on(async move {
-        let server = Server::bind(&args).await?;
-        let state = server.state();
-        let base = format!("http://{}", server.local_addr()?);
-        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-        let serving = tokio::spawn(server.run(async move {
-            let _ = stopped.await;
-        }));
-        let id = upload(&base, png, levels).await?;
-        let mut rows = Vec::new();
-        let runs: [(String, usize, Option<SweepPlane>, Option<&'static str>); 3] = [
-            (format!("1 client, mixed, lod {}", o.lod), 1, None, None),
-            (
-                format!("{} clients, mixed, lod {}", o.clients, o.lod),
-                o.clients,
-                None,
-                Some("p99 ≤ 3 s; no errors but 503; RSS ≤ cache + 256 MiB"),
-            ),
-            (
-                format!("sweep, axis {}², lod {}", o.side, o.sweep_lod),
-                1,
-                Some(SweepPlane::Axis),
-                Some("≥ 20 cuts/s at 256², lod 0"),
-            ),
-        ];
-        for (i, (name, clients, sweep, target)) in runs.into_iter().enumerate() {
-            // Every run starts cold so runs don't feed each other's cache.
-            state.registry.cache().clear();
+    let runs: [(String, usize, Option<SweepPlane>, Option<&'static str>); 3] = [
+        (
+            format!("1 client, mixed, {}², lod {}", o.side, o.lod),
+            1,
+            None,
+            None,
+        ),
+        (
+            format!("{} clients, mixed, {}², lod {}", o.clients, o.side, o.lod),
+            o.clients,
+            None,
+            Some("p99 ≤ 3 s; no errors but 503; RSS ≤ cache + 256 MiB"),
+        ),
+        (
+            format!("sweep, axis {}², lod {}", o.side, o.sweep_lod),
+            1,
+            Some(SweepPlane::Axis),
+            Some("≥ 20 cuts/s at 256², lod 0"),
+        ),
+    ];
+    let mut rows = Vec::new();
+    let mut id = None;
+    for (i, (name, clients, sweep, target)) in runs.into_iter().enumerate() {
+        let server = ServerProcess::start(&dir.0, o)?;
+        let base = server.base.clone();
+        let report = runtime.block_on(async {
+            let id = match &id {
+                Some(id) => id,
+                None => id.insert(upload(&base, png.clone(), levels).await?),
+            };
             let cfg = LoadConfig {
                 concurrency: clients,
                 duration: o.duration,
@@ -104,28 +154,27 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
                 timeout: Duration::from_secs(600),
                 ..LoadConfig::new(base.clone(), id.clone())
             };
-            let report = loadtest::run(&cfg).await?;
-            rows.push(LoadRow {
-                name,
-                target,
-                report,
-                note: String::new(),
-            });
-        }
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
-        let single = rows[0].report.total.requests_per_s;
-        if single > 0.0 {
-            let many = rows[1].report.total.requests_per_s;
-            rows[1].note = format!(
-                "{:.0} % of 1-client throughput × {cores} cores (target ≥ 85 %)",
-                100.0 * many / (single * cores)
-            );
-        }
-        rows[2].note = format!("{:.2} cuts/s", rows[2].report.total.requests_per_s);
-        let _ = stop.send(());
-        serving.await??;
-        Ok(rows)
-    })
+            loadtest::run(&cfg).await
+        })?;
+        drop(server);
+        rows.push(LoadRow {
+            name,
+            target,
+            report,
+            note: String::new(),
+        });
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
+    let single = rows[0].report.total.requests_per_s;
+    if single > 0.0 {
+        let many = rows[1].report.total.requests_per_s;
+        rows[1].note = format!(
+            "{:.0} % of 1-client throughput × {cores} cores (target ≥ 85 %)",
+            100.0 * many / (single * cores)
+        );
+    }
+    rows[2].note = format!("{:.2} cuts/s", rows[2].report.total.requests_per_s);
+    Ok(rows)
 }
 
 async fn upload(base: &str, png: Vec<u8>, levels: u32) -> anyhow::Result<String> {

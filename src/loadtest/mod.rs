@@ -346,6 +346,7 @@ pub async fn run(cfg: &LoadConfig) -> anyhow::Result<Report> {
         workload: cfg.describe(),
         concurrency: cfg.concurrency,
         elapsed_s: elapsed,
+        cuts_per_s: cfg.sweep.map(|_| total.requests_per_s),
         kinds,
         total,
         server,

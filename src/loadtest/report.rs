@@ -178,6 +178,8 @@ pub struct Report {
     pub kinds: Vec<KindSummary>,
     /// All kinds together.
     pub total: KindSummary,
+    /// Planes per second over all clients, for a sweep.
+    pub cuts_per_s: Option<f64>,
     /// The server's metrics over the run, when it exposes them.
     pub server: Option<ServerDelta>,
 }
@@ -231,6 +233,9 @@ impl Report {
                 s.other,
                 s.transport_errors
             );
+        }
+        if let Some(c) = self.cuts_per_s {
+            let _ = writeln!(out, "sweep: {c:.2} cuts/s");
         }
         match &self.server {
             None => {
@@ -319,10 +324,12 @@ mod tests {
             elapsed_s: 2.0,
             kinds: per,
             total,
+            cuts_per_s: Some(51.5),
             server: None,
         };
         let table = report.table();
         assert!(table.lines().any(|l| l.starts_with("all ")), "{table}");
         assert!(table.contains("server metrics: unavailable"));
+        assert!(table.contains("sweep: 51.50 cuts/s"));
     }
 }
