@@ -42,6 +42,53 @@ enum Command {
     Eval(EvalArgs),
     /// Run the HTTP voxel service.
     Serve(solidtex::server::ServeArgs),
+    /// Measure a running server under concurrent voxel requests.
+    Loadtest(LoadtestArgs),
+}
+
+#[derive(Args)]
+struct LoadtestArgs {
+    /// The server's base URL.
+    #[arg(long, default_value = "http://127.0.0.1:8080")]
+    url: String,
+    /// Texture id.
+    #[arg(long, default_value = "default")]
+    texture: String,
+    /// Concurrent closed-loop clients.
+    #[arg(long, default_value_t = 8)]
+    concurrency: usize,
+    /// How long new requests are sent (e.g. 30s, 2m); requests in flight
+    /// at the end are waited for.
+    #[arg(long, default_value = "30s", value_parser = solidtex::loadtest::parse_duration)]
+    duration: std::time::Duration,
+    /// Request kinds, drawn uniformly: slices, cuts, bricks.
+    #[arg(long, value_delimiter = ',', default_value = "slices,cuts,bricks")]
+    mix: Vec<solidtex::loadtest::workload::Kind>,
+    /// Seed of the request sequences.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Level of detail of every request (each step is 8× less work).
+    #[arg(long, default_value_t = 0)]
+    lod: u32,
+    /// Side of slices and cuts, pixels.
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Fraction of requests inside a small shared box (overlapping work).
+    #[arg(long, default_value_t = 0.5)]
+    overlap: f64,
+    /// Fraction of requests revalidating an earlier answer (304).
+    #[arg(long, default_value_t = 0.05)]
+    revalidate: f64,
+    /// Replay interactive cutting instead: each client sweeps a plane one
+    /// voxel per request (`axis` slices or `oblique` cuts); reports cuts/s.
+    #[arg(long, num_args = 0..=1, default_missing_value = "axis")]
+    sweep: Option<solidtex::loadtest::workload::SweepPlane>,
+    /// Give up on one request after this long.
+    #[arg(long, default_value = "120s", value_parser = solidtex::loadtest::parse_duration)]
+    timeout: std::time::Duration,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -68,6 +115,30 @@ struct BenchArgs {
     /// Small sizes only (seconds), for CI.
     #[arg(long)]
     quick: bool,
+    /// Skip a cold request whose plan predicts more seconds than this.
+    #[arg(long, default_value_t = 120.0)]
+    max_seconds: f64,
+    /// Also load a server in this process with `loadtest` runs.
+    #[arg(long)]
+    load: bool,
+    /// Level of detail of the mixed load runs.
+    #[arg(long, default_value_t = 0)]
+    load_lod: u32,
+    /// Level of detail of the sweep load run.
+    #[arg(long, default_value_t = 0)]
+    sweep_lod: u32,
+    /// Side of the slices, cuts and sweep planes of the load runs.
+    #[arg(long, default_value_t = 256)]
+    load_size: u32,
+    /// Clients of the concurrent load run.
+    #[arg(long, default_value_t = 32)]
+    load_clients: usize,
+    /// Duration of each load run.
+    #[arg(long, default_value = "60s", value_parser = solidtex::loadtest::parse_duration)]
+    load_duration: std::time::Duration,
+    /// Write the results as a Markdown page (e.g. BENCHMARKS.md).
+    #[arg(long)]
+    markdown: Option<PathBuf>,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -278,6 +349,28 @@ fn write_png(path: &Path, w: u32, h: u32, rgb: Vec<u8>) -> anyhow::Result<()> {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Serve(a) => return solidtex::server::serve_main(a),
+        Command::Loadtest(a) => {
+            let cfg = solidtex::loadtest::LoadConfig {
+                url: a.url,
+                texture: a.texture,
+                concurrency: a.concurrency,
+                duration: a.duration,
+                mix: a.mix,
+                seed: a.seed,
+                lod: a.lod,
+                side: a.size,
+                overlap: a.overlap.clamp(0.0, 1.0),
+                revalidate: a.revalidate.clamp(0.0, 1.0),
+                sweep: a.sweep,
+                timeout: a.timeout,
+            };
+            let report = solidtex::loadtest::run_blocking(&cfg)?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{}", report.table());
+            }
+        }
         Command::Precompute(a) => {
             let xy = Exemplar::open(&a.exemplar)?;
             let set = match (&a.yz, &a.zx) {
@@ -318,14 +411,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&all)?);
             }
         }
-        Command::Bench(a) => {
-            let rows = crate::bench::run(&a.exemplars, a.quick)?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&rows)?);
-            } else {
-                crate::bench::print(&rows);
-            }
-        }
+        Command::Bench(a) => bench(a)?,
         Command::Region(a) => {
             let tex = load_source(&a.src)?;
             let region = Region {
@@ -372,6 +458,43 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 write_png(&a.output.join(name), s, s, img)?;
             }
         }
+    }
+    Ok(())
+}
+
+fn bench(a: BenchArgs) -> anyhow::Result<()> {
+    use crate::bench;
+    let quick = a.quick;
+    let opts = bench::Options {
+        exemplars: a.exemplars,
+        quick,
+        max_seconds: a.max_seconds,
+        load: a.load.then_some(bench::service::LoadOptions {
+            // Quick mode (2 levels) at lod 1 synthesizes the coarse level only.
+            lod: if quick { 1 } else { a.load_lod },
+            sweep_lod: if quick { 1 } else { a.sweep_lod },
+            // Quick mode shrinks the load too, so CI stays in seconds.
+            side: if quick { 32 } else { a.load_size },
+            clients: a.load_clients,
+            duration: a.load_duration,
+            cache_bytes: 512 << 20,
+            brick_size: if quick { 16 } else { 64 },
+        }),
+    };
+    let results = bench::run(&opts)?;
+    if let Some(path) = &a.markdown {
+        let command = std::iter::once("solidtex".to_string())
+            .chain(std::env::args().skip(1))
+            .collect::<Vec<_>>()
+            .join(" ");
+        let page = bench::markdown::page(&results, &bench::machine::current(), &command);
+        write_atomically(path, page.as_bytes())?;
+        eprintln!("wrote {}", path.display());
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+    } else {
+        bench::print(&results);
     }
     Ok(())
 }

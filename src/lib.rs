@@ -17,6 +17,7 @@ pub mod candidates;
 pub mod error;
 pub mod eval;
 pub mod exemplar;
+pub mod loadtest;
 pub mod params;
 pub mod server;
 pub mod stack;

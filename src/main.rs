@@ -1,10 +1,15 @@
 //! The `solidtex` command line: precompute candidates, inspect them,
 //! synthesize regions, slices and volumes, plan dependency sets, evaluate
-//! quality and run benchmarks.
+//! quality, run benchmarks and load-test a server.
 
 mod bench;
 mod cli;
 mod evalcmd;
+mod peak_alloc;
+
+/// Counts heap bytes for `solidtex bench` (off unless the bench starts it).
+#[global_allocator]
+static ALLOC: peak_alloc::PeakAlloc = peak_alloc::PeakAlloc;
 
 use clap::Parser;
 

@@ -48,6 +48,7 @@ impl Jobs {
             return Err(ApiError::overloaded("synthesis"));
         };
         let queued = GaugeGuard::new(&self.metrics.jobs_queued);
+        let admitted_at = std::time::Instant::now();
         let running_slot = self
             .run
             .clone()
@@ -55,6 +56,9 @@ impl Jobs {
             .await
             .map_err(|_| ApiError::internal("job queue closed"))?;
         drop(queued);
+        self.metrics
+            .job_wait
+            .observe(admitted_at.elapsed().as_secs_f64());
         let metrics = self.metrics.clone();
         let handle = tokio::task::spawn_blocking(move || {
             let _slots = (admitted, running_slot);
@@ -154,6 +158,15 @@ mod tests {
         }
         assert_eq!(j.in_flight(), 0);
         j.run(|| ()).await.unwrap();
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn jobs_call_the_engine_from_outside_the_rayon_pool() {
+        // Outside the pool the engine waits for a tile a concurrent request
+        // is computing instead of computing it again.
+        let j = jobs(2, 2);
+        let in_pool = j.run(|| rayon::current_thread_index().is_some()).await;
+        assert!(!in_pool.unwrap());
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -3,8 +3,8 @@
 //! Each server owns its registry (no process-global state), so several
 //! servers in one process — as in the tests — count separately. Request
 //! counters and latency histograms are labelled by route template (never
-//! by raw path, which would explode cardinality); tile-cache counters are
-//! read from the engine's [`TileCache`] at scrape time.
+//! by raw path, which would explode cardinality); tile-cache counters and
+//! the process's resident memory and threads are read at scrape time.
 
 use crate::{SynthStats, TileCache};
 use prometheus_client::collector::Collector;
@@ -84,6 +84,8 @@ pub struct Metrics {
     pub jobs_running: Gauge,
     /// Requests turned away because the queue was full.
     pub jobs_rejected: Counter,
+    /// Time admitted jobs waited for a running slot, seconds.
+    pub job_wait: Histogram,
     /// Precomputations finished, by outcome.
     pub precomputes: Family<OutcomeLabels, Counter>,
     /// Precomputation duration, seconds.
@@ -157,6 +159,13 @@ impl Metrics {
             "Requests answered 503 because the queue was full",
             jobs_rejected.clone(),
         );
+        let job_wait = latency_histogram();
+        registry.register_with_unit(
+            "job_wait",
+            "Time admitted synthesis jobs waited for a running slot",
+            prometheus_client::registry::Unit::Seconds,
+            job_wait.clone(),
+        );
         let precomputes = Family::<OutcomeLabels, Counter>::default();
         registry.register(
             "precomputes",
@@ -185,6 +194,7 @@ impl Metrics {
         let textures = Family::<StatusLabels, Gauge>::default();
         registry.register("textures", "Textures by status", textures.clone());
         registry.register_collector(Box::new(CacheCollector { cache }));
+        registry.register_collector(Box::new(ProcessCollector));
         Metrics {
             registry,
             requests,
@@ -196,6 +206,7 @@ impl Metrics {
             jobs_queued,
             jobs_running,
             jobs_rejected,
+            job_wait,
             precomputes,
             precompute_seconds,
             precomputes_pending,
@@ -313,6 +324,40 @@ impl Collector for CacheCollector {
             ),
         ] {
             let g = ConstGauge::new(v);
+            let m = encoder.encode_descriptor(name, help, None, g.metric_type())?;
+            g.encode(m)?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads the process's resident memory and threads at scrape time.
+#[derive(Debug)]
+struct ProcessCollector;
+
+impl Collector for ProcessCollector {
+    fn encode(&self, mut encoder: DescriptorEncoder) -> Result<(), std::fmt::Error> {
+        let Some(s) = super::process::current() else {
+            return Ok(());
+        };
+        for (name, help, v) in [
+            (
+                "process_resident_bytes",
+                "Resident memory of the server process",
+                s.resident_bytes,
+            ),
+            (
+                "process_peak_resident_bytes",
+                "Peak resident memory of the server process since it started",
+                s.peak_resident_bytes,
+            ),
+            (
+                "process_threads",
+                "Threads of the server process (HTTP, blocking jobs, rayon pools)",
+                s.threads,
+            ),
+        ] {
+            let g = ConstGauge::new(v as i64);
             let m = encoder.encode_descriptor(name, help, None, g.metric_type())?;
             g.encode(m)?;
         }

@@ -11,7 +11,8 @@
 //! - [`registry`]: textures, their status and background precomputes.
 //! - [`jobs`]: the bounded synthesis queue (backpressure → 503).
 //! - [`routes`]: the router, handlers and middleware.
-//! - [`metrics`], [`error`], [`query`], [`png`]: the supporting pieces.
+//! - [`metrics`], [`process`], [`error`], [`query`], [`png`]: the supporting
+//!   pieces.
 //!
 //! [`Server::bind`] loads the data directory before it accepts anything, so
 //! ready textures are served from the first request on; [`Server::run`]
@@ -23,6 +24,7 @@ pub mod error;
 pub mod jobs;
 pub mod metrics;
 pub mod png;
+pub mod process;
 pub mod query;
 pub mod registry;
 pub mod routes;

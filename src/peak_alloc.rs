@@ -1,0 +1,89 @@
+//! A global allocator that counts heap bytes in use and their high-water
+//! mark, so `solidtex bench` can report the peak memory of one request.
+//! Counting is off until [`start`] is called, leaving every other command
+//! (the server included) with nothing but one relaxed load per call.
+//!
+//! This is the binary's only unsafe code: `GlobalAlloc` is an unsafe trait,
+//! and every method forwards to the system allocator unchanged.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicIsize, Ordering};
+
+/// The system allocator plus byte counters.
+pub struct PeakAlloc;
+
+static ENABLED: AtomicBool = AtomicBool::new(false);
+/// Bytes allocated minus freed since counting started (frees of blocks
+/// allocated earlier can make it negative).
+static CURRENT: AtomicIsize = AtomicIsize::new(0);
+static PEAK: AtomicIsize = AtomicIsize::new(0);
+
+fn grow(bytes: usize) {
+    if ENABLED.load(Ordering::Relaxed) {
+        let now = CURRENT.fetch_add(bytes as isize, Ordering::Relaxed) + bytes as isize;
+        PEAK.fetch_max(now, Ordering::Relaxed);
+    }
+}
+
+fn shrink(bytes: usize) {
+    if ENABLED.load(Ordering::Relaxed) {
+        CURRENT.fetch_sub(bytes as isize, Ordering::Relaxed);
+    }
+}
+
+// SAFETY: every call is forwarded to `System` with the caller's arguments;
+// the counters never touch the memory.
+unsafe impl GlobalAlloc for PeakAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        // SAFETY: same contract as ours.
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            grow(layout.size());
+        }
+        p
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        // SAFETY: same contract as ours.
+        let p = unsafe { System.alloc_zeroed(layout) };
+        if !p.is_null() {
+            grow(layout.size());
+        }
+        p
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as ours.
+        unsafe { System.dealloc(ptr, layout) };
+        shrink(layout.size());
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        // SAFETY: same contract as ours.
+        let p = unsafe { System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            shrink(layout.size());
+            grow(new_size);
+        }
+        p
+    }
+}
+
+/// Starts counting (idempotent).
+pub fn start() {
+    ENABLED.store(true, Ordering::Relaxed);
+}
+
+/// Forgets the high-water mark and returns the bytes in use now: the
+/// baseline of [`peak_above`].
+pub fn reset() -> isize {
+    let now = CURRENT.load(Ordering::Relaxed);
+    PEAK.store(now, Ordering::Relaxed);
+    now
+}
+
+/// The most bytes in use at once since the last [`reset`], above its
+/// `baseline` (0 when counting is off).
+pub fn peak_above(baseline: isize) -> u64 {
+    (PEAK.load(Ordering::Relaxed) - baseline).max(0) as u64
+}

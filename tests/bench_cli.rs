@@ -1,0 +1,89 @@
+//! `solidtex bench --quick` end to end, as CI runs it: the engine suite,
+//! both schemes' dependency sets, a short load test, and the Markdown page.
+
+use serde_json::Value;
+
+#[test]
+fn quick_bench_measures_everything_and_writes_the_page() {
+    let dir = tempfile::tempdir().unwrap();
+    let page = dir.path().join("BENCHMARKS.md");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
+        .args(["bench", "--quick", "--json", "--load"])
+        .args(["--load-duration", "1s", "--load-clients", "4"])
+        .args(["--exemplars", "../shared/exemplars", "--markdown"])
+        .arg(&page)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    let row = |name: &str| {
+        rows.iter()
+            .find(|r| r["name"].as_str().unwrap().starts_with(name))
+            .unwrap_or_else(|| panic!("no row {name}: {v}"))
+    };
+    for name in [
+        "precompute 64×64",
+        "single voxel, cold",
+        "brick 8³ cold",
+        "brick 8³ warm",
+        "full volume 16³ cold",
+        "axis slice 32² cold",
+        "axis slice 32² warm",
+        "oblique cut 32² cold",
+        "oblique cut 32² warm",
+    ] {
+        let r = row(name);
+        let s = r["seconds"].as_f64().unwrap_or_else(|| panic!("{r}"));
+        assert!(s > 0.0, "{r}");
+    }
+    // Cold synthesis allocates; a warm request is a cheap copy.
+    let cold = row("axis slice 32² cold")["peak_bytes"].as_u64().unwrap();
+    let warm = row("axis slice 32² warm")["peak_bytes"].as_u64().unwrap();
+    assert!(cold > 1 << 20 && warm < cold, "{cold} {warm}");
+    assert!(
+        row("axis slice 32² warm")["seconds"].as_f64()
+            < row("axis slice 32² cold")["seconds"].as_f64()
+    );
+
+    // The dual grid's single-voxel chain is smaller than the standard one.
+    let plans = v["plans"].as_array().unwrap();
+    assert_eq!(plans.len(), 4);
+    let chain = |scheme: &str| -> u64 {
+        plans
+            .iter()
+            .find(|p| p["scheme"] == scheme && p["request"].as_str().unwrap().contains("single"))
+            .unwrap()["voxels_per_level"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_u64().unwrap())
+            .sum()
+    };
+    assert!(chain("dual-grid") < chain("standard"));
+
+    let load = v["load"].as_array().unwrap();
+    assert_eq!(load.len(), 3);
+    for l in load {
+        let t = &l["report"]["total"];
+        assert!(t["requests"].as_u64().unwrap() >= 1, "{l}");
+        assert_eq!(t["statuses"]["other"], 0, "{l}");
+        assert_eq!(t["statuses"]["transport_errors"], 0, "{l}");
+    }
+
+    let md = std::fs::read_to_string(&page).unwrap();
+    for needle in [
+        "# Benchmarks",
+        "| machine |",
+        "| command | `solidtex bench --quick",
+        "Dong 2008",
+        "## Service under load",
+        "dual-grid",
+    ] {
+        assert!(md.contains(needle), "page lacks {needle:?}:\n{md}");
+    }
+}
