@@ -24,12 +24,14 @@ pub struct ServeArgs {
     pub cache_bytes: u64,
 
     /// Synthesis jobs (slices, cuts, regions, bricks) running at once.
-    #[arg(long, env = "SOLIDTEX_MAX_JOBS", default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    /// Each job already uses every core through rayon, so more jobs than
+    /// a couple only add memory and latency.
+    #[arg(long, env = "SOLIDTEX_MAX_JOBS", default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub max_jobs: u32,
 
     /// Synthesis jobs allowed to wait for a running slot; beyond that a
     /// request is answered 503 with `Retry-After`.
-    #[arg(long, env = "SOLIDTEX_QUEUE", default_value_t = 64, value_parser = clap::value_parser!(u32).range(0..=100_000))]
+    #[arg(long, env = "SOLIDTEX_QUEUE", default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=100_000))]
     pub queue: u32,
 
     /// Precomputations running at once.
