@@ -98,7 +98,8 @@ pub struct SynthStats {
     pub corrections_per_level: Vec<u64>,
     /// Tiles synthesized by this request.
     pub tiles_computed: u64,
-    /// Tiles served from the cache (or computed by a concurrent request).
+    /// Tiles served from the cache (or computed by a concurrent request),
+    /// counting those of which the cache held some of the voxels needed.
     pub tiles_from_cache: u64,
 }
 

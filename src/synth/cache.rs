@@ -106,6 +106,7 @@ pub enum Claim {
 /// error or panic) releases anyone waiting, who then compute it themselves.
 pub struct Ticket {
     key: TileKey,
+    partial: Option<Tile>,
     flight: Arc<Flight>,
     cache: Arc<TileCache>,
     published: bool,
@@ -115,6 +116,12 @@ impl Ticket {
     /// The tile to compute.
     pub fn key(&self) -> TileKey {
         self.key
+    }
+
+    /// What the cache already knows of the tile: only the voxels it lacks
+    /// need computing.
+    pub fn partial(&self) -> Option<&Tile> {
+        self.partial.as_ref()
     }
 }
 
@@ -168,11 +175,14 @@ impl TileCache {
     /// some of them and nobody is computing it.
     pub fn claim(self: &Arc<Self>, key: TileKey, want: u64) -> Claim {
         let mut g = self.lock();
-        if let Some(t) = g.lru.get(&key).filter(|t| t.covers(want)) {
-            let t = t.clone();
-            g.stats.hits += 1;
-            return Claim::Ready(t);
-        }
+        let partial = match g.lru.get(&key) {
+            Some(t) if t.covers(want) => {
+                let t = t.clone();
+                g.stats.hits += 1;
+                return Claim::Ready(t);
+            }
+            other => other.cloned(),
+        };
         if let Some(f) = g.flights.get(&key) {
             let flight = f.clone();
             g.stats.coalesced += 1;
@@ -183,6 +193,7 @@ impl TileCache {
         g.flights.insert(key, flight.clone());
         Claim::Mine(Ticket {
             key,
+            partial,
             flight,
             cache: self.clone(),
             published: false,

@@ -255,9 +255,16 @@ impl Engine {
                 Claim::Wait(w) => theirs.push(w),
             }
         }
+        // Voxels the cache already holds are not computed again.
         let mut todo: Vec<([i64; 3], u64)> = mine
             .iter()
-            .map(|t| (t.key().cell, wanted[&t.key().cell]))
+            .map(|t| {
+                let known = t.partial().map_or(0, |p| p.mask);
+                if known != 0 {
+                    acc.cached.fetch_add(1, Ordering::Relaxed);
+                }
+                (t.key().cell, wanted[&t.key().cell] & !known)
+            })
             .collect();
         todo.extend(&unclaimed);
         if !todo.is_empty() {
@@ -266,7 +273,10 @@ impl Engine {
                 .fetch_add(computed.len() as u64, Ordering::Relaxed);
             for ticket in mine {
                 let c = ticket.key().cell;
-                let t = computed.remove(&c).expect("computed");
+                let mut t = computed.remove(&c).expect("computed");
+                if let Some(p) = ticket.partial() {
+                    t = Arc::new(p.merged(&t));
+                }
                 self.cache.publish(ticket, t.clone());
                 out.insert(c, t);
             }
