@@ -838,6 +838,7 @@ async fn request_budget_is_enforced() {
     let dir = tempfile::tempdir().unwrap();
     let mut args = test_args(dir.path());
     args.max_request_voxels = 4096;
+    args.chunk_size = 16; // volume chunks must fit the budget too
     let s = TestServer::start(args).await;
     let c = client();
     let id = ready_texture(&c, &s, 10).await;
