@@ -344,7 +344,7 @@ impl Engine {
         let triples = if acc.dry {
             triples
         } else {
-            let mut work = Work::new(triples);
+            let mut work = Work::new(&self.cands, k, triples);
             let corrector = Corrector::new(&self.cands, k);
             let mut step_start: Option<(usize, Work)> = None;
             for (si, voxels) in &chain.subpasses {
@@ -354,7 +354,7 @@ impl Engine {
                 let offset = steps[*si].offset;
                 let start = step_start.as_ref().map(|s| &s.1);
                 let w = &work;
-                let new: Vec<(usize, [u32; 3])> = voxels
+                let new: Vec<(usize, [u32; 3], [f32; 3])> = voxels
                     .par_iter()
                     .map_init(Scratch::default, |s, &p| {
                         let barrier = barrier_cell.map(|m| {
@@ -365,11 +365,12 @@ impl Engine {
                             (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p, s),
                             _ => corrector.correct(w, None, p, s),
                         };
-                        (w.triples.index(p), t)
+                        (w.triples.index(p), t, colour(&self.cands, k, t))
                     })
                     .collect();
-                for (i, t) in new {
+                for (i, t, c) in new {
                     work.triples.data[i] = t;
+                    work.colours.data[i] = c;
                 }
             }
             work.triples
