@@ -60,21 +60,15 @@ impl Server {
     /// Opens the data directory, brings its textures back, registers the
     /// bundled exemplar (when configured) and binds the listener.
     pub async fn bind(args: &ServeArgs) -> anyhow::Result<Server> {
-        let brick_voxels = u64::from(args.brick_size).pow(3);
-        if brick_voxels > args.max_request_voxels {
-            anyhow::bail!(
-                "bricks of edge {} ({brick_voxels} voxels) exceed the request budget of {} voxels",
-                args.brick_size,
-                args.max_request_voxels
-            );
-        }
-        let chunk_voxels = u64::from(args.chunk_size).pow(3);
-        if chunk_voxels > args.max_request_voxels {
-            anyhow::bail!(
-                "chunks of edge {} ({chunk_voxels} voxels) exceed the request budget of {} voxels",
-                args.chunk_size,
-                args.max_request_voxels
-            );
+        // Fixed-size answers must fit the per-request work budget.
+        for (what, edge) in [("bricks", args.brick_size), ("chunks", args.chunk_size)] {
+            let voxels = u64::from(edge).pow(3);
+            if voxels > args.max_request_voxels {
+                anyhow::bail!(
+                    "{what} of edge {edge} ({voxels} voxels) exceed the request budget of {} voxels",
+                    args.max_request_voxels
+                );
+            }
         }
         let data_dir = args.resolved_data_dir();
         let store = {
