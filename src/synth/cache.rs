@@ -265,3 +265,52 @@ impl Drop for Ticket {
         self.flight.cv.notify_all();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::grid::Box3;
+
+    fn tile(mask: u64, value: u32) -> Tile {
+        let mut grid = Grid::new(Box3::new([0; 3], [4; 3]));
+        for (i, v) in grid.data.iter_mut().enumerate() {
+            if mask >> i & 1 == 1 {
+                *v = [value, i as u32, 0];
+            }
+        }
+        Arc::new(TileData { grid, mask })
+    }
+
+    const KEY: TileKey = TileKey {
+        texture: 1,
+        level: 0,
+        step: 0,
+        cell: [0, 0, 0],
+    };
+
+    #[test]
+    fn a_partial_tile_lends_its_voxels_and_grows() {
+        let cache = Arc::new(TileCache::new(1 << 20));
+        let Claim::Mine(ticket) = cache.claim(KEY, 0b0011) else {
+            panic!("an empty cache hands out the claim");
+        };
+        assert!(ticket.partial().is_none());
+        cache.publish(ticket, tile(0b0011, 7));
+        // Voxels it holds: a hit.
+        assert!(matches!(cache.claim(KEY, 0b0001), Claim::Ready(_)));
+        // One more voxel: a claim that carries what is known.
+        let Claim::Mine(ticket) = cache.claim(KEY, 0b0110) else {
+            panic!("a missing voxel is claimed");
+        };
+        assert_eq!(ticket.partial().map(|t| t.mask), Some(0b0011));
+        cache.publish(ticket, tile(0b0100, 9));
+        let Claim::Ready(t) = cache.claim(KEY, 0b0111) else {
+            panic!("the merged tile covers both requests");
+        };
+        assert_eq!(t.mask, 0b0111);
+        assert_eq!(t.grid.data[0], [7, 0, 0]);
+        assert_eq!(t.grid.data[1], [7, 1, 0]);
+        assert_eq!(t.grid.data[2], [9, 2, 0]);
+        assert_eq!(cache.stats().entries, 1);
+    }
+}
