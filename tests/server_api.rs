@@ -866,4 +866,11 @@ async fn request_budget_is_enforced() {
     args.max_request_voxels = 1000;
     let err = solidtex::server::Server::bind(&args).await.err().unwrap();
     assert!(err.to_string().contains("budget"), "{err}");
+    // So are volume chunks larger than the budget.
+    let mut args = test_args(dir.path());
+    args.max_request_voxels = 4096;
+    args.brick_size = 16;
+    args.chunk_size = 32;
+    let err = solidtex::server::Server::bind(&args).await.err().unwrap();
+    assert!(err.to_string().contains("chunks"), "{err}");
 }

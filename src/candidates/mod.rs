@@ -178,11 +178,7 @@ impl Level {
     /// [`Level::similar_vectors`] (the first [`SIMILAR_DIMS`] dimensions).
     #[inline]
     pub fn quantise_appearance(&self, p: usize, v: &[f32]) -> [i16; SIMILAR_DIMS] {
-        let mut q = [0i16; SIMILAR_DIMS];
-        for (o, &x) in q.iter_mut().zip(v) {
-            *o = quantise_wide(x, self.similar_scale[p]);
-        }
-        q
+        quantise_wide_vector(v, self.similar_scale[p])
     }
 
     /// Plane `p`'s share of the joint projection of pixel `c`.
@@ -237,6 +233,16 @@ pub const SIMILAR_DIMS: usize = 8;
 /// Largest magnitude of a [`quantise_wide`] value: squared differences of
 /// [`SIMILAR_DIMS`] such values fit an `i32` sum.
 const WIDE_MAX: f32 = 4095.0;
+
+/// The first [`SIMILAR_DIMS`] coordinates of `v`, [`quantise_wide`]d
+/// (missing ones are zero).
+fn quantise_wide_vector(v: &[f32], scale: f32) -> [i16; SIMILAR_DIMS] {
+    let mut q = [0i16; SIMILAR_DIMS];
+    for (o, &x) in q.iter_mut().zip(v) {
+        *o = quantise_wide(x, scale);
+    }
+    q
+}
 
 /// Quantises an appearance coordinate to a 13-bit signed integer.
 #[inline]
@@ -658,11 +664,10 @@ fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) 
                 s.similar[p]
                     .iter()
                     .map(|&c| {
-                        let mut q = [0i16; SIMILAR_DIMS];
-                        for (o, &x) in q.iter_mut().zip(&appearance[p].vector(c as usize)[..d]) {
-                            *o = quantise_wide(x, similar_scale[p]);
-                        }
-                        q
+                        quantise_wide_vector(
+                            &appearance[p].vector(c as usize)[..d],
+                            similar_scale[p],
+                        )
                     })
                     .collect()
             });
