@@ -136,6 +136,10 @@ struct BenchArgs {
     /// Duration of each load run.
     #[arg(long, default_value = "60s", value_parser = solidtex::loadtest::parse_duration)]
     load_duration: std::time::Duration,
+    /// The loaded server's `--max-queue-wait`, seconds: how long a job may
+    /// wait for a slot before it is answered 503.
+    #[arg(long, default_value_t = 1.0)]
+    load_max_wait: f64,
     /// Write the results as a Markdown page (e.g. BENCHMARKS.md).
     #[arg(long)]
     markdown: Option<PathBuf>,
@@ -151,6 +155,10 @@ struct PlanArgs {
     /// Slice side (an axis-z slice at z = 0).
     #[arg(long, default_value_t = 256)]
     slice: u32,
+    /// Also count the slice's exact chains for these neighbourhood sides
+    /// (geometry only, no precomputation; Zhang et al. measured N = 9).
+    #[arg(long = "neighbourhood", value_delimiter = ',')]
+    neighbourhoods: Vec<u32>,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -479,6 +487,7 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
             duration: a.load_duration,
             cache_bytes: 512 << 20,
             brick_size: if quick { 16 } else { 64 },
+            max_queue_wait: a.load_max_wait,
         }),
     };
     let results = bench::run(&opts)?;
@@ -601,6 +610,7 @@ fn heat(t: f32) -> [u8; 3] {
 
 fn plan(a: &PlanArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
+    let mut by_neighbourhood = Vec::new();
     let base = load_source(&a.src)?;
     let region = Region {
         origin: [0, 0, 0],
@@ -619,8 +629,30 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
             .map(|i| [i % a.slice as i64, i / a.slice as i64, 0])
             .collect();
         let exact = tex.dependency_chain(&plane, a.src.lod)?;
+        let mut other_n = Vec::new();
+        for &n in &a.neighbourhoods {
+            other_n.push((n, tex.dependency_chain_for(&plane, a.src.lod, n)?));
+        }
         rows.push((scheme, slice, chain, exact));
+        by_neighbourhood.push(other_n);
     }
+    // Per extra N: (N, standard totals, dual-grid totals), each total
+    // (voxels, corrections).
+    let sums = |v: &[(u64, u64)]| v.iter().fold((0, 0), |a, l| (a.0 + l.0, a.1 + l.1));
+    type Totals = (u64, u64);
+    let other: Vec<(u32, Totals, Totals)> = a
+        .neighbourhoods
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| {
+            (
+                n,
+                sums(&by_neighbourhood[0][i].1),
+                sums(&by_neighbourhood[1][i].1),
+            )
+        })
+        .collect();
+    let fewer = |s: u64, d: u64| 100.0 * (1.0 - d as f64 / s.max(1) as f64);
     if a.json {
         let v: Vec<serde_json::Value> = rows
             .iter()
@@ -635,7 +667,20 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
                 })
             })
             .collect();
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        let other: Vec<serde_json::Value> = other
+            .iter()
+            .map(|(n, s, d)| {
+                serde_json::json!({
+                    "neighbourhood": n,
+                    "standard": {"voxels": s.0, "corrections": s.1},
+                    "dual_grid": {"voxels": d.0, "corrections": d.1},
+                    "fewer_voxels_percent": fewer(s.0, d.0),
+                    "fewer_corrections_percent": fewer(s.1, d.1),
+                })
+            })
+            .collect();
+        let out = serde_json::json!({ "schemes": v, "other_neighbourhoods": other });
+        println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
     println!(
@@ -682,6 +727,17 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
         "dual grid needs {:.1} % fewer voxels (exact)",
         100.0 * (1.0 - exact_total(1) / exact_total(0))
     );
+    for (n, s, d) in &other {
+        println!(
+            "N = {n} (exact sets, geometry only): standard {}/{}, dual grid {}/{} voxels/corrections: {:.1} % fewer voxels, {:.1} % fewer corrections",
+            s.0,
+            s.1,
+            d.0,
+            d.1,
+            fewer(s.0, d.0),
+            fewer(s.1, d.1)
+        );
+    }
     println!("single-voxel exact dependency chain (history-window masks):");
     for (scheme, _, chain, _) in &rows {
         let v: u64 = chain.iter().map(|c| c.0).sum();

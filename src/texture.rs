@@ -251,13 +251,31 @@ impl Texture {
     /// Exact voxel-level dependency chain of a few voxels at `lod`:
     /// version-0 voxels and corrections per level, finest first.
     pub fn dependency_chain(&self, voxels: &[[i64; 3]], lod: u32) -> Result<Vec<(u64, u64)>> {
+        self.dependency_chain_for(voxels, lod, self.candidates().params().neighbourhood)
+    }
+
+    /// Like [`Texture::dependency_chain`], for neighbourhood side
+    /// `neighbourhood` instead of the analysed one: the chain is geometry
+    /// only, so this answers what a larger N (Zhang et al. use 9) would cost
+    /// without precomputing for it.
+    pub fn dependency_chain_for(
+        &self,
+        voxels: &[[i64; 3]],
+        lod: u32,
+        neighbourhood: u32,
+    ) -> Result<Vec<(u64, u64)>> {
         self.check_lod(lod)?;
+        if neighbourhood.is_multiple_of(2) || !(3..=9).contains(&neighbourhood) {
+            return Err(Error::InvalidRequest(
+                "neighbourhood must be odd, 3 to 9".into(),
+            ));
+        }
         if voxels.len() > 1 << 20 {
             return Err(Error::TooLarge("at most 2^20 voxels".into()));
         }
         Ok(self
             .engine
-            .exact_chain(voxels, lod)
+            .exact_chain(voxels, lod, neighbourhood as i64 / 2)
             .into_iter()
             .map(|l| (l.voxels, l.corrections))
             .collect())

@@ -33,6 +33,8 @@ pub struct LoadOptions {
     pub cache_bytes: u64,
     /// The server's brick edge.
     pub brick_size: u32,
+    /// The server's limit on a job's wait for a slot, seconds.
+    pub max_queue_wait: f64,
 }
 
 /// One load-test run.
@@ -74,6 +76,7 @@ impl ServerProcess {
             .env("SOLIDTEX_DEFAULT_TEXTURE", "false")
             .env("SOLIDTEX_CACHE_BYTES", o.cache_bytes.to_string())
             .env("SOLIDTEX_BRICK_SIZE", o.brick_size.to_string())
+            .env("SOLIDTEX_MAX_QUEUE_WAIT", o.max_queue_wait.to_string())
             .env("SOLIDTEX_LOG", "warn")
             .stdout(Stdio::piped())
             .stderr(Stdio::null())

@@ -34,6 +34,12 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_QUEUE", default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=100_000))]
     pub queue: u32,
 
+    /// Longest a synthesis job may wait for a running slot, in seconds; a
+    /// job predicted to wait longer is refused on arrival. Both get 503
+    /// with `Retry-After`, which bounds latency under overload.
+    #[arg(long, env = "SOLIDTEX_MAX_QUEUE_WAIT", default_value_t = 10.0, value_parser = parse_wait)]
+    pub max_queue_wait: f64,
+
     /// Precomputations running at once.
     #[arg(long, env = "SOLIDTEX_MAX_PRECOMPUTES", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub max_precomputes: u32,
@@ -113,6 +119,7 @@ impl ServeArgs {
             cache_bytes: 256 << 20,
             max_jobs: 4,
             queue: 64,
+            max_queue_wait: 600.0,
             max_precomputes: 1,
             precompute_queue: 16,
             worker_threads: 0,
@@ -164,7 +171,16 @@ pub fn parse_chunk_size(s: &str) -> Result<u32, String> {
 
 /// Parses a byte count with an optional binary suffix: `1048576`, `512K`,
 /// `64M`, `2G` (also `KiB`, `MB`…, case-insensitive).
-pub fn parse_bytes(s: &str) -> Result<u64, String> {
+pub fn parse_wait(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if (0.001..=86_400.0).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "`{s}` is not a number of seconds from 0.001 to 86400"
+        )),
+    }
+}
+
+fn parse_bytes(s: &str) -> Result<u64, String> {
     let t = s.trim();
     let split = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
     let (num, unit) = t.split_at(split);

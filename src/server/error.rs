@@ -83,7 +83,7 @@ impl ApiError {
         Self::new(
             StatusCode::SERVICE_UNAVAILABLE,
             "overloaded",
-            format!("{what} queue is full; retry later"),
+            format!("{what}; retry later"),
         )
         .retry_after(1)
     }

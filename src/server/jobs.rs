@@ -3,6 +3,13 @@
 //! once with 503 and `Retry-After` instead of piling up memory or timing
 //! out.
 //!
+//! Waiting is bounded in time too: a job that has not started within
+//! `max_wait` is answered 503, and one whose predicted wait (the jobs ahead
+//! of it times the recent mean job time, over the running slots) already
+//! exceeds `max_wait` is refused on arrival. Latency under overload thus
+//! stays near `max_wait` plus one job, and `Retry-After` carries the
+//! prediction.
+//!
 //! A job runs on a dedicated blocking thread, never on the async workers
 //! that answer HTTP; the engine parallelises inside it on the rayon pool.
 //! Calling the engine from outside the rayon pool matters: a tile that a
@@ -15,6 +22,8 @@
 use super::error::{ApiError, panic_message};
 use super::metrics::Metrics;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 use tokio::sync::Semaphore;
 
 /// The synthesis job queue.
@@ -22,48 +31,111 @@ use tokio::sync::Semaphore;
 pub struct Jobs {
     admit: Arc<Semaphore>,
     run: Arc<Semaphore>,
+    max_jobs: usize,
+    max_wait: Duration,
+    /// Exponential moving average of job run time, seconds (`f64` bits).
+    mean_run: Arc<AtomicU64>,
     metrics: Arc<Metrics>,
 }
 
+/// Weight of the newest job in the moving average of run times.
+const MEAN_WEIGHT: f64 = 0.2;
+
 impl Jobs {
-    /// `max_jobs` running at once, `queue` more waiting.
-    pub fn new(max_jobs: u32, queue: u32, metrics: Arc<Metrics>) -> Jobs {
+    /// `max_jobs` running at once, `queue` more waiting, none waiting
+    /// longer than `max_wait`.
+    pub fn new(max_jobs: u32, queue: u32, max_wait: Duration, metrics: Arc<Metrics>) -> Jobs {
         let max_jobs = max_jobs.max(1) as usize;
         Jobs {
             admit: Arc::new(Semaphore::new(max_jobs + queue as usize)),
             run: Arc::new(Semaphore::new(max_jobs)),
+            max_jobs,
+            max_wait,
+            mean_run: Arc::new(AtomicU64::new(0f64.to_bits())),
             metrics,
         }
     }
 
+    /// Recent mean run time of a job, seconds (0 before the first).
+    pub fn mean_run_seconds(&self) -> f64 {
+        f64::from_bits(self.mean_run.load(Ordering::Relaxed))
+    }
+
+    fn record_run(&self, seconds: f64) {
+        let _ = self
+            .mean_run
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |old| {
+                let old = f64::from_bits(old);
+                let new = if old == 0.0 {
+                    seconds
+                } else {
+                    old + MEAN_WEIGHT * (seconds - old)
+                };
+                Some(new.to_bits())
+            });
+    }
+
+    /// Predicted wait of a job arriving now: the jobs already waiting take
+    /// their turn on `max_jobs` slots at the mean run time. The running
+    /// jobs' remainders are not counted, so the first in line is always
+    /// admitted and the slots never idle while refused clients back off.
+    fn predicted_wait(&self) -> f64 {
+        let busy = self.metrics.jobs_running.get().max(0) as usize;
+        if busy < self.max_jobs {
+            return 0.0;
+        }
+        let ahead = self.metrics.jobs_queued.get().max(0) as f64;
+        ahead / self.max_jobs as f64 * self.mean_run_seconds()
+    }
+
+    fn refuse(&self, reason: &str, retry_seconds: f64) -> ApiError {
+        self.metrics.jobs_rejected.inc();
+        let mut e = ApiError::overloaded(reason);
+        e.retry_after = Some(retry_seconds.ceil().clamp(1.0, 3600.0) as u32);
+        e
+    }
+
     /// Runs `f` on a blocking thread once a slot is free. Fails with 503 if
-    /// the queue is full and with 500 if `f` panics.
+    /// the queue is full or the wait for a slot would exceed the limit, and
+    /// with 500 if `f` panics.
     pub async fn run<T, F>(&self, f: F) -> Result<T, ApiError>
     where
         T: Send + 'static,
         F: FnOnce() -> T + Send + 'static,
     {
+        let predicted = self.predicted_wait();
+        if predicted > self.max_wait.as_secs_f64() {
+            return Err(self.refuse("synthesis queue is too slow", predicted));
+        }
         let Ok(admitted) = self.admit.clone().try_acquire_owned() else {
-            self.metrics.jobs_rejected.inc();
-            return Err(ApiError::overloaded("synthesis"));
+            return Err(self.refuse("synthesis queue is full", predicted));
         };
         let queued = GaugeGuard::new(&self.metrics.jobs_queued);
-        let admitted_at = std::time::Instant::now();
-        let running_slot = self
-            .run
-            .clone()
-            .acquire_owned()
-            .await
-            .map_err(|_| ApiError::internal("job queue closed"))?;
+        let admitted_at = Instant::now();
+        let running_slot =
+            match tokio::time::timeout(self.max_wait, self.run.clone().acquire_owned()).await {
+                Ok(slot) => slot.map_err(|_| ApiError::internal("job queue closed"))?,
+                Err(_) => {
+                    self.metrics.jobs_timed_out.inc();
+                    return Err(self.refuse(
+                        "synthesis queue wait limit reached",
+                        self.predicted_wait().max(1.0),
+                    ));
+                }
+            };
         drop(queued);
         self.metrics
             .job_wait
             .observe(admitted_at.elapsed().as_secs_f64());
         let metrics = self.metrics.clone();
+        let this = self.clone();
         let handle = tokio::task::spawn_blocking(move || {
             let _slots = (admitted, running_slot);
             let _running = GaugeGuard::new(&metrics.jobs_running);
-            f()
+            let started = Instant::now();
+            let out = f();
+            this.record_run(started.elapsed().as_secs_f64());
+            out
         });
         match handle.await {
             Ok(v) => Ok(v),
@@ -112,11 +184,98 @@ mod tests {
     use std::sync::mpsc;
 
     fn jobs(max: u32, queue: u32) -> Jobs {
+        jobs_waiting(max, queue, Duration::from_secs(600))
+    }
+
+    fn jobs_waiting(max: u32, queue: u32, wait: Duration) -> Jobs {
         Jobs::new(
             max,
             queue,
+            wait,
             Arc::new(Metrics::new(Arc::new(TileCache::new(1 << 20)))),
         )
+    }
+
+    /// Occupies every running slot of `j` until the returned sender is
+    /// dropped or sent to.
+    async fn hold_slots(
+        j: &Jobs,
+        n: usize,
+    ) -> (mpsc::Sender<()>, Vec<tokio::task::JoinHandle<()>>) {
+        let (tx, rx) = mpsc::channel::<()>();
+        let rx = Arc::new(std::sync::Mutex::new(rx));
+        let mut held = Vec::new();
+        for _ in 0..n {
+            let j = j.clone();
+            let rx = rx.clone();
+            held.push(tokio::spawn(async move {
+                let _ = j
+                    .run(move || {
+                        let _ = rx.lock().unwrap().recv();
+                    })
+                    .await;
+            }));
+        }
+        for _ in 0..200 {
+            if j.metrics.jobs_running.get() as usize == n {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        assert_eq!(j.metrics.jobs_running.get() as usize, n);
+        (tx, held)
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_job_waiting_past_the_limit_is_503() {
+        let j = jobs_waiting(1, 4, Duration::from_millis(150));
+        let (tx, held) = hold_slots(&j, 1).await;
+        let t = Instant::now();
+        let e = j.run(|| ()).await.unwrap_err();
+        assert_eq!(e.status.as_u16(), 503);
+        assert!(e.retry_after.unwrap() >= 1);
+        assert!(t.elapsed() >= Duration::from_millis(150));
+        assert_eq!(j.metrics.jobs_timed_out.get(), 1);
+        drop(tx);
+        for h in held {
+            h.await.unwrap();
+        }
+        // With the slot free again, a job runs.
+        assert_eq!(j.run(|| 5).await.unwrap(), 5);
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_job_predicted_to_wait_too_long_is_refused_at_once() {
+        let j = jobs_waiting(1, 4, Duration::from_secs(2));
+        j.record_run(10.0);
+        let (tx, held) = hold_slots(&j, 1).await;
+        // The first in line is admitted: it may get the slot in time.
+        let first = {
+            let j = j.clone();
+            tokio::spawn(async move { j.run(|| ()).await })
+        };
+        for _ in 0..200 {
+            if j.metrics.jobs_queued.get() == 1 {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        assert_eq!(j.metrics.jobs_queued.get(), 1);
+        // The next would wait a whole mean job (10 s) behind it.
+        let t = Instant::now();
+        let e = j.run(|| ()).await.unwrap_err();
+        assert!(t.elapsed() < Duration::from_secs(1), "not refused at once");
+        assert_eq!(e.status.as_u16(), 503);
+        assert_eq!(e.retry_after, Some(10));
+        assert_eq!(j.metrics.jobs_timed_out.get(), 0);
+        drop(tx);
+        for h in held {
+            h.await.unwrap();
+        }
+        first.await.unwrap().unwrap();
+        // The mean moves towards recent jobs.
+        j.run(|| ()).await.unwrap();
+        assert!(j.mean_run_seconds() < 10.0);
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

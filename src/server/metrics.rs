@@ -82,8 +82,11 @@ pub struct Metrics {
     pub jobs_queued: Gauge,
     /// Synthesis jobs running.
     pub jobs_running: Gauge,
-    /// Requests turned away because the queue was full.
+    /// Requests turned away: queue full, predicted wait too long, or wait
+    /// limit reached.
     pub jobs_rejected: Counter,
+    /// Of those, jobs that waited the whole limit without a slot.
+    pub jobs_timed_out: Counter,
     /// Time admitted jobs waited for a running slot, seconds.
     pub job_wait: Histogram,
     /// Precomputations finished, by outcome.
@@ -156,8 +159,14 @@ impl Metrics {
         let jobs_rejected = Counter::default();
         registry.register(
             "jobs_rejected",
-            "Requests answered 503 because the queue was full",
+            "Requests answered 503 because the queue was full or too slow",
             jobs_rejected.clone(),
+        );
+        let jobs_timed_out = Counter::default();
+        registry.register(
+            "jobs_timed_out",
+            "Queued jobs answered 503 after waiting the whole wait limit",
+            jobs_timed_out.clone(),
         );
         let job_wait = latency_histogram();
         registry.register_with_unit(
@@ -206,6 +215,7 @@ impl Metrics {
             jobs_queued,
             jobs_running,
             jobs_rejected,
+            jobs_timed_out,
             job_wait,
             precomputes,
             precompute_seconds,

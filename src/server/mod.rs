@@ -113,7 +113,12 @@ impl Server {
                 .await
                 .map_err(|e| anyhow::anyhow!("registering the default texture: {e}"))?;
         }
-        let jobs = jobs::Jobs::new(args.max_jobs, args.queue, metrics.clone());
+        let jobs = jobs::Jobs::new(
+            args.max_jobs,
+            args.queue,
+            std::time::Duration::from_secs_f64(args.max_queue_wait),
+            metrics.clone(),
+        );
         let listener = tokio::net::TcpListener::bind(args.addr)
             .await
             .with_context(|| format!("binding {}", args.addr))?;

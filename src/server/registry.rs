@@ -303,7 +303,7 @@ impl Registry {
             // Server-chosen ids (the bundled default) are never refused.
             if !fixed_id && self.pending.load(Ordering::SeqCst) >= self.max_pending {
                 self.metrics.jobs_rejected.inc();
-                return Err(ApiError::overloaded("precompute"));
+                return Err(ApiError::overloaded("precompute queue is full"));
             }
             if let Some(old) = map.get(&id) {
                 old.deleted.store(true, Ordering::SeqCst);

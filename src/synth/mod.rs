@@ -486,7 +486,14 @@ impl Engine {
 
     /// Exact voxel-level dependency chain of a few voxels (see
     /// [`plan::exact_chain`]).
-    pub(crate) fn exact_chain(&self, voxels: &[[i64; 3]], lod: u32) -> Vec<plan::LevelPlan> {
+    /// `radius` is the neighbourhood's half side (the analysis's own unless
+    /// a caller asks what another N would need).
+    pub(crate) fn exact_chain(
+        &self,
+        voxels: &[[i64; 3]],
+        lod: u32,
+        radius: i64,
+    ) -> Vec<plan::LevelPlan> {
         let levels: Vec<Vec<Step>> = (0..=self.init_level)
             .skip(lod as usize)
             .map(|k| self.steps_at(k).to_vec())
@@ -499,7 +506,7 @@ impl Engine {
             voxels,
             levels.len(),
             &levels,
-            self.radius,
+            radius,
             self.params.subpass_side as i64,
             cell,
         )
