@@ -293,6 +293,18 @@ fn plans(c: &Arc<Candidates>, side: u32) -> anyhow::Result<Vec<PlanRow>> {
             voxels_per_level: chain.iter().map(|l| l.0).collect(),
             corrections_per_level: chain.iter().map(|l| l.1).collect(),
         });
+        // Zhang et al. measured their dual grid at N = 9, where the
+        // standard chain is much thicker; the chain is geometry only.
+        let plane: Vec<[i64; 3]> = (0..side as i64 * side as i64)
+            .map(|i| [i % side as i64, i / side as i64, 0])
+            .collect();
+        let wide = tex.dependency_chain_for(&plane, 0, 9)?;
+        out.push(PlanRow {
+            scheme: name,
+            request: format!("{side}² axis slice at N = 9 (exact chain, geometry only)"),
+            voxels_per_level: wide.iter().map(|l| l.0).collect(),
+            corrections_per_level: wide.iter().map(|l| l.1).collect(),
+        });
     }
     Ok(out)
 }

@@ -17,10 +17,12 @@
 //! recomputed (inside the pool the engine must compute it again to avoid
 //! blocking a rayon worker). The slots are owned by the job itself, so a
 //! client that disconnects does not free a slot before its work has
-//! actually stopped.
+//! actually stopped; its synthesis is cancelled (see
+//! [`crate::synth::cancel`]) and stops within a correction subpass.
 
 use super::error::{ApiError, panic_message};
 use super::metrics::Metrics;
+use crate::synth::cancel::{CancelFlag, Cancelled, run_cancellable};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -129,16 +131,25 @@ impl Jobs {
             .observe(admitted_at.elapsed().as_secs_f64());
         let metrics = self.metrics.clone();
         let this = self.clone();
+        // Dropping this future (the client hung up) stops the synthesis.
+        let flag = CancelFlag::new();
+        let _cancel_on_drop = CancelOnDrop(flag.clone());
         let handle = tokio::task::spawn_blocking(move || {
             let _slots = (admitted, running_slot);
             let _running = GaugeGuard::new(&metrics.jobs_running);
             let started = Instant::now();
-            let out = f();
-            this.record_run(started.elapsed().as_secs_f64());
+            let out = run_cancellable(&flag, f);
+            match out {
+                Ok(_) => this.record_run(started.elapsed().as_secs_f64()),
+                Err(Cancelled) => {
+                    metrics.jobs_cancelled.inc();
+                }
+            }
             out
         });
         match handle.await {
-            Ok(v) => Ok(v),
+            Ok(Ok(v)) => Ok(v),
+            Ok(Err(Cancelled)) => Err(ApiError::internal("job cancelled")),
             Err(e) if e.is_panic() => {
                 let p = e.into_panic();
                 Err(ApiError::internal(format!(
@@ -158,6 +169,15 @@ impl Jobs {
     /// Jobs waiting plus running.
     pub fn in_flight(&self) -> usize {
         (self.metrics.jobs_queued.get() + self.metrics.jobs_running.get()) as usize
+    }
+}
+
+/// Sets a cancellation flag when dropped.
+struct CancelOnDrop(CancelFlag);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        self.0.cancel();
     }
 }
 

@@ -87,6 +87,8 @@ pub struct Metrics {
     pub jobs_rejected: Counter,
     /// Of those, jobs that waited the whole limit without a slot.
     pub jobs_timed_out: Counter,
+    /// Running jobs stopped because their client went away.
+    pub jobs_cancelled: Counter,
     /// Time admitted jobs waited for a running slot, seconds.
     pub job_wait: Histogram,
     /// Precomputations finished, by outcome.
@@ -162,6 +164,12 @@ impl Metrics {
             "Requests answered 503 because the queue was full or too slow",
             jobs_rejected.clone(),
         );
+        let jobs_cancelled = Counter::default();
+        registry.register(
+            "jobs_cancelled",
+            "Running synthesis jobs stopped because their client went away",
+            jobs_cancelled.clone(),
+        );
         let jobs_timed_out = Counter::default();
         registry.register(
             "jobs_timed_out",
@@ -216,6 +224,7 @@ impl Metrics {
             jobs_running,
             jobs_rejected,
             jobs_timed_out,
+            jobs_cancelled,
             job_wait,
             precomputes,
             precompute_seconds,

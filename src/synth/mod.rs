@@ -21,6 +21,7 @@
 //! tiles (recursively), and only those voxels are computed.
 
 pub mod cache;
+pub mod cancel;
 pub mod correction;
 pub mod grid;
 pub mod hash;
@@ -67,12 +68,15 @@ pub(crate) struct Acc {
     cached: AtomicU64,
     /// Count the work without doing it (tiles hold zeros).
     dry: bool,
+    /// The request's cancellation flag (see [`cancel`]).
+    cancel: Option<cancel::CancelFlag>,
 }
 
 impl Acc {
     fn new(levels: usize, dry: bool) -> Acc {
         Acc {
             dry,
+            cancel: cancel::current(),
             voxels: (0..levels).map(|_| AtomicU64::new(0)).collect(),
             corrections: (0..levels).map(|_| AtomicU64::new(0)).collect(),
             computed: AtomicU64::new(0),
@@ -337,7 +341,9 @@ impl Engine {
             Scheme::Standard => None,
         };
         let side = self.params.subpass_side as i64;
+        cancel::check(&acc.cancel);
         let chain = plan::backward(&targets, steps, self.radius, side, barrier_cell);
+        cancel::check(&acc.cancel);
         acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
         acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
         let triples = self.version0(k, &chain.need, acc);
@@ -348,6 +354,7 @@ impl Engine {
             let corrector = Corrector::new(&self.cands, k);
             let mut step_start: Option<(usize, Work)> = None;
             for (si, voxels) in &chain.subpasses {
+                cancel::check(&acc.cancel);
                 if barrier_cell.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
                     step_start = Some((*si, work.clone()));
                 }

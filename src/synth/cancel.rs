@@ -1,0 +1,102 @@
+//! Cooperative cancellation of a synthesis whose answer nobody will read
+//! (a client that hung up). The caller runs the engine inside
+//! [`run_cancellable`]; the engine looks at the flag between correction
+//! subpasses and, once it is set, unwinds out of the request. Unwinding is
+//! safe for the shared cache: tiles finished before the flag was seen are
+//! complete and stay published, and the tickets of tiles in flight are
+//! released, so requests waiting for them compute them themselves. Nothing
+//! partial is ever published.
+
+use std::cell::RefCell;
+use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// A flag that asks the syntheses run under it to stop.
+#[derive(Clone, Debug, Default)]
+pub struct CancelFlag(Arc<AtomicBool>);
+
+impl CancelFlag {
+    /// A flag not yet set.
+    pub fn new() -> CancelFlag {
+        CancelFlag::default()
+    }
+
+    /// Asks the syntheses under this flag to stop at their next check.
+    pub fn cancel(&self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+
+    /// Whether [`CancelFlag::cancel`] was called.
+    pub fn is_cancelled(&self) -> bool {
+        self.0.load(Ordering::Relaxed)
+    }
+}
+
+/// The error of a synthesis stopped by its flag.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Cancelled;
+
+thread_local! {
+    /// The flag of the synthesis started on this thread, if any.
+    static CURRENT: RefCell<Option<CancelFlag>> = const { RefCell::new(None) };
+}
+
+/// Runs `f` (which calls the engine on this thread) under `flag`: a
+/// synthesis started inside it stops soon after the flag is set, and this
+/// then returns `Err(Cancelled)`. Other panics pass through unchanged.
+pub fn run_cancellable<T>(flag: &CancelFlag, f: impl FnOnce() -> T) -> Result<T, Cancelled> {
+    struct Restore(Option<CancelFlag>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let old = self.0.take();
+            CURRENT.with(|c| *c.borrow_mut() = old);
+        }
+    }
+    let _restore = Restore(CURRENT.with(|c| c.borrow_mut().replace(flag.clone())));
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(v) => Ok(v),
+        Err(payload) if payload.is::<Cancelled>() => Err(Cancelled),
+        Err(payload) => resume_unwind(payload),
+    }
+}
+
+/// The flag the engine should watch for a request starting on this thread.
+pub(crate) fn current() -> Option<CancelFlag> {
+    CURRENT.with(|c| c.borrow().clone())
+}
+
+/// Unwinds out of the synthesis if `flag` is set (no panic message: this
+/// is not an error of the engine).
+pub(crate) fn check(flag: &Option<CancelFlag>) {
+    if flag.as_ref().is_some_and(CancelFlag::is_cancelled) {
+        resume_unwind(Box::new(Cancelled));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_set_flag_stops_at_the_next_check() {
+        let flag = CancelFlag::new();
+        let r = run_cancellable(&flag, || {
+            check(&current());
+            flag.cancel();
+            check(&current());
+            unreachable!("the second check unwinds");
+        });
+        assert_eq!(r, Err(Cancelled));
+        // Outside the scope no flag is watched.
+        assert!(current().is_none());
+        assert_eq!(run_cancellable(&CancelFlag::new(), || 3), Ok(3));
+    }
+
+    #[test]
+    fn other_panics_pass_through() {
+        let r = std::panic::catch_unwind(|| run_cancellable(&CancelFlag::new(), || panic!("boom")));
+        assert!(r.is_err());
+        assert!(current().is_none());
+    }
+}
