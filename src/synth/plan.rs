@@ -108,6 +108,39 @@ impl Mask {
         self.count = self.grid.data.iter().filter(|b| **b).count() as u64;
     }
 
+    /// Shrinks the box to the members' bounding box (no change when
+    /// empty), so grids laid over [`Mask::bounds`] hold no dead margin.
+    pub fn shrink_to_fit(&mut self) {
+        let (size, data) = (self.grid.bounds.size(), &self.grid.data);
+        let (nx, ny) = (size[0] as usize, size[1] as usize);
+        let mut lo = [usize::MAX; 3];
+        let mut hi = [0usize; 3];
+        for (i, _) in data.iter().enumerate().filter(|(_, m)| **m) {
+            let c = [i % nx, (i / nx) % ny, i / (nx * ny)];
+            for a in 0..3 {
+                lo[a] = lo[a].min(c[a]);
+                hi[a] = hi[a].max(c[a] + 1);
+            }
+        }
+        if lo[0] == usize::MAX {
+            return;
+        }
+        let origin = self.grid.bounds.lo;
+        let tight = Box3 {
+            lo: [0, 1, 2].map(|a| origin[a] + lo[a] as i64),
+            hi: [0, 1, 2].map(|a| origin[a] + hi[a] as i64),
+        };
+        if tight == self.grid.bounds {
+            return;
+        }
+        let mut grid = Grid::new(tight);
+        for p in self.positions() {
+            let i = grid.index(p);
+            grid.data[i] = true;
+        }
+        self.grid = grid;
+    }
+
     /// Number of voxels in the set.
     pub fn count(&self) -> u64 {
         self.count
@@ -226,6 +259,9 @@ pub fn backward(
         }
     }
     subpasses.reverse();
+    // The box was sized for the worst-case growth; the working grids of
+    // the synthesis follow it, so keep only what the chain touches.
+    need.shrink_to_fit();
     LevelChain { need, subpasses }
 }
 
@@ -269,6 +305,23 @@ pub fn exact_chain(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shrinking_keeps_the_members_in_a_tight_box() {
+        let mut m = Mask::new(Box3::new([-10, -10, -10], [30, 30, 30]));
+        for p in [[-3, 2, 5], [4, -1, 5], [0, 0, 7]] {
+            m.insert(p);
+        }
+        m.shrink_to_fit();
+        assert_eq!(m.bounds(), Box3::new([-3, -1, 5], [8, 4, 3]));
+        let mut got: Vec<[i64; 3]> = m.positions().collect();
+        got.sort();
+        assert_eq!(got, vec![[-3, 2, 5], [0, 0, 7], [4, -1, 5]]);
+        assert_eq!(m.count(), 3);
+        let mut empty = Mask::new(Box3::new([0, 0, 0], [4, 4, 4]));
+        empty.shrink_to_fit();
+        assert_eq!(empty.bounds(), Box3::new([0, 0, 0], [4, 4, 4]));
+    }
 
     #[test]
     fn shape_has_sixty_one_voxels_for_n5() {
