@@ -162,7 +162,7 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
             w,
             "`solidtex serve` in a child process (default settings: 2 jobs at once, \
              16 queued, 2 HTTP threads, rayon on every core, 512 MiB cache; the queue \
-             wait limit is the command's `--load-max-wait`), restarted \
+             wait limit is the command's `--load-max-wait`, 1 s unless given), restarted \
              cold for each run, loaded by `solidtex loadtest` over loopback; the client \
              shares the cores with the server. RSS is the server process's peak resident \
              memory, sampled twice a second.\n"
