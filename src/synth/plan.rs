@@ -35,6 +35,8 @@ fn split(mut cells: Vec<[i64; 3]>, max: usize, out: &mut Vec<Vec<[i64; 3]>>) {
 
 use super::Step;
 use super::grid::{Box3, Grid};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Exact dependency counts of one level under a history-window scheme.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -70,9 +72,13 @@ fn shape(v: [i64; 3], r: i64, mut f: impl FnMut([i64; 3])) {
     }
 }
 
-/// A dense set of voxels inside a fixed box.
+/// A dense set of voxels inside a fixed box. Members are atomic flags so
+/// that the voxels of one subpass mark their neighbourhoods in parallel
+/// (marking is idempotent, so the set does not depend on the order).
 pub struct Mask {
-    grid: Grid<bool>,
+    /// Geometry only (a grid of zero-sized cells allocates nothing).
+    shape: Grid<()>,
+    flags: Vec<AtomicBool>,
     count: u64,
 }
 
@@ -80,42 +86,58 @@ impl Mask {
     /// An empty set able to hold the voxels of `b`.
     pub fn new(b: Box3) -> Mask {
         Mask {
-            grid: Grid::new(b),
+            shape: Grid::new(b),
+            flags: (0..b.volume()).map(|_| AtomicBool::new(false)).collect(),
             count: 0,
         }
+    }
+
+    #[inline]
+    fn has_index(&self, i: usize) -> bool {
+        self.flags[i].load(Ordering::Relaxed)
+    }
+
+    /// Whether `p` (which must lie inside the box) is a member.
+    #[inline]
+    pub fn contains(&self, p: [i64; 3]) -> bool {
+        self.has_index(self.shape.index(p))
     }
 
     /// Adds `p` (which must lie inside the box).
     #[inline]
     pub fn insert(&mut self, p: [i64; 3]) {
-        let i = self.grid.index(p);
-        if !self.grid.data[i] {
-            self.grid.data[i] = true;
+        let i = self.shape.index(p);
+        if !self.flags[i].swap(true, Ordering::Relaxed) {
             self.count += 1;
         }
     }
 
     /// Adds `p` without keeping the count (call [`Mask::recount`] after a
-    /// batch of marks); the hot path of dependency planning.
+    /// batch of marks); the hot path of dependency planning, callable from
+    /// many threads at once.
     #[inline]
-    pub fn mark(&mut self, p: [i64; 3]) {
-        let i = self.grid.index(p);
-        self.grid.data[i] = true;
+    pub fn mark(&self, p: [i64; 3]) {
+        self.flags[self.shape.index(p)].store(true, Ordering::Relaxed);
     }
 
     /// Recomputes the count after [`Mask::mark`] calls.
     pub fn recount(&mut self) {
-        self.count = self.grid.data.iter().filter(|b| **b).count() as u64;
+        self.count = self
+            .flags
+            .par_iter()
+            .with_min_len(1 << 16)
+            .filter(|f| f.load(Ordering::Relaxed))
+            .count() as u64;
     }
 
     /// Shrinks the box to the members' bounding box (no change when
     /// empty), so grids laid over [`Mask::bounds`] hold no dead margin.
     pub fn shrink_to_fit(&mut self) {
-        let (size, data) = (self.grid.bounds.size(), &self.grid.data);
+        let size = self.shape.bounds.size();
         let (nx, ny) = (size[0] as usize, size[1] as usize);
         let mut lo = [usize::MAX; 3];
         let mut hi = [0usize; 3];
-        for (i, _) in data.iter().enumerate().filter(|(_, m)| **m) {
+        for i in (0..self.flags.len()).filter(|&i| self.has_index(i)) {
             let c = [i % nx, (i / nx) % ny, i / (nx * ny)];
             for a in 0..3 {
                 lo[a] = lo[a].min(c[a]);
@@ -125,20 +147,20 @@ impl Mask {
         if lo[0] == usize::MAX {
             return;
         }
-        let origin = self.grid.bounds.lo;
+        let origin = self.shape.bounds.lo;
         let tight = Box3 {
             lo: [0, 1, 2].map(|a| origin[a] + lo[a] as i64),
             hi: [0, 1, 2].map(|a| origin[a] + hi[a] as i64),
         };
-        if tight == self.grid.bounds {
+        if tight == self.shape.bounds {
             return;
         }
-        let mut grid = Grid::new(tight);
+        let mut smaller = Mask::new(tight);
         for p in self.positions() {
-            let i = grid.index(p);
-            grid.data[i] = true;
+            smaller.mark(p);
         }
-        self.grid = grid;
+        smaller.count = self.count;
+        *self = smaller;
     }
 
     /// Number of voxels in the set.
@@ -148,30 +170,25 @@ impl Mask {
 
     /// The box the set lives in.
     pub fn bounds(&self) -> Box3 {
-        self.grid.bounds
+        self.shape.bounds
     }
 
     /// Members in x-fastest order.
     pub fn positions(&self) -> impl Iterator<Item = [i64; 3]> + '_ {
-        self.grid
-            .data
-            .iter()
-            .enumerate()
-            .filter(|(_, b)| **b)
-            .map(|(i, _)| self.grid.position(i))
+        (0..self.flags.len())
+            .filter(|&i| self.has_index(i))
+            .map(|i| self.shape.position(i))
     }
 
     /// Members of one z layer, x fastest.
     pub fn layer(&self, z: i64) -> impl Iterator<Item = [i64; 3]> + '_ {
-        let b = self.grid.bounds;
+        let b = self.shape.bounds;
         let s = b.size();
         let per = (s[0] * s[1]) as usize;
         let start = (z - b.lo[2]) as usize * per;
-        self.grid.data[start..start + per]
-            .iter()
-            .enumerate()
-            .filter(|(_, m)| **m)
-            .map(move |(i, _)| self.grid.position(start + i))
+        (start..start + per)
+            .filter(|&i| self.has_index(i))
+            .map(|i| self.shape.position(i))
     }
 }
 
@@ -226,12 +243,16 @@ pub fn backward(
             let phase = [class % side, (class / side) % side, class / (side * side)];
             let mut corrected = Vec::new();
             super::correction::for_class(&need.bounds(), phase, side, |v| {
-                if need.grid.data[need.grid.index(v)] {
+                if need.contains(v) {
                     corrected.push(v);
                 }
             });
-            for &v in &corrected {
-                match cell {
+            // The voxels of one subpass are independent: they mark their
+            // reads in parallel.
+            corrected
+                .par_iter()
+                .with_min_len(1024)
+                .for_each(|&v| match cell {
                     None => shape(v, radius, |q| need.mark(q)),
                     Some(m) => {
                         let lo = v.map(|c| (c - step.offset).div_euclid(m) * m + step.offset);
@@ -244,11 +265,10 @@ pub fn backward(
                             }
                         });
                     }
-                }
-            }
+                });
             // Blocks of 16×16 columns keep each thread's reads local; the
             // voxels of one subpass are independent, so order is free.
-            corrected.sort_unstable_by_key(|p| (p[1] >> 4, p[0] >> 4, p[2], p[1], p[0]));
+            corrected.par_sort_unstable_by_key(|p| (p[1] >> 4, p[0] >> 4, p[2], p[1], p[0]));
             subpasses.push((si, corrected));
         }
         need.recount();
