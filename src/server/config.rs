@@ -169,10 +169,9 @@ pub fn parse_chunk_size(s: &str) -> Result<u32, String> {
     Ok(n)
 }
 
-/// Parses a byte count with an optional binary suffix: `1048576`, `512K`,
-/// `64M`, `2G` (also `KiB`, `MB`…, case-insensitive).
+/// Parses a queue wait limit in seconds, from 1 ms to a day.
 pub fn parse_wait(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
+    match s.trim().parse::<f64>() {
         Ok(v) if (0.001..=86_400.0).contains(&v) => Ok(v),
         _ => Err(format!(
             "`{s}` is not a number of seconds from 0.001 to 86400"
@@ -180,7 +179,9 @@ pub fn parse_wait(s: &str) -> Result<f64, String> {
     }
 }
 
-fn parse_bytes(s: &str) -> Result<u64, String> {
+/// Parses a byte count with an optional binary suffix: `1048576`, `512K`,
+/// `64M`, `2G` (also `KiB`, `MB`…, case-insensitive).
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
     let t = s.trim();
     let split = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
     let (num, unit) = t.split_at(split);
@@ -219,6 +220,20 @@ mod tests {
         assert!(parse_bytes("lots").is_err());
         assert!(parse_bytes("3Q").is_err());
         assert!(parse_bytes("99999999999T").is_err());
+    }
+
+    #[test]
+    fn wait_limits() {
+        assert_eq!(parse_wait("1.5"), Ok(1.5));
+        assert_eq!(parse_wait(" 10 "), Ok(10.0));
+        assert!(parse_wait("0").is_err());
+        assert!(parse_wait("-1").is_err());
+        assert!(parse_wait("NaN").is_err());
+        assert!(parse_wait("inf").is_err());
+        assert!(parse_wait("soon").is_err());
+        let c = Cli::try_parse_from(["x"]).unwrap().serve;
+        assert_eq!(c.max_queue_wait, 10.0);
+        assert!(Cli::try_parse_from(["x", "--max-queue-wait", "100000"]).is_err());
     }
 
     #[test]

@@ -133,25 +133,13 @@ impl Mask {
     /// Shrinks the box to the members' bounding box (no change when
     /// empty), so grids laid over [`Mask::bounds`] hold no dead margin.
     pub fn shrink_to_fit(&mut self) {
-        let size = self.shape.bounds.size();
-        let (nx, ny) = (size[0] as usize, size[1] as usize);
-        let mut lo = [usize::MAX; 3];
-        let mut hi = [0usize; 3];
-        for i in (0..self.flags.len()).filter(|&i| self.has_index(i)) {
-            let c = [i % nx, (i / nx) % ny, i / (nx * ny)];
-            for a in 0..3 {
-                lo[a] = lo[a].min(c[a]);
-                hi[a] = hi[a].max(c[a] + 1);
-            }
-        }
-        if lo[0] == usize::MAX {
+        let mut members = self.positions();
+        let Some(first) = members.next() else {
             return;
-        }
-        let origin = self.shape.bounds.lo;
-        let tight = Box3 {
-            lo: [0, 1, 2].map(|a| origin[a] + lo[a] as i64),
-            hi: [0, 1, 2].map(|a| origin[a] + hi[a] as i64),
         };
+        let tight = members.fold(Box3::new(first, [1, 1, 1]), |b, p| {
+            b.union(&Box3::new(p, [1, 1, 1]))
+        });
         if tight == self.shape.bounds {
             return;
         }
