@@ -3,8 +3,9 @@
 //! Counting is off until [`start`] is called, leaving every other command
 //! (the server included) with nothing but one relaxed load per call.
 //!
-//! This is the binary's only unsafe code: `GlobalAlloc` is an unsafe trait,
-//! and every method forwards to the system allocator unchanged.
+//! Unsafe code here, because `GlobalAlloc` is an unsafe trait; every method
+//! forwards to the system allocator unchanged. The only other unsafe block
+//! is the cache prefetch hint in `synth::correction`.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicIsize, Ordering};

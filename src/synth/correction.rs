@@ -162,6 +162,58 @@ impl<'a> Corrector<'a> {
                 start
             }
         };
+        // The exemplar pixels whose similarity sets each plane scans, and
+        // the coherent triples, are known from the triples alone: gather
+        // them first and prefetch their tables, so the cache misses overlap
+        // the neighbourhood gathering and projection below.
+        let mut bases = [[u32::MAX; 9]; 3];
+        let mut bases_n = [0usize; 3];
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            for j in -1..=1i64 {
+                for i in -1..=1i64 {
+                    let idx = (centre + i * strides[a] + j * strides[b]) as usize;
+                    let t = pick(a, i, b, j).triples.data[idx];
+                    let base = self.dims.shift(t[plane], -i * h, -j * h);
+                    // Coherent neighbours usually point at the same pixel:
+                    // visit each base pixel once.
+                    if bases[plane][..bases_n[plane]].contains(&base) {
+                        continue;
+                    }
+                    bases[plane][bases_n[plane]] = base;
+                    bases_n[plane] += 1;
+                    prefetch(self.level.similar_vectors(plane, base));
+                    prefetch(self.level.similar(plane, base));
+                }
+            }
+        }
+        let inside3 = |d: [i64; 3]| (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
+        let mut coherent = [[u32::MAX; 3]; 19];
+        let mut coherent_n = 0;
+        // Coherent triples: each neighbour's triple moved back by its
+        // offset, in all three planes at once (the neighbours the shape
+        // holds: those with at least one zero offset).
+        for dz in -1..=1i64 {
+            for dy in -1..=1i64 {
+                for dx in -1..=1i64 {
+                    if dx != 0 && dy != 0 && dz != 0 {
+                        continue;
+                    }
+                    let d = [dx, dy, dz];
+                    let idx =
+                        (centre + dx * strides[0] + dy * strides[1] + dz * strides[2]) as usize;
+                    let src = if inside3(d) { work } else { start };
+                    let t = offset_triple(self.dims, src.triples.data[idx], d.map(|v| -v), h);
+                    if coherent[..coherent_n].contains(&t) {
+                        continue;
+                    }
+                    coherent[coherent_n] = t;
+                    coherent_n += 1;
+                    for (p, &c) in t.iter().enumerate() {
+                        prefetch(self.level.joint_share(p, c));
+                    }
+                }
+            }
+        }
         let mut best2d = [0u32; 3];
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             // The voxel's slice neighbourhood in this plane, u outer order
@@ -188,31 +240,29 @@ impl<'a> Corrector<'a> {
             );
             let query = self.level.quantise_appearance(plane, &s.app[plane][..dims]);
             let mut best = (u32::MAX, u32::MAX);
-            // Coherent neighbours usually point at the same pixel: visit
-            // each base pixel once.
-            let mut seen = [u32::MAX; 9];
-            let mut seen_n = 0;
-            for j in -1..=1i64 {
-                for i in -1..=1i64 {
-                    let idx = (centre + i * strides[a] + j * strides[b]) as usize;
-                    let t = pick(a, i, b, j).triples.data[idx];
-                    let base = self.dims.shift(t[plane], -i * h, -j * h);
-                    if seen[..seen_n].contains(&base) {
-                        continue;
-                    }
-                    seen[seen_n] = base;
-                    seen_n += 1;
-                    let ids = self.level.similar(plane, base);
-                    let vectors = self.level.similar_vectors(plane, base);
-                    for (&cand, v) in ids.iter().zip(vectors) {
-                        let d = sq_dist_i16(&query, v);
-                        if d < best.0 || (d == best.0 && cand < best.1) {
-                            best = (d, cand);
-                        }
+            for &base in &bases[plane][..bases_n[plane]] {
+                let ids = self.level.similar(plane, base);
+                let vectors = self.level.similar_vectors(plane, base);
+                for (&cand, v) in ids.iter().zip(vectors) {
+                    let d = sq_dist_i16(&query, v);
+                    if d < best.0 || (d == best.0 && cand < best.1) {
+                        best = (d, cand);
                     }
                 }
             }
             best2d[plane] = best.1;
+            // Stage two reads this pixel's 3D candidates.
+            let cands = self.level.candidates(plane);
+            let range = cands.range(best.1);
+            let jd = self.level.joint_dims();
+            let take = range.len().min(self.max_3d);
+            let vectors = &self.level.vectors[plane][range.start * jd..(range.start + take) * jd];
+            for line in vectors.chunks(64) {
+                prefetch(line);
+            }
+            for line in cands.triples[range.start..range.start + take].chunks(5) {
+                prefetch(line);
+            }
         }
         // Stage two: 3D candidates of the best pixel of each plane.
         let mut len = 0;
@@ -230,40 +280,17 @@ impl<'a> Corrector<'a> {
             *q = quantise(v, scale);
         }
         let mut best = (u32::MAX, [u32::MAX; 3]);
-        // Coherent triples: each neighbour's triple moved back by its
-        // offset, in all three planes at once (the neighbours the shape
-        // holds: those with at least one zero offset).
-        let mut seen = [[u32::MAX; 3]; 19];
-        let mut seen_n = 0;
-        let inside3 = |d: [i64; 3]| (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
-        for dz in -1..=1i64 {
-            for dy in -1..=1i64 {
-                for dx in -1..=1i64 {
-                    if dx != 0 && dy != 0 && dz != 0 {
-                        continue;
-                    }
-                    let d = [dx, dy, dz];
-                    let idx =
-                        (centre + dx * strides[0] + dy * strides[1] + dz * strides[2]) as usize;
-                    let src = if inside3(d) { work } else { start };
-                    let t = offset_triple(self.dims, src.triples.data[idx], d.map(|v| -v), h);
-                    if seen[..seen_n].contains(&t) {
-                        continue;
-                    }
-                    seen[seen_n] = t;
-                    seen_n += 1;
-                    let shares = [0, 1, 2].map(|p| self.level.joint_share(p, t[p]));
-                    let mut dist = 0u32;
-                    for (j, &q) in query[..jd].iter().enumerate() {
-                        let v = shares[0][j] + shares[1][j] + shares[2][j] - self.joint_offsets[j];
-                        let e = quantise(v, scale) as i32 - q as i32;
-                        dist += (e * e) as u32;
-                    }
-                    let dist = dist * COHERENT_WEIGHT / 256;
-                    if dist < best.0 || (dist == best.0 && t < best.1) {
-                        best = (dist, t);
-                    }
-                }
+        for &t in &coherent[..coherent_n] {
+            let shares = [0, 1, 2].map(|p| self.level.joint_share(p, t[p]));
+            let mut dist = 0u32;
+            for (j, &q) in query[..jd].iter().enumerate() {
+                let v = shares[0][j] + shares[1][j] + shares[2][j] - self.joint_offsets[j];
+                let e = quantise(v, scale) as i32 - q as i32;
+                dist += (e * e) as u32;
+            }
+            let dist = dist * COHERENT_WEIGHT / 256;
+            if dist < best.0 || (dist == best.0 && t < best.1) {
+                best = (dist, t);
             }
         }
         for (plane, &pixel) in best2d.iter().enumerate() {
@@ -281,6 +308,21 @@ impl<'a> Corrector<'a> {
         }
         best.1
     }
+}
+
+/// Asks the CPU to start loading the first cache line of `data`.
+#[inline(always)]
+#[allow(unsafe_code)]
+fn prefetch<T>(data: &[T]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: SSE is part of the x86_64 baseline, and a prefetch is a
+        // hint that never faults, whatever the address.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(data.as_ptr().cast()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = data;
 }
 
 /// Calls `f` for each voxel of `b` whose coordinates are congruent to
