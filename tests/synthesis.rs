@@ -135,6 +135,33 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
     assert!(tiny_cache_evicted(&tiny));
 }
 
+/// A cut sweeping one voxel at a time reads the earlier correction steps
+/// that neighbouring planes left in the cache: the same bytes as cold
+/// planes, with fewer corrections, also when the cache is too small to keep
+/// everything.
+#[test]
+fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
+    let slice = |t: &Texture, z: i64| t.slice(Axis::Z, z, -4, 3, 20, 20, 0).unwrap();
+    let sweep = texture_with(SynthParams::default(), 256 << 20);
+    let small = texture_with(SynthParams::default(), 512 << 10);
+    let (mut cold_corrections, mut swept_corrections) = (0, 0);
+    for z in 8..14 {
+        let (cold, cold_stats) = slice(&texture_with(SynthParams::default(), 256 << 20), z);
+        let (swept, swept_stats) = slice(&sweep, z);
+        assert_eq!(cold, swept, "plane {z} after its neighbours");
+        assert_eq!(cold, slice(&small, z).0, "plane {z} with evictions");
+        if z > 8 {
+            cold_corrections += cold_stats.corrections_per_level[0];
+            swept_corrections += swept_stats.corrections_per_level[0];
+        }
+    }
+    assert!(
+        swept_corrections * 10 < cold_corrections * 7,
+        "a sweep corrected {swept_corrections} finest voxels, cold planes {cold_corrections}"
+    );
+    assert!(tiny_cache_evicted(&small));
+}
+
 fn tiny_cache_evicted(t: &Texture) -> bool {
     // Ask again: with a 16 KiB cache the second request must recompute.
     let (_, s) = t

@@ -18,7 +18,8 @@ pub struct TileKey {
     pub texture: u64,
     /// Pyramid level (0 = finest).
     pub level: u8,
-    /// Correction step whose result the tile holds.
+    /// Version the tile holds: 0 for the final one, s ≥ 1 for the
+    /// version after the level's first s correction steps.
     pub step: u8,
     /// Cell coordinates.
     pub cell: [i64; 3],
@@ -207,32 +208,52 @@ impl TileCache {
         let tile = {
             let mut g = self.lock();
             g.flights.remove(&ticket.key);
-            let tile = match g.lru.peek(&ticket.key) {
-                Some(old) if !tile.covers(old.mask) => Arc::new(old.merged(&tile)),
-                _ => tile,
-            };
-            let bytes = tile_bytes(&tile);
-            if bytes <= self.max_bytes {
-                if let Some(old) = g.lru.put(ticket.key, tile.clone()) {
-                    g.stats.bytes -= tile_bytes(&old) as u64;
-                }
-                g.stats.bytes += bytes as u64;
-                while g.stats.bytes > self.max_bytes as u64 {
-                    match g.lru.pop_lru() {
-                        Some((_, old)) => {
-                            g.stats.bytes -= tile_bytes(&old) as u64;
-                            g.stats.evictions += 1;
-                        }
-                        None => break,
-                    }
-                }
-            }
-            g.stats.entries = g.lru.len() as u64;
-            tile
+            self.store(&mut g, ticket.key, tile)
         };
         let mut done = ticket.flight.done.lock().unwrap_or_else(|e| e.into_inner());
         *done = Some(Some(tile));
         ticket.flight.cv.notify_all();
+    }
+
+    /// Merges `tile` into what is cached under `key` and stores it,
+    /// evicting least recently used tiles beyond the byte limit.
+    fn store(&self, g: &mut Inner, key: TileKey, tile: Tile) -> Tile {
+        let tile = match g.lru.peek(&key) {
+            Some(old) if !tile.covers(old.mask) => Arc::new(old.merged(&tile)),
+            _ => tile,
+        };
+        let bytes = tile_bytes(&tile);
+        if bytes <= self.max_bytes {
+            if let Some(old) = g.lru.put(key, tile.clone()) {
+                g.stats.bytes -= tile_bytes(&old) as u64;
+            }
+            g.stats.bytes += bytes as u64;
+            while g.stats.bytes > self.max_bytes as u64 {
+                match g.lru.pop_lru() {
+                    Some((_, old)) => {
+                        g.stats.bytes -= tile_bytes(&old) as u64;
+                        g.stats.evictions += 1;
+                    }
+                    None => break,
+                }
+            }
+        }
+        g.stats.entries = g.lru.len() as u64;
+        tile
+    }
+
+    /// The tile cached under `key`, whatever voxels it holds, without
+    /// claiming it: for intermediate versions, which a request computes
+    /// itself when they are missing rather than waiting for another.
+    pub fn peek(&self, key: &TileKey) -> Option<Tile> {
+        self.lock().lru.get(key).cloned()
+    }
+
+    /// Merges an intermediate-version tile into the cache (see
+    /// [`TileCache::peek`]).
+    pub fn merge(&self, key: TileKey, tile: Tile) {
+        let mut g = self.lock();
+        self.store(&mut g, key, tile);
     }
 
     /// Blocks until the awaited tile is published; `None` if its computation

@@ -60,6 +60,15 @@ pub struct Step {
     pub passes: u32,
 }
 
+/// The voxels needed at the start of a correction step (after `step`
+/// steps): those an earlier request cached, with their triples, and the
+/// tiles of the others, to cache once computed.
+struct StepBoundary {
+    step: usize,
+    known: Vec<([i64; 3], [u32; 3])>,
+    fresh: Wanted,
+}
+
 /// Counters gathered while serving one request.
 pub(crate) struct Acc {
     voxels: Vec<AtomicU64>,
@@ -342,19 +351,57 @@ impl Engine {
         };
         let side = self.params.subpass_side as i64;
         cancel::check(&acc.cancel);
-        let chain = plan::backward(&targets, steps, self.radius, side, barrier_cell);
+        // Values at the start of a later step that an earlier request left
+        // in the cache end the chain there; the rest are published once
+        // computed, so that overlapping requests (a sweeping cut) share the
+        // earlier steps instead of redoing them.
+        let mut boundaries: Vec<StepBoundary> = Vec::new();
+        let chain = plan::backward(
+            &targets,
+            steps,
+            self.radius,
+            side,
+            barrier_cell,
+            |si, need| {
+                if !acc.dry {
+                    boundaries.push(self.resume_step(k, si, need));
+                }
+            },
+        );
         cancel::check(&acc.cancel);
         acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
         acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
-        let triples = self.version0(k, &chain.need, acc);
+        let mut triples = self.version0(k, &chain.need, acc);
+        if let Some(b) = boundaries
+            .iter()
+            .flat_map(|b| &b.known)
+            .map(|(p, _)| Box3::new(*p, [1, 1, 1]))
+            .reduce(|a, b| a.union(&b))
+        {
+            let mut wider = Grid::new(triples.bounds.union(&b));
+            wider.copy_from(&triples);
+            triples = wider;
+        }
         let triples = if acc.dry {
             triples
         } else {
             let mut work = Work::new(&self.cands, k, triples);
             let corrector = Corrector::new(&self.cands, k);
             let mut step_start: Option<(usize, Work)> = None;
+            let mut current_step = 0;
             for (si, voxels) in &chain.subpasses {
                 cancel::check(&acc.cancel);
+                if *si != current_step {
+                    current_step = *si;
+                    if let Some(b) = boundaries.iter().find(|b| b.step == *si) {
+                        self.publish_step(k, b, &work);
+                        for &(p, t) in &b.known {
+                            let i = work.triples.index(p);
+                            work.triples.data[i] = t;
+                            work.colours.data[i] = colour(&self.cands, k, t);
+                        }
+                    }
+                }
                 if barrier_cell.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
                     step_start = Some((*si, work.clone()));
                 }
@@ -390,6 +437,69 @@ impl Engine {
                 (t, Arc::new(TileData { grid, mask }))
             })
             .collect()
+    }
+
+    /// Looks up the voxels of `need` (needed at the start of step `si` of
+    /// level `k`) among the cached versions after `si` steps, removes the
+    /// known ones from `need` and returns them with the tiles to publish.
+    fn resume_step(&self, k: usize, si: usize, need: &mut plan::Mask) -> StepBoundary {
+        let b = need.bounds();
+        let zs: Vec<i64> = (b.lo[2]..b.hi[2]).collect();
+        let members: Vec<Vec<[i64; 3]>> = zs.par_iter().map(|&z| need.layer(z).collect()).collect();
+        let mut wanted = Wanted::new();
+        for p in members.iter().flatten() {
+            *wanted.entry(Self::tile_of(*p)).or_default() |= Self::bit_of(*p);
+        }
+        let mut known = Vec::new();
+        let mut fresh = Wanted::new();
+        for (cell, want) in wanted {
+            let cached = self.cache.peek(&self.step_key(k, si, cell));
+            let have = cached.as_ref().map_or(0, |t| t.mask & want);
+            if let Some(t) = &cached {
+                let tile = Self::tile_box(cell);
+                for i in (0..64).filter(|i| have >> i & 1 == 1) {
+                    let p = position(&tile, i);
+                    known.push((p, t.grid.get(p)));
+                }
+            }
+            if want & !have != 0 {
+                fresh.insert(cell, want & !have);
+            }
+        }
+        for (p, _) in &known {
+            need.remove(*p);
+        }
+        StepBoundary {
+            step: si,
+            known,
+            fresh,
+        }
+    }
+
+    /// Caches the values `work` holds at the start of step `b.step` for the
+    /// voxels this request computed there.
+    fn publish_step(&self, k: usize, b: &StepBoundary, work: &Work) {
+        let cells: Vec<([i64; 3], u64)> = b.fresh.iter().map(|(c, m)| (*c, *m)).collect();
+        let tiles: Vec<([i64; 3], Tile)> = cells
+            .par_iter()
+            .map(|&(cell, mask)| {
+                let mut grid = Grid::new(Self::tile_box(cell));
+                grid.copy_from(&work.triples);
+                (cell, Arc::new(TileData { grid, mask }))
+            })
+            .collect();
+        for (cell, t) in tiles {
+            self.cache.merge(self.step_key(k, b.step, cell), t);
+        }
+    }
+
+    fn step_key(&self, k: usize, si: usize, cell: [i64; 3]) -> TileKey {
+        TileKey {
+            texture: self.key,
+            level: k as u8,
+            step: si as u8,
+            cell,
+        }
     }
 
     /// Version 0 of level `k` at the voxels of `need` (a grid over its

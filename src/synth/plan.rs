@@ -112,6 +112,15 @@ impl Mask {
         }
     }
 
+    /// Removes `p` (which must lie inside the box).
+    #[inline]
+    pub fn remove(&mut self, p: [i64; 3]) {
+        let i = self.shape.index(p);
+        if self.flags[i].swap(false, Ordering::Relaxed) {
+            self.count -= 1;
+        }
+    }
+
     /// Adds `p` without keeping the count (call [`Mask::recount`] after a
     /// batch of marks); the hot path of dependency planning, callable from
     /// many threads at once.
@@ -203,12 +212,18 @@ impl LevelChain {
 /// window: a neighbour is needed at the previous subpass's version, or, when
 /// `cell` is set and the neighbour lies across the step's cell wall, at the
 /// version the step started from (Zhang et al.'s barrier).
+///
+/// Between steps, `at_step_start(s, need)` sees the voxels needed at the
+/// start of step `s` (s ≥ 1) and may remove those whose value there is
+/// already known (cached from an earlier request), which cuts their whole
+/// chain through the earlier steps.
 pub fn backward(
     targets: &[[i64; 3]],
     steps: &[Step],
     radius: i64,
     side: i64,
     cell: Option<i64>,
+    mut at_step_start: impl FnMut(usize, &mut Mask),
 ) -> LevelChain {
     let classes = side * side * side;
     let first = targets.first().copied().unwrap_or([0; 3]);
@@ -265,6 +280,9 @@ pub fn backward(
         for q in extra {
             need.insert(q);
         }
+        if si > 0 {
+            at_step_start(si, &mut need);
+        }
     }
     subpasses.reverse();
     // The box was sized for the worst-case growth; the working grids of
@@ -293,7 +311,7 @@ pub fn exact_chain(
         if points.is_empty() {
             break;
         }
-        let chain = backward(&points, steps, radius, side, cell);
+        let chain = backward(&points, steps, radius, side, cell, |_, _| {});
         out.push(LevelPlan {
             voxels: chain.need.count(),
             corrections: chain.corrections(),
