@@ -61,11 +61,11 @@ pub struct Step {
 }
 
 /// The voxels needed at the start of a correction step (after `step`
-/// steps): those an earlier request cached, with their triples, and the
-/// tiles of the others, to cache once computed.
+/// steps): those an earlier request cached (per tile: the voxels used and
+/// the cached tile), and the tiles of the others, to cache once computed.
 struct StepBoundary {
     step: usize,
-    known: Vec<([i64; 3], [u32; 3])>,
+    known: Vec<([i64; 3], u64, Tile)>,
     fresh: Wanted,
 }
 
@@ -371,17 +371,22 @@ impl Engine {
         cancel::check(&acc.cancel);
         acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
         acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
-        let mut triples = self.version0(k, &chain.need, acc);
-        if let Some(b) = boundaries
+        let known_box = boundaries
             .iter()
             .flat_map(|b| &b.known)
-            .map(|(p, _)| Box3::new(*p, [1, 1, 1]))
-            .reduce(|a, b| a.union(&b))
-        {
-            let mut wider = Grid::new(triples.bounds.union(&b));
-            wider.copy_from(&triples);
-            triples = wider;
-        }
+            .map(|(cell, _, _)| Self::tile_box(*cell))
+            .reduce(|a, b| a.union(&b));
+        let triples = match known_box {
+            // Everything came from cached steps: no version 0 at all.
+            Some(kb) if chain.need.count() == 0 => Grid::new(kb),
+            Some(kb) => {
+                let v0 = self.version0(k, &chain.need, acc);
+                let mut wider = Grid::new(v0.bounds.union(&kb));
+                wider.copy_from(&v0);
+                wider
+            }
+            None => self.version0(k, &chain.need, acc),
+        };
         let triples = if acc.dry {
             triples
         } else {
@@ -395,10 +400,14 @@ impl Engine {
                     current_step = *si;
                     if let Some(b) = boundaries.iter().find(|b| b.step == *si) {
                         self.publish_step(k, b, &work);
-                        for &(p, t) in &b.known {
-                            let i = work.triples.index(p);
-                            work.triples.data[i] = t;
-                            work.colours.data[i] = colour(&self.cands, k, t);
+                        for (cell, have, tile) in &b.known {
+                            let cell = Self::tile_box(*cell);
+                            for i in (0..64).filter(|i| have >> i & 1 == 1) {
+                                let t = tile.grid.data[i];
+                                let w = work.triples.index(position(&cell, i));
+                                work.triples.data[w] = t;
+                                work.colours.data[w] = colour(&self.cands, k, t);
+                            }
                         }
                     }
                 }
@@ -444,30 +453,44 @@ impl Engine {
     /// known ones from `need` and returns them with the tiles to publish.
     fn resume_step(&self, k: usize, si: usize, need: &mut plan::Mask) -> StepBoundary {
         let b = need.bounds();
-        let zs: Vec<i64> = (b.lo[2]..b.hi[2]).collect();
-        let members: Vec<Vec<[i64; 3]>> = zs.par_iter().map(|&z| need.layer(z).collect()).collect();
-        let mut wanted = Wanted::new();
-        for p in members.iter().flatten() {
-            *wanted.entry(Self::tile_of(*p)).or_default() |= Self::bit_of(*p);
-        }
+        let lo = Self::tile_of(b.lo);
+        let hi = Self::tile_of(b.hi.map(|v| v - 1));
+        let (tx, ty) = ((hi[0] - lo[0] + 1) as usize, (hi[1] - lo[1] + 1) as usize);
+        // The members' tile masks, one dense layer of tiles at a time.
+        let layers: Vec<(i64, Vec<u64>)> = (lo[2]..=hi[2])
+            .into_par_iter()
+            .map(|tz| {
+                let mut masks = vec![0u64; tx * ty];
+                for z in (tz * TILE).max(b.lo[2])..((tz + 1) * TILE).min(b.hi[2]) {
+                    for p in need.layer(z) {
+                        let c = Self::tile_of(p);
+                        masks[(c[1] - lo[1]) as usize * tx + (c[0] - lo[0]) as usize] |=
+                            Self::bit_of(p);
+                    }
+                }
+                (tz, masks)
+            })
+            .collect();
         let mut known = Vec::new();
         let mut fresh = Wanted::new();
-        for (cell, want) in wanted {
-            let cached = self.cache.peek(&self.step_key(k, si, cell));
-            let have = cached.as_ref().map_or(0, |t| t.mask & want);
-            if let Some(t) = &cached {
-                let tile = Self::tile_box(cell);
-                for i in (0..64).filter(|i| have >> i & 1 == 1) {
-                    let p = position(&tile, i);
-                    known.push((p, t.grid.get(p)));
+        for (tz, masks) in layers {
+            for (i, &want) in masks.iter().enumerate().filter(|(_, m)| **m != 0) {
+                let cell = [lo[0] + (i % tx) as i64, lo[1] + (i / tx) as i64, tz];
+                let cached = self.cache.peek(&self.step_key(k, si, cell));
+                let have = cached.as_ref().map_or(0, |t| t.mask & want);
+                if let Some(t) = cached.filter(|_| have != 0) {
+                    known.push((cell, have, t));
+                }
+                if want & !have != 0 {
+                    fresh.insert(cell, want & !have);
                 }
             }
-            if want & !have != 0 {
-                fresh.insert(cell, want & !have);
-            }
         }
-        for (p, _) in &known {
-            need.remove(*p);
+        for (cell, have, _) in &known {
+            let tile = Self::tile_box(*cell);
+            for i in (0..64).filter(|i| have >> i & 1 == 1) {
+                need.remove(position(&tile, i));
+            }
         }
         StepBoundary {
             step: si,
