@@ -187,6 +187,9 @@ struct SourceArgs {
     /// Subpass block side s (s³ subpasses per pass; 1 disables subpasses).
     #[arg(long, default_value_t = 2)]
     subpass_side: u32,
+    /// Gain on correction neighbourhoods around their mean (1 disables).
+    #[arg(long, default_value_t = solidtex::params::DEFAULT_CONTRAST)]
+    contrast: f32,
     /// Level of detail (0 = finest).
     #[arg(long, default_value_t = 0)]
     lod: u32,
@@ -337,6 +340,7 @@ fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
         grid: src.grid,
         jitter: src.jitter,
         subpass_side: src.subpass_side,
+        contrast: src.contrast,
         ..SynthParams::default()
     };
     Ok(Texture::new(

@@ -90,6 +90,10 @@ impl std::str::FromStr for Scheme {
     }
 }
 
+/// Default [`SynthParams::contrast`], measured on the shared exemplars
+/// (docs/quality.md).
+pub const DEFAULT_CONTRAST: f32 = 1.6;
+
 /// Parameters of the synthesis itself; changing them changes the voxels but
 /// not the precomputed candidates.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -109,6 +113,12 @@ pub struct SynthParams {
     pub jitter: f32,
     /// Also correct the initialisation level after jitter.
     pub correct_init_level: bool,
+    /// Gain on a correction's neighbourhood colours around their mean
+    /// before matching (1 leaves them as they are). A voxel's colour is the
+    /// mean of three exemplar colours, so synthesized neighbourhoods are
+    /// flatter than the exemplar's and, matched as they are, pick its calm
+    /// regions: rare dark or bright features fade (docs/quality.md).
+    pub contrast: f32,
 }
 
 impl Default for SynthParams {
@@ -121,6 +131,7 @@ impl Default for SynthParams {
             grid: 12,
             jitter: 1.0,
             correct_init_level: true,
+            contrast: DEFAULT_CONTRAST,
         }
     }
 }
@@ -136,6 +147,14 @@ impl SynthParams {
                 name: "jitter",
                 value: self.jitter as f64,
                 min: 0.0,
+                max: 4.0,
+            });
+        }
+        if !(1.0..=4.0).contains(&self.contrast) || self.contrast.is_nan() {
+            return Err(Error::InvalidRange {
+                name: "contrast",
+                value: self.contrast as f64,
+                min: 1.0,
                 max: 4.0,
             });
         }

@@ -293,12 +293,14 @@ mod tests {
             ("scheme", "dual-grid"),
             ("jitter", "0.5"),
             ("correct_init_level", "false"),
+            ("contrast", "1.25"),
         ];
         let flat = TextureParams::flat_from_pairs(pairs.into_iter());
         let p = TextureParams::from_flat(&flat).unwrap();
         assert_eq!(p.synth.seed, 7);
         assert_eq!(p.synth.jitter, 0.5);
         assert!(!p.synth.correct_init_level);
+        assert_eq!(p.synth.contrast, 1.25);
     }
 
     #[test]

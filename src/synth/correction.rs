@@ -96,6 +96,9 @@ pub struct Corrector<'a> {
     max_3d: usize,
     /// Each plane's exemplar colours at this level.
     plane_colours: [&'a [[f32; 3]]; 3],
+    /// Gain on neighbourhood colours around their mean (see
+    /// [`crate::SynthParams::contrast`]).
+    contrast: f32,
 }
 
 /// Weight (out of 256) of a coherent triple's distance: favouring triples
@@ -111,8 +114,9 @@ const COHERENT_WEIGHT: u32 = 128;
 const FINE_3D_CANDIDATES: usize = 4;
 
 impl<'a> Corrector<'a> {
-    /// A corrector for level `k`.
-    pub fn new(cands: &'a Candidates, k: usize) -> Self {
+    /// A corrector for level `k` whose queries stretch neighbourhood
+    /// colours by `contrast` around their mean.
+    pub fn new(cands: &'a Candidates, k: usize, contrast: f32) -> Self {
         Corrector {
             level: cands.level(k),
             k,
@@ -121,6 +125,7 @@ impl<'a> Corrector<'a> {
             offsets: [0, 1, 2].map(|p| cands.level(k).appearance[p].pca.mean_offsets()),
             joint_offsets: cands.level(k).joint_pca().mean_offsets(),
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
+            contrast,
             max_3d: if k == 0 {
                 FINE_3D_CANDIDATES
             } else {
@@ -231,6 +236,9 @@ impl<'a> Corrector<'a> {
                     o += 3;
                 }
             }
+            if self.contrast != 1.0 {
+                stretch(&mut s.neigh[..o], self.contrast);
+            }
             let app = &self.level.appearance[plane];
             let dims = app.pca.dims;
             app.pca.project_with(
@@ -307,6 +315,23 @@ impl<'a> Corrector<'a> {
             }
         }
         best.1
+    }
+}
+
+/// Moves RGB colours away from their mean by `gain` (per channel).
+fn stretch(rgb: &mut [f32], gain: f32) {
+    let n = (rgb.len() / 3) as f32;
+    let mut mean = [0f32; 3];
+    for c in rgb.chunks_exact(3) {
+        for ch in 0..3 {
+            mean[ch] += c[ch];
+        }
+    }
+    let mean = mean.map(|m| m / n);
+    for c in rgb.chunks_exact_mut(3) {
+        for ch in 0..3 {
+            c[ch] = mean[ch] + gain * (c[ch] - mean[ch]);
+        }
     }
 }
 

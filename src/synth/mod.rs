@@ -391,7 +391,7 @@ impl Engine {
             triples
         } else {
             let mut work = Work::new(&self.cands, k, triples);
-            let corrector = Corrector::new(&self.cands, k);
+            let corrector = Corrector::new(&self.cands, k, self.params.contrast);
             let mut step_start: Option<(usize, Work)> = None;
             let mut current_step = 0;
             for (si, voxels) in &chain.subpasses {
