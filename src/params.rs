@@ -142,35 +142,56 @@ impl SynthParams {
         range("passes", self.passes, 0, 6)?;
         range("subpass_side", self.subpass_side, 1, 3)?;
         range("grid", self.grid, 4, 64)?;
-        if !(0.0..=4.0).contains(&self.jitter) || self.jitter.is_nan() {
-            return Err(Error::InvalidRange {
-                name: "jitter",
-                value: self.jitter as f64,
-                min: 0.0,
-                max: 4.0,
-            });
-        }
-        if !(1.0..=4.0).contains(&self.contrast) || self.contrast.is_nan() {
-            return Err(Error::InvalidRange {
-                name: "contrast",
-                value: self.contrast as f64,
-                min: 1.0,
-                max: 4.0,
-            });
-        }
+        range("jitter", self.jitter, 0.0, 4.0)?;
+        range("contrast", self.contrast, 1.0, 4.0)?;
         Ok(())
     }
 }
 
-fn range(name: &'static str, v: u32, min: u32, max: u32) -> Result<()> {
+/// Checks `min ≤ v ≤ max` (NaN fails the test and is refused too).
+fn range<T: PartialOrd + Into<f64> + Copy>(name: &'static str, v: T, min: T, max: T) -> Result<()> {
     if (min..=max).contains(&v) {
         Ok(())
     } else {
         Err(Error::InvalidRange {
             name,
-            value: v as f64,
-            min: min as f64,
-            max: max as f64,
+            value: v.into(),
+            min: min.into(),
+            max: max.into(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn synthesis_parameters_outside_their_ranges_are_refused() {
+        assert!(SynthParams::default().validate().is_ok());
+        for contrast in [0.5, 4.5, f32::NAN] {
+            let p = SynthParams {
+                contrast,
+                ..SynthParams::default()
+            };
+            assert!(
+                matches!(
+                    p.validate(),
+                    Err(Error::InvalidRange {
+                        name: "contrast",
+                        ..
+                    })
+                ),
+                "contrast {contrast} accepted"
+            );
+        }
+        let p = SynthParams {
+            passes: 7,
+            ..SynthParams::default()
+        };
+        assert!(matches!(
+            p.validate(),
+            Err(Error::InvalidRange { name: "passes", .. })
+        ));
     }
 }
