@@ -130,6 +130,10 @@ struct BenchArgs {
     /// Side of the slices, cuts and sweep planes of the load runs.
     #[arg(long, default_value_t = 256)]
     load_size: u32,
+    /// Side of the sweep's planes, when it differs from `--load-size` (the
+    /// sweep target is set at 256²).
+    #[arg(long)]
+    sweep_size: Option<u32>,
     /// Clients of the concurrent load run.
     #[arg(long, default_value_t = 32)]
     load_clients: usize,
@@ -487,6 +491,11 @@ fn bench(a: BenchArgs) -> anyhow::Result<()> {
             sweep_lod: if quick { 1 } else { a.sweep_lod },
             // Quick mode shrinks the load too, so CI stays in seconds.
             side: if quick { 32 } else { a.load_size },
+            sweep_side: if quick {
+                32
+            } else {
+                a.sweep_size.unwrap_or(a.load_size)
+            },
             clients: a.load_clients,
             duration: a.load_duration,
             cache_bytes: 512 << 20,

@@ -23,8 +23,10 @@ pub struct LoadOptions {
     pub lod: u32,
     /// Level of detail of the sweep.
     pub sweep_lod: u32,
-    /// Side of slices, cuts and sweep planes.
+    /// Side of slices and cuts.
     pub side: u32,
+    /// Side of the sweep's planes.
+    pub sweep_side: u32,
     /// Clients of the concurrent run.
     pub clients: usize,
     /// Duration of each run.
@@ -131,7 +133,7 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
             Some("p99 ≤ 3 s; no errors but 503; RSS ≤ cache + 256 MiB"),
         ),
         (
-            format!("sweep, axis {}², lod {}", o.side, o.sweep_lod),
+            format!("sweep, axis {}², lod {}", o.sweep_side, o.sweep_lod),
             1,
             Some(SweepPlane::Axis),
             Some("≥ 20 cuts/s at 256², lod 0"),
@@ -152,7 +154,11 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
                 duration: o.duration,
                 seed: i as u64 + 1,
                 lod: if sweep.is_some() { o.sweep_lod } else { o.lod },
-                side: o.side,
+                side: if sweep.is_some() {
+                    o.sweep_side
+                } else {
+                    o.side
+                },
                 sweep,
                 timeout: Duration::from_secs(600),
                 ..LoadConfig::new(base.clone(), id.clone())
