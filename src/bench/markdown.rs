@@ -160,7 +160,7 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
     } else {
         let _ = writeln!(
             w,
-            "`solidtex serve` in a child process (default settings: 2 jobs at once, \
+            "`solidtex serve` in a child process (default settings: jobs at once = half the cores, \
              16 queued, 2 HTTP threads, rayon on every core, 512 MiB cache; the queue \
              wait limit is the command's `--load-max-wait`, 1 s unless given), restarted \
              cold for each run, loaded by `solidtex loadtest` over loopback; the client \
