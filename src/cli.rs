@@ -142,7 +142,7 @@ struct BenchArgs {
     load_duration: std::time::Duration,
     /// The loaded server's `--max-queue-wait`, seconds: how long a job may
     /// wait for a slot before it is answered 503.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = solidtex::server::config::parse_wait)]
     load_max_wait: f64,
     /// Write the results as a Markdown page (e.g. BENCHMARKS.md).
     #[arg(long)]

@@ -87,3 +87,16 @@ fn quick_bench_measures_everything_and_writes_the_page() {
         assert!(md.contains(needle), "page lacks {needle:?}:\n{md}");
     }
 }
+
+#[test]
+fn a_bad_wait_limit_is_refused_before_anything_runs() {
+    for bad in ["0", "soon", "1e9"] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
+            .args(["bench", "--quick", "--load", "--load-max-wait", bad])
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "--load-max-wait {bad} accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("--load-max-wait"), "{err}");
+    }
+}

@@ -10,6 +10,10 @@
 //! exemplars the blend lowers the histogram distance to the exemplar by
 //! 4–27 % against means alone.
 //!
+//! Before matching, the gathered colours are stretched around their mean
+//! by the texture's `contrast`: averaged voxel colours are flatter than any
+//! exemplar patch, and flat queries drift to the exemplar's calm regions.
+//!
 //! Candidates come in two stages. For each plane, the 3×3 in-plane
 //! neighbours' triples, moved back by their offset, point at exemplar
 //! pixels; those pixels' 2D similarity sets are compared in appearance space

@@ -337,12 +337,7 @@ impl Engine {
     ) -> Vec<([i64; 3], Tile)> {
         let mut targets = Vec::with_capacity(tiles.len() * (TILE * TILE * TILE) as usize);
         for &(t, mask) in tiles {
-            let b = Self::tile_box(t);
-            for i in 0..b.volume() as usize {
-                if mask >> i & 1 == 1 {
-                    targets.push(position(&b, i));
-                }
-            }
+            targets.extend(tile_voxels(t, mask).map(|(_, p)| p));
         }
         let steps = self.steps_at(k);
         let barrier_cell = match self.params.scheme {
@@ -401,10 +396,9 @@ impl Engine {
                     if let Some(b) = boundaries.iter().find(|b| b.step == *si) {
                         self.publish_step(k, b, &work);
                         for (cell, have, tile) in &b.known {
-                            let cell = Self::tile_box(*cell);
-                            for i in (0..64).filter(|i| have >> i & 1 == 1) {
+                            for (i, p) in tile_voxels(*cell, *have) {
                                 let t = tile.grid.data[i];
-                                let w = work.triples.index(position(&cell, i));
+                                let w = work.triples.index(p);
                                 work.triples.data[w] = t;
                                 work.colours.data[w] = colour(&self.cands, k, t);
                             }
@@ -452,44 +446,22 @@ impl Engine {
     /// level `k`) among the cached versions after `si` steps, removes the
     /// known ones from `need` and returns them with the tiles to publish.
     fn resume_step(&self, k: usize, si: usize, need: &mut plan::Mask) -> StepBoundary {
-        let b = need.bounds();
-        let lo = Self::tile_of(b.lo);
-        let hi = Self::tile_of(b.hi.map(|v| v - 1));
-        let (tx, ty) = ((hi[0] - lo[0] + 1) as usize, (hi[1] - lo[1] + 1) as usize);
-        // The members' tile masks, one dense layer of tiles at a time.
-        let layers: Vec<(i64, Vec<u64>)> = (lo[2]..=hi[2])
-            .into_par_iter()
-            .map(|tz| {
-                let mut masks = vec![0u64; tx * ty];
-                for z in (tz * TILE).max(b.lo[2])..((tz + 1) * TILE).min(b.hi[2]) {
-                    for p in need.layer(z) {
-                        let c = Self::tile_of(p);
-                        masks[(c[1] - lo[1]) as usize * tx + (c[0] - lo[0]) as usize] |=
-                            Self::bit_of(p);
-                    }
-                }
-                (tz, masks)
-            })
-            .collect();
+        let wanted = tile_masks(need, 1);
         let mut known = Vec::new();
         let mut fresh = Wanted::new();
-        for (tz, masks) in layers {
-            for (i, &want) in masks.iter().enumerate().filter(|(_, m)| **m != 0) {
-                let cell = [lo[0] + (i % tx) as i64, lo[1] + (i / tx) as i64, tz];
-                let cached = self.cache.peek(&self.step_key(k, si, cell));
-                let have = cached.as_ref().map_or(0, |t| t.mask & want);
-                if let Some(t) = cached.filter(|_| have != 0) {
-                    known.push((cell, have, t));
-                }
-                if want & !have != 0 {
-                    fresh.insert(cell, want & !have);
-                }
+        for (cell, want) in wanted {
+            let cached = self.cache.peek(&self.step_key(k, si, cell));
+            let have = cached.as_ref().map_or(0, |t| t.mask & want);
+            if let Some(t) = cached.filter(|_| have != 0) {
+                known.push((cell, have, t));
+            }
+            if want & !have != 0 {
+                fresh.insert(cell, want & !have);
             }
         }
         for (cell, have, _) in &known {
-            let tile = Self::tile_box(*cell);
-            for i in (0..64).filter(|i| have >> i & 1 == 1) {
-                need.remove(position(&tile, i));
+            for (_, p) in tile_voxels(*cell, *have) {
+                need.remove(p);
             }
         }
         StepBoundary {
@@ -550,39 +522,7 @@ impl Engine {
                 });
             return g;
         }
-        // Parents of the needed voxels, as tile masks over a dense grid of
-        // the parent tiles, gathered layer by layer in parallel.
-        let tile_box = {
-            let lo = Self::tile_of(b.lo.map(|v| v.div_euclid(2)));
-            let hi = Self::tile_of(b.hi.map(|v| (v - 1).div_euclid(2)));
-            Box3::new(lo, [0, 1, 2].map(|a| hi[a] - lo[a] + 1))
-        };
-        let tile_index = |c: [i64; 3]| {
-            let s = tile_box.size();
-            (((c[2] - tile_box.lo[2]) * s[1] + (c[1] - tile_box.lo[1])) * s[0]
-                + (c[0] - tile_box.lo[0])) as usize
-        };
-        let touched: Vec<Vec<(usize, u64)>> = zs
-            .par_iter()
-            .map(|&z| {
-                need.layer(z)
-                    .map(|p| {
-                        let q = p.map(|v| v.div_euclid(2));
-                        (tile_index(Self::tile_of(q)), Self::bit_of(q))
-                    })
-                    .collect()
-            })
-            .collect();
-        let mut masks = vec![0u64; tile_box.volume() as usize];
-        for (i, bit) in touched.into_iter().flatten() {
-            masks[i] |= bit;
-        }
-        let parent_tiles: Wanted = masks
-            .iter()
-            .enumerate()
-            .filter(|(_, m)| **m != 0)
-            .map(|(i, m)| (position(&tile_box, i), *m))
-            .collect();
+        let parent_tiles = tile_masks(need, 2);
         let parents = self.tiles(k + 1, parent_tiles, acc);
         if acc.dry {
             return g;
@@ -768,6 +708,48 @@ impl Engine {
         };
         Ok((rgb, acc.stats()))
     }
+}
+
+/// The voxels of tile `cell` whose bits are set in `mask`, with their
+/// index in the tile.
+fn tile_voxels(cell: [i64; 3], mask: u64) -> impl Iterator<Item = (usize, [i64; 3])> {
+    let b = Engine::tile_box(cell);
+    (0..(TILE * TILE * TILE) as usize)
+        .filter(move |i| mask >> i & 1 == 1)
+        .map(move |i| (i, position(&b, i)))
+}
+
+/// Tile masks of the members of `need` divided by `scale` (1: the members
+/// themselves, 2: their parents one level up), built one dense layer of
+/// tiles at a time in parallel.
+fn tile_masks(need: &plan::Mask, scale: i64) -> Wanted {
+    let b = need.bounds();
+    let lo = Engine::tile_of(b.lo.map(|v| v.div_euclid(scale)));
+    let hi = Engine::tile_of(b.hi.map(|v| (v - 1).div_euclid(scale)));
+    let (tx, ty) = ((hi[0] - lo[0] + 1) as usize, (hi[1] - lo[1] + 1) as usize);
+    let layers: Vec<(i64, Vec<u64>)> = (lo[2]..=hi[2])
+        .into_par_iter()
+        .map(|tz| {
+            let mut masks = vec![0u64; tx * ty];
+            let zs = tz * TILE * scale..(tz + 1) * TILE * scale;
+            for z in zs.start.max(b.lo[2])..zs.end.min(b.hi[2]) {
+                for p in need.layer(z) {
+                    let q = p.map(|v| v.div_euclid(scale));
+                    let c = Engine::tile_of(q);
+                    masks[(c[1] - lo[1]) as usize * tx + (c[0] - lo[0]) as usize] |=
+                        Engine::bit_of(q);
+                }
+            }
+            (tz, masks)
+        })
+        .collect();
+    let mut out = Wanted::new();
+    for (tz, masks) in layers {
+        for (i, &m) in masks.iter().enumerate().filter(|(_, m)| **m != 0) {
+            out.insert([lo[0] + (i % tx) as i64, lo[1] + (i / tx) as i64, tz], m);
+        }
+    }
+    out
 }
 
 #[inline]
