@@ -18,7 +18,10 @@
 //! a level are synthesized together: [`plan::backward`] walks the history
 //! windows back from them to the exact voxels each subpass must correct and
 //! the version-0 voxels needed, whose parents come from the parent level's
-//! tiles (recursively), and only those voxels are computed.
+//! tiles (recursively), and only those voxels are computed. What a request
+//! computes beyond what it was asked for is kept where it is reusable: the
+//! values at the start of later steps, and every voxel corrected in the
+//! last pass (final there), so overlapping requests end their chains on it.
 
 pub mod cache;
 pub mod cancel;
@@ -351,6 +354,10 @@ impl Engine {
         // computed, so that overlapping requests (a sweeping cut) share the
         // earlier steps instead of redoing them.
         let mut boundaries: Vec<StepBoundary> = Vec::new();
+        // Likewise, final values cached by earlier requests end the chain
+        // in the last pass (see `plan::backward`), by forward subpass.
+        let mut finals: HashMap<usize, Vec<KnownVoxel>> = HashMap::new();
+        let mut peeked: HashMap<[i64; 3], Option<Tile>> = HashMap::new();
         let chain = plan::backward(
             &targets,
             steps,
@@ -362,7 +369,32 @@ impl Engine {
                     boundaries.push(self.resume_step(k, si, need));
                 }
             },
+            |forward, voxels| {
+                if acc.dry {
+                    return Vec::new();
+                }
+                let mut found = Vec::new();
+                voxels.retain(|&q| {
+                    let t = Self::tile_of(q);
+                    let tile = peeked
+                        .entry(t)
+                        .or_insert_with(|| self.cache.peek(&self.step_key(k, 0, t)));
+                    match tile {
+                        Some(tile) if tile.mask & Self::bit_of(q) != 0 => {
+                            found.push((q, tile.grid.get(q)));
+                            false
+                        }
+                        _ => true,
+                    }
+                });
+                let removed = found.iter().map(|f| f.0).collect();
+                if !found.is_empty() {
+                    finals.insert(forward, found);
+                }
+                removed
+            },
         );
+        drop(peeked);
         cancel::check(&acc.cancel);
         acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
         acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
@@ -370,6 +402,12 @@ impl Engine {
             .iter()
             .flat_map(|b| &b.known)
             .map(|(cell, _, _)| Self::tile_box(*cell))
+            .chain(
+                finals
+                    .values()
+                    .flatten()
+                    .map(|(p, _)| Box3::new(*p, [1, 1, 1])),
+            )
             .reduce(|a, b| a.union(&b));
         let triples = match known_box {
             // Everything came from cached steps: no version 0 at all.
@@ -389,7 +427,7 @@ impl Engine {
             let corrector = Corrector::new(&self.cands, k, self.params.contrast);
             let mut step_start: Option<(usize, Work)> = None;
             let mut current_step = 0;
-            for (si, voxels) in &chain.subpasses {
+            for (forward, (si, voxels)) in chain.subpasses.iter().enumerate() {
                 cancel::check(&acc.cancel);
                 if *si != current_step {
                     current_step = *si;
@@ -429,16 +467,49 @@ impl Engine {
                     work.triples.data[i] = t;
                     work.colours.data[i] = c;
                 }
+                for &(p, t) in finals.get(&forward).into_iter().flatten() {
+                    let i = work.triples.index(p);
+                    work.triples.data[i] = t;
+                    work.colours.data[i] = colour(&self.cands, k, t);
+                }
             }
             work.triples
         };
-        tiles
-            .par_iter()
-            .map(|&(t, mask)| {
-                let mut grid = Grid::new(Self::tile_box(t));
-                grid.copy_from(&triples);
-                (t, Arc::new(TileData { grid, mask }))
-            })
+        // Every voxel corrected in the last subpass pass holds its final
+        // value, though only the wanted ones were asked for: keep them all,
+        // so that a neighbouring request (the next plane of a sweeping cut)
+        // finds them instead of walking their chains again.
+        let mut finished = if acc.dry {
+            Wanted::new()
+        } else {
+            let classes = (side * side * side) as usize;
+            let last = chain.subpasses.len().saturating_sub(classes);
+            let mut finished = Wanted::new();
+            for (_, voxels) in &chain.subpasses[last..] {
+                for &p in voxels {
+                    *finished.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
+                }
+            }
+            finished
+        };
+        let own: Vec<([i64; 3], u64)> = tiles
+            .iter()
+            .map(|&(t, mask)| (t, mask | finished.remove(&t).unwrap_or(0)))
+            .collect();
+        let tile_of_grid = |t: [i64; 3], mask: u64| {
+            let mut grid = Grid::new(Self::tile_box(t));
+            grid.copy_from(&triples);
+            Arc::new(TileData { grid, mask })
+        };
+        let spare: Vec<([i64; 3], Tile)> = finished
+            .into_par_iter()
+            .map(|(t, mask)| (t, tile_of_grid(t, mask)))
+            .collect();
+        for (t, tile) in spare {
+            self.cache.merge(self.step_key(k, 0, t), tile);
+        }
+        own.par_iter()
+            .map(|&(t, mask)| (t, tile_of_grid(t, mask)))
             .collect()
     }
 
@@ -709,6 +780,9 @@ impl Engine {
         Ok((rgb, acc.stats()))
     }
 }
+
+/// A voxel whose value at some version is known, with that value.
+type KnownVoxel = ([i64; 3], [u32; 3]);
 
 /// The voxels of tile `cell` whose bits are set in `mask`, with their
 /// index in the tile.

@@ -217,6 +217,13 @@ impl LevelChain {
 /// start of step `s` (s ≥ 1) and may remove those whose value there is
 /// already known (cached from an earlier request), which cuts their whole
 /// chain through the earlier steps.
+///
+/// In the last pass, a voxel's correction produces its final value, so
+/// `known_final(subpass, voxels)` (the subpass's index in forward order)
+/// may take out of `voxels` those whose final value is known and return
+/// them: they are not corrected (their chain stops), and the synthesis
+/// writes their final value into place right after that subpass, which is
+/// when a correction would have put it there.
 pub fn backward(
     targets: &[[i64; 3]],
     steps: &[Step],
@@ -224,6 +231,7 @@ pub fn backward(
     side: i64,
     cell: Option<i64>,
     mut at_step_start: impl FnMut(usize, &mut Mask),
+    mut known_final: impl FnMut(usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
 ) -> LevelChain {
     let classes = side * side * side;
     let first = targets.first().copied().unwrap_or([0; 3]);
@@ -239,9 +247,13 @@ pub fn backward(
         need.insert(*p);
     }
     let mut subpasses = Vec::new();
+    let total: i64 = steps.iter().map(|s| s.passes as i64 * classes).sum();
+    let mut forward_end = total;
     for (si, step) in steps.iter().enumerate().rev() {
         let mut start = Mask::new(need.bounds());
-        for t in (0..step.passes as i64 * classes).rev() {
+        let step_subpasses = step.passes as i64 * classes;
+        let first_of_step = forward_end - step_subpasses;
+        for t in (0..step_subpasses).rev() {
             let class = t % classes;
             let phase = [class % side, (class / side) % side, class / (side * side)];
             let mut corrected = Vec::new();
@@ -250,6 +262,12 @@ pub fn backward(
                     corrected.push(v);
                 }
             });
+            let forward = first_of_step + t;
+            if forward >= total - classes {
+                for q in known_final(forward as usize, &mut corrected) {
+                    need.remove(q);
+                }
+            }
             // The voxels of one subpass are independent: they mark their
             // reads in parallel.
             corrected
@@ -283,6 +301,7 @@ pub fn backward(
         if si > 0 {
             at_step_start(si, &mut need);
         }
+        forward_end = first_of_step;
     }
     subpasses.reverse();
     // The box was sized for the worst-case growth; the working grids of
@@ -311,7 +330,15 @@ pub fn exact_chain(
         if points.is_empty() {
             break;
         }
-        let chain = backward(&points, steps, radius, side, cell, |_, _| {});
+        let chain = backward(
+            &points,
+            steps,
+            radius,
+            side,
+            cell,
+            |_, _| {},
+            |_, _| Vec::new(),
+        );
         out.push(LevelPlan {
             voxels: chain.need.count(),
             corrections: chain.corrections(),
