@@ -136,11 +136,12 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
 }
 
 /// A cut sweeping one voxel at a time reads what neighbouring planes left
-/// in the cache: the values at the start of later correction steps, and
-/// the final values of every voxel their last pass corrected (which ends
-/// chains inside that pass, and serves some planes outright). The same
-/// bytes as cold planes, with far fewer corrections, also when the cache is
-/// too small to keep everything.
+/// in the cache: the value at the end of each correction step of every
+/// voxel their steps' last passes corrected (which ends chains at step
+/// boundaries and inside those passes, and serves some planes outright).
+/// The same bytes as cold planes, with far fewer corrections (13 % of the
+/// cold planes' when written), also when the cache is too small to keep
+/// everything.
 #[test]
 fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
     let slice = |t: &Texture, z: i64| t.slice(Axis::Z, z, -4, 3, 20, 20, 0).unwrap();
@@ -161,7 +162,7 @@ fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
         }
     }
     assert!(
-        swept_corrections * 10 < cold_corrections * 4,
+        swept_corrections * 4 < cold_corrections,
         "a sweep corrected {swept_corrections} finest voxels, cold planes {cold_corrections}"
     );
     assert!(

@@ -19,9 +19,10 @@
 //! windows back from them to the exact voxels each subpass must correct and
 //! the version-0 voxels needed, whose parents come from the parent level's
 //! tiles (recursively), and only those voxels are computed. What a request
-//! computes beyond what it was asked for is kept where it is reusable: the
-//! values at the start of later steps, and every voxel corrected in the
-//! last pass (final there), so overlapping requests end their chains on it.
+//! computes beyond what it was asked for is kept where it is reusable: every
+//! voxel corrected in a step's last pass, with its value at the end of the
+//! step (final after the last step), so overlapping requests end their
+//! chains on it.
 
 pub mod cache;
 pub mod cancel;
@@ -64,12 +65,11 @@ pub struct Step {
 }
 
 /// The voxels needed at the start of a correction step (after `step`
-/// steps): those an earlier request cached (per tile: the voxels used and
-/// the cached tile), and the tiles of the others, to cache once computed.
+/// steps) that an earlier request cached: per tile, the voxels used and
+/// the cached tile.
 struct StepBoundary {
     step: usize,
     known: Vec<([i64; 3], u64, Tile)>,
-    fresh: Wanted,
 }
 
 /// Counters gathered while serving one request.
@@ -350,14 +350,14 @@ impl Engine {
         let side = self.params.subpass_side as i64;
         cancel::check(&acc.cancel);
         // Values at the start of a later step that an earlier request left
-        // in the cache end the chain there; the rest are published once
-        // computed, so that overlapping requests (a sweeping cut) share the
-        // earlier steps instead of redoing them.
+        // in the cache end the chain there, so that overlapping requests (a
+        // sweeping cut) share the earlier steps instead of redoing them.
         let mut boundaries: Vec<StepBoundary> = Vec::new();
-        // Likewise, final values cached by earlier requests end the chain
-        // in the last pass (see `plan::backward`), by forward subpass.
-        let mut finals: HashMap<usize, Vec<KnownVoxel>> = HashMap::new();
-        let mut peeked: HashMap<[i64; 3], Option<Tile>> = HashMap::new();
+        // Likewise, values at the end of a step that earlier requests
+        // cached end the chain inside the step's last pass (see
+        // `plan::backward`); by forward subpass.
+        let mut ends: HashMap<usize, Vec<KnownVoxel>> = HashMap::new();
+        let mut peeked: HashMap<([i64; 3], usize), Option<Tile>> = HashMap::new();
         let chain = plan::backward(
             &targets,
             steps,
@@ -369,7 +369,7 @@ impl Engine {
                     boundaries.push(self.resume_step(k, si, need));
                 }
             },
-            |forward, voxels| {
+            |si, forward, voxels| {
                 if acc.dry {
                     return Vec::new();
                 }
@@ -377,8 +377,8 @@ impl Engine {
                 voxels.retain(|&q| {
                     let t = Self::tile_of(q);
                     let tile = peeked
-                        .entry(t)
-                        .or_insert_with(|| self.cache.peek(&self.step_key(k, 0, t)));
+                        .entry((t, si))
+                        .or_insert_with(|| self.cache.peek(&self.end_key(k, si, t)));
                     match tile {
                         Some(tile) if tile.mask & Self::bit_of(q) != 0 => {
                             found.push((q, tile.grid.get(q)));
@@ -389,7 +389,7 @@ impl Engine {
                 });
                 let removed = found.iter().map(|f| f.0).collect();
                 if !found.is_empty() {
-                    finals.insert(forward, found);
+                    ends.insert(forward, found);
                 }
                 removed
             },
@@ -403,8 +403,7 @@ impl Engine {
             .flat_map(|b| &b.known)
             .map(|(cell, _, _)| Self::tile_box(*cell))
             .chain(
-                finals
-                    .values()
+                ends.values()
                     .flatten()
                     .map(|(p, _)| Box3::new(*p, [1, 1, 1])),
             )
@@ -420,6 +419,9 @@ impl Engine {
             }
             None => self.version0(k, &chain.need, acc),
         };
+        // Voxels corrected in the current step's last pass: their values at
+        // the end of the step, cached once it ends.
+        let mut ended = Wanted::new();
         let triples = if acc.dry {
             triples
         } else {
@@ -427,12 +429,23 @@ impl Engine {
             let corrector = Corrector::new(&self.cands, k, self.params.contrast);
             let mut step_start: Option<(usize, Work)> = None;
             let mut current_step = 0;
+            // Subpass index where each step's last pass begins.
+            let classes = (side * side * side) as usize;
+            let last_pass: Vec<usize> = steps
+                .iter()
+                .scan(0, |first, s| {
+                    *first += s.passes as usize * classes;
+                    Some(*first - classes)
+                })
+                .collect();
             for (forward, (si, voxels)) in chain.subpasses.iter().enumerate() {
                 cancel::check(&acc.cancel);
                 if *si != current_step {
+                    // The values at the end of the step just done.
+                    self.publish_ended(k, *si, &ended, &work.triples);
+                    ended.clear();
                     current_step = *si;
                     if let Some(b) = boundaries.iter().find(|b| b.step == *si) {
-                        self.publish_step(k, b, &work);
                         for (cell, have, tile) in &b.known {
                             for (i, p) in tile_voxels(*cell, *have) {
                                 let t = tile.grid.data[i];
@@ -467,67 +480,75 @@ impl Engine {
                     work.triples.data[i] = t;
                     work.colours.data[i] = c;
                 }
-                for &(p, t) in finals.get(&forward).into_iter().flatten() {
+                for &(p, t) in ends.get(&forward).into_iter().flatten() {
                     let i = work.triples.index(p);
                     work.triples.data[i] = t;
                     work.colours.data[i] = colour(&self.cands, k, t);
                 }
+                if forward >= last_pass[*si] {
+                    for &p in voxels {
+                        *ended.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
+                    }
+                }
             }
             work.triples
         };
-        // Every voxel corrected in the last subpass pass holds its final
-        // value, though only the wanted ones were asked for: keep them all,
-        // so that a neighbouring request (the next plane of a sweeping cut)
-        // finds them instead of walking their chains again.
-        let mut finished = if acc.dry {
-            Wanted::new()
-        } else {
-            let classes = (side * side * side) as usize;
-            let last = chain.subpasses.len().saturating_sub(classes);
-            let mut finished = Wanted::new();
-            for (_, voxels) in &chain.subpasses[last..] {
-                for &p in voxels {
-                    *finished.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
-                }
-            }
-            finished
-        };
+        // Every voxel corrected in the last pass holds its final value,
+        // though only the wanted ones were asked for: the requested tiles
+        // keep theirs, the rest go to the cache as final voxels, so that a
+        // neighbouring request (the next plane of a sweeping cut) finds
+        // them instead of walking their chains again.
         let own: Vec<([i64; 3], u64)> = tiles
             .iter()
-            .map(|&(t, mask)| (t, mask | finished.remove(&t).unwrap_or(0)))
+            .map(|&(t, mask)| (t, mask | ended.remove(&t).unwrap_or(0)))
             .collect();
-        let tile_of_grid = |t: [i64; 3], mask: u64| {
-            let mut grid = Grid::new(Self::tile_box(t));
-            grid.copy_from(&triples);
-            Arc::new(TileData { grid, mask })
-        };
-        let spare: Vec<([i64; 3], Tile)> = finished
-            .into_par_iter()
-            .map(|(t, mask)| (t, tile_of_grid(t, mask)))
-            .collect();
-        for (t, tile) in spare {
-            self.cache.merge(self.step_key(k, 0, t), tile);
-        }
+        self.publish_ended(k, 0, &ended, &triples);
         own.par_iter()
-            .map(|&(t, mask)| (t, tile_of_grid(t, mask)))
+            .map(|&(t, mask)| (t, Self::tile_from(&triples, t, mask)))
             .collect()
+    }
+
+    /// Caches the voxels of `ended` (tile masks) from `triples`, as values
+    /// at the start of step `next` of level `k` (0: final values).
+    fn publish_ended(&self, k: usize, next: usize, ended: &Wanted, triples: &Grid<[u32; 3]>) {
+        let tiles: Vec<([i64; 3], Tile)> = ended
+            .par_iter()
+            .map(|(&t, &mask)| (t, Self::tile_from(triples, t, mask)))
+            .collect();
+        for (t, tile) in tiles {
+            self.cache.merge(self.step_key(k, next, t), tile);
+        }
+    }
+
+    /// Tile `t` of `triples`, holding the voxels of `mask`.
+    fn tile_from(triples: &Grid<[u32; 3]>, t: [i64; 3], mask: u64) -> Tile {
+        let mut grid = Grid::new(Self::tile_box(t));
+        grid.copy_from(triples);
+        Arc::new(TileData { grid, mask })
+    }
+
+    /// Key of the values at the end of step `si` of level `k` in tile
+    /// `cell`: the start of the next step, or the final version.
+    fn end_key(&self, k: usize, si: usize, cell: [i64; 3]) -> TileKey {
+        let next = if si + 1 < self.steps_at(k).len() {
+            si + 1
+        } else {
+            0
+        };
+        self.step_key(k, next, cell)
     }
 
     /// Looks up the voxels of `need` (needed at the start of step `si` of
     /// level `k`) among the cached versions after `si` steps, removes the
-    /// known ones from `need` and returns them with the tiles to publish.
+    /// known ones from `need` and returns them.
     fn resume_step(&self, k: usize, si: usize, need: &mut plan::Mask) -> StepBoundary {
         let wanted = tile_masks(need, 1);
         let mut known = Vec::new();
-        let mut fresh = Wanted::new();
         for (cell, want) in wanted {
             let cached = self.cache.peek(&self.step_key(k, si, cell));
             let have = cached.as_ref().map_or(0, |t| t.mask & want);
             if let Some(t) = cached.filter(|_| have != 0) {
                 known.push((cell, have, t));
-            }
-            if want & !have != 0 {
-                fresh.insert(cell, want & !have);
             }
         }
         for (cell, have, _) in &known {
@@ -535,28 +556,7 @@ impl Engine {
                 need.remove(p);
             }
         }
-        StepBoundary {
-            step: si,
-            known,
-            fresh,
-        }
-    }
-
-    /// Caches the values `work` holds at the start of step `b.step` for the
-    /// voxels this request computed there.
-    fn publish_step(&self, k: usize, b: &StepBoundary, work: &Work) {
-        let cells: Vec<([i64; 3], u64)> = b.fresh.iter().map(|(c, m)| (*c, *m)).collect();
-        let tiles: Vec<([i64; 3], Tile)> = cells
-            .par_iter()
-            .map(|&(cell, mask)| {
-                let mut grid = Grid::new(Self::tile_box(cell));
-                grid.copy_from(&work.triples);
-                (cell, Arc::new(TileData { grid, mask }))
-            })
-            .collect();
-        for (cell, t) in tiles {
-            self.cache.merge(self.step_key(k, b.step, cell), t);
-        }
+        StepBoundary { step: si, known }
     }
 
     fn step_key(&self, k: usize, si: usize, cell: [i64; 3]) -> TileKey {

@@ -218,12 +218,13 @@ impl LevelChain {
 /// already known (cached from an earlier request), which cuts their whole
 /// chain through the earlier steps.
 ///
-/// In the last pass, a voxel's correction produces its final value, so
-/// `known_final(subpass, voxels)` (the subpass's index in forward order)
-/// may take out of `voxels` those whose final value is known and return
-/// them: they are not corrected (their chain stops), and the synthesis
-/// writes their final value into place right after that subpass, which is
-/// when a correction would have put it there.
+/// In the last pass of a step, a voxel's correction produces its value at
+/// the end of the step (its final value after the last step), so
+/// `known_at_end(step, subpass, voxels)` (the subpass's index in forward
+/// order) may take out of `voxels` those whose value there is known and
+/// return them: they are not corrected (their chain stops), and the
+/// synthesis writes that value into place right after the subpass, which
+/// is when a correction would have put it there.
 pub fn backward(
     targets: &[[i64; 3]],
     steps: &[Step],
@@ -231,7 +232,7 @@ pub fn backward(
     side: i64,
     cell: Option<i64>,
     mut at_step_start: impl FnMut(usize, &mut Mask),
-    mut known_final: impl FnMut(usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
+    mut known_at_end: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
 ) -> LevelChain {
     let classes = side * side * side;
     let first = targets.first().copied().unwrap_or([0; 3]);
@@ -262,9 +263,9 @@ pub fn backward(
                     corrected.push(v);
                 }
             });
-            let forward = first_of_step + t;
-            if forward >= total - classes {
-                for q in known_final(forward as usize, &mut corrected) {
+            if t >= step_subpasses - classes {
+                let forward = (first_of_step + t) as usize;
+                for q in known_at_end(si, forward, &mut corrected) {
                     need.remove(q);
                 }
             }
@@ -337,7 +338,7 @@ pub fn exact_chain(
             side,
             cell,
             |_, _| {},
-            |_, _| Vec::new(),
+            |_, _, _| Vec::new(),
         );
         out.push(LevelPlan {
             voxels: chain.need.count(),
