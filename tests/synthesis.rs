@@ -136,9 +136,9 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
 }
 
 /// A cut sweeping one voxel at a time reads what neighbouring planes left
-/// in the cache: the value at the end of each correction step of every
-/// voxel their steps' last passes corrected (which ends chains at step
-/// boundaries and inside those passes, and serves some planes outright).
+/// in the cache: every voxel they corrected, with its value after that
+/// pass (which ends chains at step boundaries and inside passes, and
+/// serves some planes outright).
 /// The same bytes as cold planes, with far fewer corrections (13 % of the
 /// cold planes' when written), also when the cache is too small to keep
 /// everything.
@@ -229,9 +229,10 @@ fn overlapping_requests_of_any_shape_share_work_and_keep_their_bytes() {
             cold_total += cold_n;
             shared_total += shared_n;
         }
-        // Measured when written: 31 % (dual grid), 50 % (standard).
+        // Measured when written: 31 % (dual grid), 30 % (standard; 50 %
+        // while only the last pass was shared).
         assert!(
-            shared_total * 10 < cold_total * 7,
+            shared_total * 10 < cold_total * 4,
             "{scheme:?}: {shared_total} corrections shared, {cold_total} cold"
         );
     }

@@ -11,7 +11,7 @@ use lru::LruCache;
 use std::collections::HashMap;
 use std::sync::{Arc, Condvar, Mutex};
 
-/// Identifies a tile: texture, level, correction step and cell position.
+/// Identifies a tile: texture, level, version and cell position.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct TileKey {
     /// Hash of the texture's candidates and synthesis parameters.
@@ -19,7 +19,7 @@ pub struct TileKey {
     /// Pyramid level (0 = finest).
     pub level: u8,
     /// Version the tile holds: 0 for the final one, s ≥ 1 for the
-    /// version after the level's first s correction steps.
+    /// version after the level's first s correction passes.
     pub step: u8,
     /// Cell coordinates.
     pub cell: [i64; 3],

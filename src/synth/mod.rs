@@ -20,9 +20,8 @@
 //! the version-0 voxels needed, whose parents come from the parent level's
 //! tiles (recursively), and only those voxels are computed. What a request
 //! computes beyond what it was asked for is kept where it is reusable: every
-//! voxel corrected in a step's last pass, with its value at the end of the
-//! step (final after the last step), so overlapping requests end their
-//! chains on it.
+//! voxel it corrects, with its value after that pass (final after the last
+//! pass), so overlapping requests end their chains on it.
 
 pub mod cache;
 pub mod cancel;
@@ -52,7 +51,7 @@ pub const TILE: i64 = 4;
 type Wanted = BTreeMap<[i64; 3], u64>;
 
 /// Most tiles synthesized together in one group (bounds working memory).
-/// Neighbouring groups share their halos through the cached end-of-step
+/// Neighbouring groups share their halos through the cached after-pass
 /// voxels, so smaller groups cost little: a 512² slice in four groups
 /// instead of two ran about 4 % longer with 23 % less resident memory.
 const MAX_GROUP_TILES: usize = 4096;
@@ -356,9 +355,9 @@ impl Engine {
         // in the cache end the chain there, so that overlapping requests (a
         // sweeping cut) share the earlier steps instead of redoing them.
         let mut boundaries: Vec<StepBoundary> = Vec::new();
-        // Likewise, values at the end of a step that earlier requests
-        // cached end the chain inside the step's last pass (see
-        // `plan::backward`); by forward subpass.
+        // Likewise, values after a pass that earlier requests cached end
+        // the chain inside that pass (see `plan::backward`); by forward
+        // subpass.
         let mut ends: HashMap<usize, Vec<KnownVoxel>> = HashMap::new();
         let mut peeked: HashMap<([i64; 3], usize), Option<Tile>> = HashMap::new();
         let chain = plan::backward(
@@ -372,7 +371,7 @@ impl Engine {
                     boundaries.push(self.resume_step(k, si, need));
                 }
             },
-            |si, forward, voxels| {
+            |pass, forward, voxels| {
                 if acc.dry {
                     return Vec::new();
                 }
@@ -380,8 +379,8 @@ impl Engine {
                 voxels.retain(|&q| {
                     let t = Self::tile_of(q);
                     let tile = peeked
-                        .entry((t, si))
-                        .or_insert_with(|| self.cache.peek(&self.end_key(k, si, t)));
+                        .entry((t, pass))
+                        .or_insert_with(|| self.cache.peek(&self.after_pass_key(k, pass, t)));
                     match tile {
                         Some(tile) if tile.mask & Self::bit_of(q) != 0 => {
                             found.push((q, tile.grid.get(q)));
@@ -422,8 +421,8 @@ impl Engine {
             }
             None => self.version0(k, &chain.need, acc),
         };
-        // Voxels corrected in the current step's last pass: their values at
-        // the end of the step, cached once it ends.
+        // Voxels corrected in the current pass: their values after it,
+        // cached once it ends.
         let mut ended = Wanted::new();
         let triples = if acc.dry {
             triples
@@ -432,21 +431,18 @@ impl Engine {
             let corrector = Corrector::new(&self.cands, k, self.params.contrast);
             let mut step_start: Option<(usize, Work)> = None;
             let mut current_step = 0;
-            // Subpass index where each step's last pass begins.
+            let mut current_pass = 0;
             let classes = (side * side * side) as usize;
-            let last_pass: Vec<usize> = steps
-                .iter()
-                .scan(0, |first, s| {
-                    *first += s.passes as usize * classes;
-                    Some(*first - classes)
-                })
-                .collect();
             for (forward, (si, voxels)) in chain.subpasses.iter().enumerate() {
                 cancel::check(&acc.cancel);
-                if *si != current_step {
-                    // The values at the end of the step just done.
-                    self.publish_ended(k, *si, &ended, &work.triples);
+                if forward / classes != current_pass {
+                    // The values after the pass just done.
+                    let key = self.after_pass_key(k, current_pass, [0; 3]).step;
+                    self.publish_ended(k, key as usize, &ended, &work.triples);
                     ended.clear();
+                    current_pass = forward / classes;
+                }
+                if *si != current_step {
                     current_step = *si;
                     if let Some(b) = boundaries.iter().find(|b| b.step == *si) {
                         for (cell, have, tile) in &b.known {
@@ -488,10 +484,8 @@ impl Engine {
                     work.triples.data[i] = t;
                     work.colours.data[i] = colour(&self.cands, k, t);
                 }
-                if forward >= last_pass[*si] {
-                    for &p in voxels {
-                        *ended.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
-                    }
+                for &p in voxels {
+                    *ended.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
                 }
             }
             work.triples
@@ -530,25 +524,27 @@ impl Engine {
         Arc::new(TileData { grid, mask })
     }
 
-    /// Key of the values at the end of step `si` of level `k` in tile
-    /// `cell`: the start of the next step, or the final version.
-    fn end_key(&self, k: usize, si: usize, cell: [i64; 3]) -> TileKey {
-        let next = if si + 1 < self.steps_at(k).len() {
-            si + 1
-        } else {
-            0
-        };
-        self.step_key(k, next, cell)
+    /// Key of the values after pass `pass` (counted over all steps from 0)
+    /// of level `k` in tile `cell`: the version after `pass + 1` passes, or
+    /// the final version after the last pass.
+    fn after_pass_key(&self, k: usize, pass: usize, cell: [i64; 3]) -> TileKey {
+        let total: usize = self.steps_at(k).iter().map(|s| s.passes as usize).sum();
+        let done = if pass + 1 < total { pass + 1 } else { 0 };
+        self.step_key(k, done, cell)
     }
 
     /// Looks up the voxels of `need` (needed at the start of step `si` of
-    /// level `k`) among the cached versions after `si` steps, removes the
-    /// known ones from `need` and returns them.
+    /// level `k`) among the cached versions, removes the known ones from
+    /// `need` and returns them.
     fn resume_step(&self, k: usize, si: usize, need: &mut plan::Mask) -> StepBoundary {
         let wanted = tile_masks(need, 1);
+        let done: usize = self.steps_at(k)[..si]
+            .iter()
+            .map(|s| s.passes as usize)
+            .sum();
         let mut known = Vec::new();
         for (cell, want) in wanted {
-            let cached = self.cache.peek(&self.step_key(k, si, cell));
+            let cached = self.cache.peek(&self.step_key(k, done, cell));
             let have = cached.as_ref().map_or(0, |t| t.mask & want);
             if let Some(t) = cached.filter(|_| have != 0) {
                 known.push((cell, have, t));
@@ -562,11 +558,13 @@ impl Engine {
         StepBoundary { step: si, known }
     }
 
-    fn step_key(&self, k: usize, si: usize, cell: [i64; 3]) -> TileKey {
+    /// Key of the version after `done` correction passes of level `k` (0:
+    /// the final version) in tile `cell`.
+    fn step_key(&self, k: usize, done: usize, cell: [i64; 3]) -> TileKey {
         TileKey {
             texture: self.key,
             level: k as u8,
-            step: si as u8,
+            step: done as u8,
             cell,
         }
     }

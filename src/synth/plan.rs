@@ -218,13 +218,13 @@ impl LevelChain {
 /// already known (cached from an earlier request), which cuts their whole
 /// chain through the earlier steps.
 ///
-/// In the last pass of a step, a voxel's correction produces its value at
-/// the end of the step (its final value after the last step), so
-/// `known_at_end(step, subpass, voxels)` (the subpass's index in forward
-/// order) may take out of `voxels` those whose value there is known and
-/// return them: they are not corrected (their chain stops), and the
-/// synthesis writes that value into place right after the subpass, which
-/// is when a correction would have put it there.
+/// A voxel's correction in a pass produces its value at the end of that
+/// pass (its final value in the last pass), so `known_after(pass, subpass,
+/// voxels)` (the pass counted over all steps, the subpass's index in
+/// forward order) may take out of `voxels` those whose value after the pass
+/// is known and return them: they are not corrected (their chain stops),
+/// and the synthesis writes that value into place right after the subpass,
+/// which is when a correction would have put it there.
 pub fn backward(
     targets: &[[i64; 3]],
     steps: &[Step],
@@ -232,7 +232,7 @@ pub fn backward(
     side: i64,
     cell: Option<i64>,
     mut at_step_start: impl FnMut(usize, &mut Mask),
-    mut known_at_end: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
+    mut known_after: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
 ) -> LevelChain {
     let classes = side * side * side;
     let first = targets.first().copied().unwrap_or([0; 3]);
@@ -263,11 +263,10 @@ pub fn backward(
                     corrected.push(v);
                 }
             });
-            if t >= step_subpasses - classes {
-                let forward = (first_of_step + t) as usize;
-                for q in known_at_end(si, forward, &mut corrected) {
-                    need.remove(q);
-                }
+            let forward = first_of_step + t;
+            let pass = (forward / classes) as usize;
+            for q in known_after(pass, forward as usize, &mut corrected) {
+                need.remove(q);
             }
             // The voxels of one subpass are independent: they mark their
             // reads in parallel.
