@@ -66,14 +66,6 @@ pub struct Step {
     pub passes: u32,
 }
 
-/// The voxels needed at the start of a correction step (after `step`
-/// steps) that an earlier request cached: per tile, the voxels used and
-/// the cached tile.
-struct StepBoundary {
-    step: usize,
-    known: Vec<([i64; 3], u64, Tile)>,
-}
-
 /// Counters gathered while serving one request.
 pub(crate) struct Acc {
     voxels: Vec<AtomicU64>,
@@ -351,12 +343,9 @@ impl Engine {
         };
         let side = self.params.subpass_side as i64;
         cancel::check(&acc.cancel);
-        // Values at the start of a later step that an earlier request left
-        // in the cache end the chain there, so that overlapping requests (a
-        // sweeping cut) share the earlier steps instead of redoing them.
-        let mut boundaries: Vec<StepBoundary> = Vec::new();
-        // Likewise, values after a pass that earlier requests cached end
-        // the chain inside that pass (see `plan::backward`); by forward
+        // Values after a pass that earlier requests cached end the chain
+        // there (see `plan::backward`), so that overlapping requests (a
+        // sweeping cut) share their work instead of redoing it; by forward
         // subpass.
         let mut ends: HashMap<usize, Vec<KnownVoxel>> = HashMap::new();
         let mut peeked: HashMap<([i64; 3], usize), Option<Tile>> = HashMap::new();
@@ -366,11 +355,6 @@ impl Engine {
             self.radius,
             side,
             barrier_cell,
-            |si, need| {
-                if !acc.dry {
-                    boundaries.push(self.resume_step(k, si, need));
-                }
-            },
             |pass, forward, voxels| {
                 if acc.dry {
                     return Vec::new();
@@ -400,18 +384,13 @@ impl Engine {
         cancel::check(&acc.cancel);
         acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
         acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
-        let known_box = boundaries
-            .iter()
-            .flat_map(|b| &b.known)
-            .map(|(cell, _, _)| Self::tile_box(*cell))
-            .chain(
-                ends.values()
-                    .flatten()
-                    .map(|(p, _)| Box3::new(*p, [1, 1, 1])),
-            )
+        let known_box = ends
+            .values()
+            .flatten()
+            .map(|(p, _)| Box3::new(*p, [1, 1, 1]))
             .reduce(|a, b| a.union(&b));
         let triples = match known_box {
-            // Everything came from cached steps: no version 0 at all.
+            // Everything came from cached passes: no version 0 at all.
             Some(kb) if chain.need.count() == 0 => Grid::new(kb),
             Some(kb) => {
                 let v0 = self.version0(k, &chain.need, acc);
@@ -430,7 +409,6 @@ impl Engine {
             let mut work = Work::new(&self.cands, k, triples);
             let corrector = Corrector::new(&self.cands, k, self.params.contrast);
             let mut step_start: Option<(usize, Work)> = None;
-            let mut current_step = 0;
             let mut current_pass = 0;
             let classes = (side * side * side) as usize;
             for (forward, (si, voxels)) in chain.subpasses.iter().enumerate() {
@@ -441,19 +419,6 @@ impl Engine {
                     self.publish_ended(k, key as usize, &ended, &work.triples);
                     ended.clear();
                     current_pass = forward / classes;
-                }
-                if *si != current_step {
-                    current_step = *si;
-                    if let Some(b) = boundaries.iter().find(|b| b.step == *si) {
-                        for (cell, have, tile) in &b.known {
-                            for (i, p) in tile_voxels(*cell, *have) {
-                                let t = tile.grid.data[i];
-                                let w = work.triples.index(p);
-                                work.triples.data[w] = t;
-                                work.colours.data[w] = colour(&self.cands, k, t);
-                            }
-                        }
-                    }
                 }
                 if barrier_cell.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
                     step_start = Some((*si, work.clone()));
@@ -531,31 +496,6 @@ impl Engine {
         let total: usize = self.steps_at(k).iter().map(|s| s.passes as usize).sum();
         let done = if pass + 1 < total { pass + 1 } else { 0 };
         self.step_key(k, done, cell)
-    }
-
-    /// Looks up the voxels of `need` (needed at the start of step `si` of
-    /// level `k`) among the cached versions, removes the known ones from
-    /// `need` and returns them.
-    fn resume_step(&self, k: usize, si: usize, need: &mut plan::Mask) -> StepBoundary {
-        let wanted = tile_masks(need, 1);
-        let done: usize = self.steps_at(k)[..si]
-            .iter()
-            .map(|s| s.passes as usize)
-            .sum();
-        let mut known = Vec::new();
-        for (cell, want) in wanted {
-            let cached = self.cache.peek(&self.step_key(k, done, cell));
-            let have = cached.as_ref().map_or(0, |t| t.mask & want);
-            if let Some(t) = cached.filter(|_| have != 0) {
-                known.push((cell, have, t));
-            }
-        }
-        for (cell, have, _) in &known {
-            for (_, p) in tile_voxels(*cell, *have) {
-                need.remove(p);
-            }
-        }
-        StepBoundary { step: si, known }
     }
 
     /// Key of the version after `done` correction passes of level `k` (0:

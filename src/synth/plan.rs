@@ -213,25 +213,21 @@ impl LevelChain {
 /// `cell` is set and the neighbour lies across the step's cell wall, at the
 /// version the step started from (Zhang et al.'s barrier).
 ///
-/// Between steps, `at_step_start(s, need)` sees the voxels needed at the
-/// start of step `s` (s ≥ 1) and may remove those whose value there is
-/// already known (cached from an earlier request), which cuts their whole
-/// chain through the earlier steps.
-///
 /// A voxel's correction in a pass produces its value at the end of that
 /// pass (its final value in the last pass), so `known_after(pass, subpass,
 /// voxels)` (the pass counted over all steps, the subpass's index in
 /// forward order) may take out of `voxels` those whose value after the pass
 /// is known and return them: they are not corrected (their chain stops),
 /// and the synthesis writes that value into place right after the subpass,
-/// which is when a correction would have put it there.
+/// which is when a correction would have put it there. This also covers
+/// the values at a step boundary: every voxel needed there is corrected in
+/// the earlier step's last pass.
 pub fn backward(
     targets: &[[i64; 3]],
     steps: &[Step],
     radius: i64,
     side: i64,
     cell: Option<i64>,
-    mut at_step_start: impl FnMut(usize, &mut Mask),
     mut known_after: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
 ) -> LevelChain {
     let classes = side * side * side;
@@ -298,9 +294,6 @@ pub fn backward(
         for q in extra {
             need.insert(q);
         }
-        if si > 0 {
-            at_step_start(si, &mut need);
-        }
         forward_end = first_of_step;
     }
     subpasses.reverse();
@@ -330,15 +323,7 @@ pub fn exact_chain(
         if points.is_empty() {
             break;
         }
-        let chain = backward(
-            &points,
-            steps,
-            radius,
-            side,
-            cell,
-            |_, _| {},
-            |_, _, _| Vec::new(),
-        );
+        let chain = backward(&points, steps, radius, side, cell, |_, _, _| Vec::new());
         out.push(LevelPlan {
             voxels: chain.need.count(),
             corrections: chain.corrections(),
