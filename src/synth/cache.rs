@@ -20,7 +20,7 @@ pub struct TileKey {
     pub level: u8,
     /// Version the tile holds: 0 for the final one, s ≥ 1 for the
     /// version after the level's first s correction passes.
-    pub step: u8,
+    pub version: u8,
     /// Cell coordinates.
     pub cell: [i64; 3],
 }
@@ -305,7 +305,7 @@ mod tests {
     const KEY: TileKey = TileKey {
         texture: 1,
         level: 0,
-        step: 0,
+        version: 0,
         cell: [0, 0, 0],
     };
 

@@ -250,7 +250,7 @@ impl Engine {
             let key = TileKey {
                 texture: self.key,
                 level: k as u8,
-                step: 0,
+                version: 0,
                 cell: c,
             };
             match self.cache.claim(key, want) {
@@ -415,7 +415,7 @@ impl Engine {
                 cancel::check(&acc.cancel);
                 if forward / classes != current_pass {
                     // The values after the pass just done.
-                    let key = self.after_pass_key(k, current_pass, [0; 3]).step;
+                    let key = self.after_pass_key(k, current_pass, [0; 3]).version;
                     self.publish_ended(k, key as usize, &ended, &work.triples);
                     ended.clear();
                     current_pass = forward / classes;
@@ -470,15 +470,15 @@ impl Engine {
             .collect()
     }
 
-    /// Caches the voxels of `ended` (tile masks) from `triples`, as values
-    /// at the start of step `next` of level `k` (0: final values).
-    fn publish_ended(&self, k: usize, next: usize, ended: &Wanted, triples: &Grid<[u32; 3]>) {
+    /// Caches the voxels of `ended` (tile masks) from `triples` as the
+    /// version of level `k` after `done` passes (0: final values).
+    fn publish_ended(&self, k: usize, done: usize, ended: &Wanted, triples: &Grid<[u32; 3]>) {
         let tiles: Vec<([i64; 3], Tile)> = ended
             .par_iter()
             .map(|(&t, &mask)| (t, Self::tile_from(triples, t, mask)))
             .collect();
         for (t, tile) in tiles {
-            self.cache.merge(self.step_key(k, next, t), tile);
+            self.cache.merge(self.version_key(k, done, t), tile);
         }
     }
 
@@ -495,16 +495,16 @@ impl Engine {
     fn after_pass_key(&self, k: usize, pass: usize, cell: [i64; 3]) -> TileKey {
         let total: usize = self.steps_at(k).iter().map(|s| s.passes as usize).sum();
         let done = if pass + 1 < total { pass + 1 } else { 0 };
-        self.step_key(k, done, cell)
+        self.version_key(k, done, cell)
     }
 
     /// Key of the version after `done` correction passes of level `k` (0:
     /// the final version) in tile `cell`.
-    fn step_key(&self, k: usize, done: usize, cell: [i64; 3]) -> TileKey {
+    fn version_key(&self, k: usize, done: usize, cell: [i64; 3]) -> TileKey {
         TileKey {
             texture: self.key,
             level: k as u8,
-            step: done as u8,
+            version: done as u8,
             cell,
         }
     }
