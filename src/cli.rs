@@ -105,6 +105,10 @@ struct EvalArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
+    /// Parameters of the corrected slices (the slab baseline shares the
+    /// seed and jitter).
+    #[command(flatten)]
+    synth: SynthArgs,
 }
 
 #[derive(Args)]
@@ -173,15 +177,25 @@ struct SourceArgs {
     /// A `.stx` file, or an exemplar image (precomputed on the fly; the
     /// bundled default exemplar when omitted).
     source: Option<PathBuf>,
+    /// Correction scheme: standard or dual-grid.
+    #[arg(long, default_value = "dual-grid")]
+    scheme: Scheme,
+    #[command(flatten)]
+    synth: SynthArgs,
+    /// Level of detail (0 = finest).
+    #[arg(long, default_value_t = 0)]
+    lod: u32,
+}
+
+/// Synthesis parameters other than the scheme.
+#[derive(Args, Clone)]
+struct SynthArgs {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Correction passes per level.
     #[arg(long, default_value_t = 2)]
     passes: u32,
-    /// Correction scheme: standard or dual-grid.
-    #[arg(long, default_value = "dual-grid")]
-    scheme: Scheme,
     /// Dual-grid cell side M.
     #[arg(long, default_value_t = 12)]
     grid: u32,
@@ -194,9 +208,21 @@ struct SourceArgs {
     /// Gain on correction neighbourhoods around their mean (1 disables).
     #[arg(long, default_value_t = solidtex::params::DEFAULT_CONTRAST)]
     contrast: f32,
-    /// Level of detail (0 = finest).
-    #[arg(long, default_value_t = 0)]
-    lod: u32,
+}
+
+impl SynthArgs {
+    fn params(&self, scheme: Scheme) -> SynthParams {
+        SynthParams {
+            seed: self.seed,
+            passes: self.passes,
+            scheme,
+            grid: self.grid,
+            jitter: self.jitter,
+            subpass_side: self.subpass_side,
+            contrast: self.contrast,
+            ..SynthParams::default()
+        }
+    }
 }
 
 #[derive(Args)]
@@ -337,16 +363,7 @@ fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
             true,
         )?,
     };
-    let params = SynthParams {
-        seed: src.seed,
-        passes: src.passes,
-        scheme: src.scheme,
-        grid: src.grid,
-        jitter: src.jitter,
-        subpass_side: src.subpass_side,
-        contrast: src.contrast,
-        ..SynthParams::default()
-    };
+    let params = src.synth.params(src.scheme);
     Ok(Texture::new(
         Arc::new(cands),
         params,
@@ -417,7 +434,13 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                     .map(|n| n.to_string_lossy().into_owned())
                     .unwrap_or_default();
                 let e = Exemplar::open(path)?;
-                let scores = crate::evalcmd::evaluate(&name, &e, a.side, a.standard)?;
+                let scores = crate::evalcmd::evaluate(
+                    &name,
+                    &e,
+                    a.side,
+                    a.standard,
+                    &a.synth.params(Scheme::DualGrid),
+                )?;
                 if !a.json {
                     crate::evalcmd::print(&scores);
                 }

@@ -44,12 +44,15 @@ fn slices(tex: &Texture, side: u32) -> anyhow::Result<Vec<(&'static str, Vec<u8>
     Ok(out)
 }
 
-/// Scores one exemplar with every method.
+/// Scores one exemplar with every method; `params` are those of the
+/// dual-grid slices, and the other methods differ from them only in what
+/// defines the method (the scheme, or no correction).
 pub fn evaluate(
     name: &str,
     exemplar: &Exemplar,
     side: u32,
     schemes: bool,
+    params: &SynthParams,
 ) -> anyhow::Result<Vec<Score>> {
     let cands = Arc::new(Candidates::compute(
         &ExemplarSet::single(exemplar.clone()),
@@ -63,13 +66,19 @@ pub fn evaluate(
         rgb: &ex_rgb,
     };
     let mut methods = vec![
-        ("dual-grid", SynthParams::default()),
+        (
+            "dual-grid",
+            SynthParams {
+                scheme: Scheme::DualGrid,
+                ..params.clone()
+            },
+        ),
         (
             "slab-only",
             SynthParams {
                 passes: 0,
                 correct_init_level: false,
-                ..SynthParams::default()
+                ..params.clone()
             },
         ),
     ];
@@ -78,7 +87,7 @@ pub fn evaluate(
             "standard",
             SynthParams {
                 scheme: Scheme::Standard,
-                ..SynthParams::default()
+                ..params.clone()
             },
         ));
     }
@@ -125,5 +134,34 @@ pub fn print(scores: &[Score]) {
             "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4}",
             s.exemplar, s.orientation, s.method, s.coherence, s.completeness, s.histogram
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn synthesis_parameters_reach_the_corrected_slices_only() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../shared/exemplars/animal_leather.png"
+        );
+        let e = Exemplar::open(std::path::Path::new(path)).unwrap();
+        let score = |params: &SynthParams| evaluate("leather", &e, 24, false, params).unwrap();
+        let default = score(&SynthParams::default());
+        let flat = score(&SynthParams {
+            contrast: 1.0,
+            ..SynthParams::default()
+        });
+        let rows = |s: &[Score], method: &str| -> Vec<f64> {
+            s.iter()
+                .filter(|r| r.method == method)
+                .map(|r| r.coherence)
+                .collect()
+        };
+        assert_eq!(rows(&default, "dual-grid").len(), 4, "xy, yz, zx, oblique");
+        assert_ne!(rows(&default, "dual-grid"), rows(&flat, "dual-grid"));
+        assert_eq!(rows(&default, "slab-only"), rows(&flat, "slab-only"));
     }
 }
