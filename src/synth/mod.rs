@@ -359,6 +359,23 @@ impl Engine {
                 if acc.dry {
                     return Vec::new();
                 }
+                // One lookup per tile (the voxels come in runs within one):
+                // on a cold cache nothing is found and nothing is filtered.
+                let mut any = false;
+                let mut last = None;
+                for &q in voxels.iter() {
+                    let t = Self::tile_of(q);
+                    if last != Some(t) {
+                        last = Some(t);
+                        any |= peeked
+                            .entry((t, pass))
+                            .or_insert_with(|| self.cache.peek(&self.after_pass_key(k, pass, t)))
+                            .is_some();
+                    }
+                }
+                if !any {
+                    return Vec::new();
+                }
                 let mut found = Vec::new();
                 voxels.retain(|&q| {
                     let t = Self::tile_of(q);
@@ -402,7 +419,7 @@ impl Engine {
         };
         // Voxels corrected in the current pass: their values after it,
         // cached once it ends.
-        let mut ended = Wanted::new();
+        let mut ended: HashMap<[i64; 3], u64> = HashMap::new();
         let triples = if acc.dry {
             triples
         } else {
@@ -449,8 +466,23 @@ impl Engine {
                     work.triples.data[i] = t;
                     work.colours.data[i] = colour(&self.cands, k, t);
                 }
+                // Sorted voxels come in runs within one tile: one map update
+                // per run.
+                let mut run: Option<([i64; 3], u64)> = None;
                 for &p in voxels {
-                    *ended.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
+                    let t = Self::tile_of(p);
+                    match &mut run {
+                        Some((rt, bits)) if *rt == t => *bits |= Self::bit_of(p),
+                        _ => {
+                            if let Some((rt, bits)) = run {
+                                *ended.entry(rt).or_default() |= bits;
+                            }
+                            run = Some((t, Self::bit_of(p)));
+                        }
+                    }
+                }
+                if let Some((rt, bits)) = run {
+                    *ended.entry(rt).or_default() |= bits;
                 }
             }
             work.triples
@@ -472,7 +504,13 @@ impl Engine {
 
     /// Caches the voxels of `ended` (tile masks) from `triples` as the
     /// version of level `k` after `done` passes (0: final values).
-    fn publish_ended(&self, k: usize, done: usize, ended: &Wanted, triples: &Grid<[u32; 3]>) {
+    fn publish_ended(
+        &self,
+        k: usize,
+        done: usize,
+        ended: &HashMap<[i64; 3], u64>,
+        triples: &Grid<[u32; 3]>,
+    ) {
         let tiles: Vec<([i64; 3], Tile)> = ended
             .par_iter()
             .map(|(&t, &mask)| (t, Self::tile_from(triples, t, mask)))
