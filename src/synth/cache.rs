@@ -6,6 +6,7 @@
 //! voxels compute them once: the others wait. A voxel's value never depends
 //! on cache state, so evicting, recomputing and merging are harmless.
 
+use super::TILE;
 use super::grid::Grid;
 use lru::LruCache;
 use std::collections::HashMap;
@@ -25,32 +26,113 @@ pub struct TileKey {
     pub cell: [i64; 3],
 }
 
-/// The voxels of one cell that are known, and their triples.
+/// The voxels of one cell that are known, and their triples. Only known
+/// voxels are stored: intermediate versions are often sparse.
 #[derive(Clone, Debug)]
 pub struct TileData {
-    /// Triples of the cell (meaningful where `mask` is set).
-    pub grid: Grid<[u32; 3]>,
+    /// Lowest corner of the cell.
+    origin: [i64; 3],
     /// Bit i set: voxel i of the cell (x fastest) is known.
     pub mask: u64,
+    /// Triples of the known voxels, in bit order.
+    triples: Vec<[u32; 3]>,
+}
+
+/// Position in the cell at `origin` of bit `i`.
+#[inline]
+fn voxel_of_bit(origin: [i64; 3], i: u32) -> [i64; 3] {
+    let i = i as i64;
+    [
+        origin[0] + i % TILE,
+        origin[1] + (i / TILE) % TILE,
+        origin[2] + i / (TILE * TILE),
+    ]
+}
+
+/// Set bits of `mask`, lowest first.
+fn bits(mut mask: u64) -> impl Iterator<Item = u32> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let i = mask.trailing_zeros();
+            mask &= mask - 1;
+            i
+        })
+    })
 }
 
 impl TileData {
+    /// The voxels of `mask` in the cell at `origin`, read from `src` (which
+    /// must hold them).
+    pub fn from_grid(src: &Grid<[u32; 3]>, origin: [i64; 3], mask: u64) -> TileData {
+        TileData {
+            origin,
+            mask,
+            triples: bits(mask)
+                .map(|i| {
+                    let p = voxel_of_bit(origin, i);
+                    debug_assert!(src.bounds.contains(p), "voxel {p:?} outside the source");
+                    src.get(p)
+                })
+                .collect(),
+        }
+    }
+
     /// Whether every voxel of `want` is known.
     #[inline]
     pub fn covers(&self, want: u64) -> bool {
         self.mask & want == want
     }
 
-    /// The union of two partial tiles of the same cell.
-    pub fn merged(&self, other: &TileData) -> TileData {
-        let mut out = self.clone();
-        for i in 0..out.grid.data.len() {
-            if other.mask >> i & 1 == 1 {
-                out.grid.data[i] = other.grid.data[i];
+    /// The triple of known voxel `p`.
+    #[inline]
+    pub fn get(&self, p: [i64; 3]) -> [u32; 3] {
+        let l = [0, 1, 2].map(|a| p[a] - self.origin[a]);
+        let i = l[0] + TILE * (l[1] + TILE * l[2]);
+        debug_assert!(self.mask >> i & 1 == 1, "voxel {p:?} is not known");
+        let below = self.mask & ((1u64 << i) - 1);
+        self.triples[below.count_ones() as usize]
+    }
+
+    /// Writes the known voxels that lie inside `g` into it.
+    pub fn copy_into(&self, g: &mut Grid<[u32; 3]>) {
+        for (i, &t) in bits(self.mask).zip(&self.triples) {
+            let p = voxel_of_bit(self.origin, i);
+            if g.bounds.contains(p) {
+                let j = g.index(p);
+                g.data[j] = t;
             }
         }
-        out.mask |= other.mask;
-        out
+    }
+
+    /// The union of two partial tiles of the same cell.
+    pub fn merged(&self, other: &TileData) -> TileData {
+        let mask = self.mask | other.mask;
+        let (mut a, mut b) = (self.triples.iter(), other.triples.iter());
+        let triples = bits(mask)
+            .map(|i| {
+                let mine = self.mask >> i & 1 == 1;
+                let theirs = other.mask >> i & 1 == 1;
+                let t = if theirs {
+                    *b.next().expect("bit")
+                } else {
+                    *a.next().expect("bit")
+                };
+                if mine && theirs {
+                    a.next();
+                }
+                t
+            })
+            .collect();
+        TileData {
+            origin: self.origin,
+            mask,
+            triples,
+        }
+    }
+
+    /// Bytes held, for the cache's budget.
+    fn bytes(&self) -> usize {
+        self.triples.capacity() * std::mem::size_of::<[u32; 3]>() + 136
     }
 }
 
@@ -140,7 +222,7 @@ impl Waiter {
 }
 
 fn tile_bytes(t: &Tile) -> usize {
-    t.grid.data.len() * std::mem::size_of::<[u32; 3]>() + 136
+    t.bytes()
 }
 
 impl TileCache {
@@ -295,11 +377,9 @@ mod tests {
     fn tile(mask: u64, value: u32) -> Tile {
         let mut grid = Grid::new(Box3::new([0; 3], [4; 3]));
         for (i, v) in grid.data.iter_mut().enumerate() {
-            if mask >> i & 1 == 1 {
-                *v = [value, i as u32, 0];
-            }
+            *v = [value, i as u32, 0];
         }
-        Arc::new(TileData { grid, mask })
+        Arc::new(TileData::from_grid(&grid, [0; 3], mask))
     }
 
     const KEY: TileKey = TileKey {
@@ -329,9 +409,9 @@ mod tests {
             panic!("the merged tile covers both requests");
         };
         assert_eq!(t.mask, 0b0111);
-        assert_eq!(t.grid.data[0], [7, 0, 0]);
-        assert_eq!(t.grid.data[1], [7, 1, 0]);
-        assert_eq!(t.grid.data[2], [9, 2, 0]);
+        assert_eq!(t.get([0, 0, 0]), [7, 0, 0]);
+        assert_eq!(t.get([1, 0, 0]), [7, 1, 0]);
+        assert_eq!(t.get([2, 0, 0]), [9, 2, 0]);
         assert_eq!(cache.stats().entries, 1);
     }
 }

@@ -232,7 +232,7 @@ impl Engine {
         let tiles = self.tiles(k, Self::wanted_box(b), acc);
         let mut g = Grid::new(*b);
         for t in tiles.values() {
-            g.copy_from(&t.grid);
+            t.copy_into(&mut g);
         }
         g
     }
@@ -384,7 +384,7 @@ impl Engine {
                         .or_insert_with(|| self.cache.peek(&self.after_pass_key(k, pass, t)));
                     match tile {
                         Some(tile) if tile.mask & Self::bit_of(q) != 0 => {
-                            found.push((q, tile.grid.get(q)));
+                            found.push((q, tile.get(q)));
                             false
                         }
                         _ => true,
@@ -522,9 +522,7 @@ impl Engine {
 
     /// Tile `t` of `triples`, holding the voxels of `mask`.
     fn tile_from(triples: &Grid<[u32; 3]>, t: [i64; 3], mask: u64) -> Tile {
-        let mut grid = Grid::new(Self::tile_box(t));
-        grid.copy_from(triples);
-        Arc::new(TileData { grid, mask })
+        Arc::new(TileData::from_grid(triples, Self::tile_box(t).lo, mask))
     }
 
     /// Key of the values after pass `pass` (counted over all steps from 0)
@@ -583,7 +581,7 @@ impl Engine {
             .for_each(|(dst, &z)| {
                 for p in need.layer(z) {
                     let q = p.map(|v| v.div_euclid(2));
-                    let parent = parents[&Self::tile_of(q)].grid.get(q);
+                    let parent = parents[&Self::tile_of(q)].get(q);
                     let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
                     dst[i] = init::upsample(&self.cands, parent, k, p);
                 }
@@ -669,7 +667,7 @@ impl Engine {
         let tiles = self.tiles(k, wanted, acc);
         points
             .iter()
-            .map(|p| tiles[&Self::tile_of(*p)].grid.get(*p))
+            .map(|p| tiles[&Self::tile_of(*p)].get(*p))
             .collect()
     }
 
