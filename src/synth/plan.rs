@@ -112,13 +112,11 @@ impl Mask {
         }
     }
 
-    /// Removes `p` (which must lie inside the box).
+    /// Removes `p` (which must lie inside the box) without keeping the
+    /// count, like [`Mask::mark`] (call [`Mask::recount`] after a batch).
     #[inline]
-    pub fn remove(&mut self, p: [i64; 3]) {
-        let i = self.shape.index(p);
-        if self.flags[i].swap(false, Ordering::Relaxed) {
-            self.count -= 1;
-        }
+    pub fn unmark(&self, p: [i64; 3]) {
+        self.flags[self.shape.index(p)].store(false, Ordering::Relaxed);
     }
 
     /// Adds `p` without keeping the count (call [`Mask::recount`] after a
@@ -261,8 +259,9 @@ pub fn backward(
             });
             let forward = first_of_step + t;
             let pass = (forward / classes) as usize;
+            // The count is refreshed when the step's walk ends.
             for q in known_after(pass, forward as usize, &mut corrected) {
-                need.remove(q);
+                need.unmark(q);
             }
             // The voxels of one subpass are independent: they mark their
             // reads in parallel.
