@@ -60,6 +60,14 @@ fn bits(mut mask: u64) -> impl Iterator<Item = u32> {
     })
 }
 
+/// The triples for the set bits of `mask`, allocated exactly (the cache
+/// budget counts capacity).
+fn triples_for(mask: u64, f: impl FnMut(u32) -> [u32; 3]) -> Vec<[u32; 3]> {
+    let mut out = Vec::with_capacity(mask.count_ones() as usize);
+    out.extend(bits(mask).map(f));
+    out
+}
+
 impl TileData {
     /// The voxels of `mask` in the cell at `origin`, read from `src` (which
     /// must hold them).
@@ -67,13 +75,11 @@ impl TileData {
         TileData {
             origin,
             mask,
-            triples: bits(mask)
-                .map(|i| {
-                    let p = voxel_of_bit(origin, i);
-                    debug_assert!(src.bounds.contains(p), "voxel {p:?} outside the source");
-                    src.get(p)
-                })
-                .collect(),
+            triples: triples_for(mask, |i| {
+                let p = voxel_of_bit(origin, i);
+                debug_assert!(src.bounds.contains(p), "voxel {p:?} outside the source");
+                src.get(p)
+            }),
         }
     }
 
@@ -108,21 +114,19 @@ impl TileData {
     pub fn merged(&self, other: &TileData) -> TileData {
         let mask = self.mask | other.mask;
         let (mut a, mut b) = (self.triples.iter(), other.triples.iter());
-        let triples = bits(mask)
-            .map(|i| {
-                let mine = self.mask >> i & 1 == 1;
-                let theirs = other.mask >> i & 1 == 1;
-                let t = if theirs {
-                    *b.next().expect("bit")
-                } else {
-                    *a.next().expect("bit")
-                };
-                if mine && theirs {
-                    a.next();
-                }
-                t
-            })
-            .collect();
+        let triples = triples_for(mask, |i| {
+            let mine = self.mask >> i & 1 == 1;
+            let theirs = other.mask >> i & 1 == 1;
+            let t = if theirs {
+                *b.next().expect("bit")
+            } else {
+                *a.next().expect("bit")
+            };
+            if mine && theirs {
+                a.next();
+            }
+            t
+        });
         TileData {
             origin: self.origin,
             mask,

@@ -433,8 +433,8 @@ impl Engine {
                 cancel::check(&acc.cancel);
                 if forward / classes != current_pass {
                     // The values after the pass just done.
-                    let key = self.after_pass_key(k, current_pass, [0; 3]).version;
-                    self.publish_ended(k, key as usize, &ended, &work.triples);
+                    let done = self.version_after_pass(k, current_pass);
+                    self.publish_ended(k, done, &ended, &work.triples);
                     ended.clear();
                     current_pass = forward / classes;
                 }
@@ -530,9 +530,14 @@ impl Engine {
     /// of level `k` in tile `cell`: the version after `pass + 1` passes, or
     /// the final version after the last pass.
     fn after_pass_key(&self, k: usize, pass: usize, cell: [i64; 3]) -> TileKey {
+        self.version_key(k, self.version_after_pass(k, pass), cell)
+    }
+
+    /// The version of level `k` after pass `pass`: `pass + 1`, or 0 (final)
+    /// after the last pass.
+    fn version_after_pass(&self, k: usize, pass: usize) -> usize {
         let total: usize = self.steps_at(k).iter().map(|s| s.passes as usize).sum();
-        let done = if pass + 1 < total { pass + 1 } else { 0 };
-        self.version_key(k, done, cell)
+        if pass + 1 < total { pass + 1 } else { 0 }
     }
 
     /// Key of the version after `done` correction passes of level `k` (0:
