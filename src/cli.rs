@@ -6,8 +6,8 @@ use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use solidtex::{
-    AnalysisParams, Axis, Candidates, Exemplar, ExemplarSet, Region, Scheme, Stage, SynthParams,
-    Texture, TileCache,
+    AnalysisParams, Axis, Candidates, Exemplar, ExemplarSet, Region, Scheme, Slices, Stage,
+    SynthParams, Texture, TileCache,
 };
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -208,6 +208,10 @@ struct SynthArgs {
     /// Gain on correction neighbourhoods around their mean (1 disables).
     #[arg(long, default_value_t = solidtex::params::DEFAULT_CONTRAST)]
     contrast: f32,
+    /// Voxels a correction reads: sparse (direct neighbours, the rest of
+    /// each N×N slice extrapolated) or full (every voxel of the slices).
+    #[arg(long, default_value = "sparse")]
+    slices: Slices,
 }
 
 impl SynthArgs {
@@ -220,6 +224,7 @@ impl SynthArgs {
             jitter: self.jitter,
             subpass_side: self.subpass_side,
             contrast: self.contrast,
+            slices: self.slices,
             ..SynthParams::default()
         }
     }

@@ -249,9 +249,12 @@ impl Texture {
     }
 
     /// Exact voxel-level dependency chain of a few voxels at `lod`:
-    /// version-0 voxels and corrections per level, finest first.
+    /// version-0 voxels and corrections per level, finest first. It follows
+    /// what a correction reads: radius 1 with sparse slices, N/2 with full
+    /// ones.
     pub fn dependency_chain(&self, voxels: &[[i64; 3]], lod: u32) -> Result<Vec<(u64, u64)>> {
-        self.dependency_chain_for(voxels, lod, self.candidates().params().neighbourhood)
+        self.check_lod(lod)?;
+        self.chain(voxels, lod, self.engine.radius())
     }
 
     /// Like [`Texture::dependency_chain`], for neighbourhood side
@@ -270,12 +273,16 @@ impl Texture {
                 "neighbourhood must be odd, 3 to 9".into(),
             ));
         }
+        self.chain(voxels, lod, neighbourhood as i64 / 2)
+    }
+
+    fn chain(&self, voxels: &[[i64; 3]], lod: u32, radius: i64) -> Result<Vec<(u64, u64)>> {
         if voxels.len() > 1 << 20 {
             return Err(Error::TooLarge("at most 2^20 voxels".into()));
         }
         Ok(self
             .engine
-            .exact_chain(voxels, lod, neighbourhood as i64 / 2)
+            .exact_chain(voxels, lod, radius)
             .into_iter()
             .map(|l| (l.voxels, l.corrections))
             .collect())

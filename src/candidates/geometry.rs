@@ -44,24 +44,31 @@ impl Dims {
         yi * self.w + xi
     }
 
-    /// Pixel `c` moved by (du, dv), wrapping. Hot in the correction, so the
-    /// common case (no wrap-around) avoids divisions.
+    /// Pixel `c` moved by (du, dv), wrapping. Hot in the correction: a move
+    /// along v is a multiple of the width (no division), and a move along u
+    /// needs only the column.
     #[inline]
     pub fn shift(self, c: u32, du: i64, dv: i64) -> u32 {
-        let (w, h) = (self.w as i64, self.h as i64);
-        let x = (c % self.w) as i64 + du;
-        let y = (c / self.w) as i64 + dv;
-        let x = if (0..w).contains(&x) {
-            x
-        } else {
-            x.rem_euclid(w)
-        };
-        let y = if (0..h).contains(&y) {
-            y
-        } else {
-            y.rem_euclid(h)
-        };
-        (y * w + x) as u32
+        let w = self.w as i64;
+        let mut c = c as i64;
+        if du != 0 {
+            let x = (c as u32 % self.w) as i64;
+            let nx = x + du;
+            let nx = if (0..w).contains(&nx) {
+                nx
+            } else {
+                nx.rem_euclid(w)
+            };
+            c += nx - x;
+        }
+        if dv != 0 {
+            let len = self.len() as i64;
+            c += dv * w;
+            if !(0..len).contains(&c) {
+                c = c.rem_euclid(len);
+            }
+        }
+        c as u32
     }
 }
 
@@ -82,4 +89,26 @@ pub fn offset_triple(dims: Dims, t: [u32; 3], d: [i64; 3], h: i64) -> [u32; 3] {
         *o = dims.shift(t[p], du * h, dv * h);
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shifting_a_pixel_wraps_like_its_coordinates() {
+        let dims = Dims { w: 13, h: 7 };
+        for c in 0..dims.len() as u32 {
+            let (x, y) = dims.xy(c);
+            for du in -30..=30 {
+                for dv in [-22, -8, -7, -1, 0, 1, 3, 6, 7, 15] {
+                    assert_eq!(
+                        dims.shift(c, du, dv),
+                        dims.index(x + du, y + dv),
+                        "pixel {c} moved by ({du}, {dv})"
+                    );
+                }
+            }
+        }
+    }
 }

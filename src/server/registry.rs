@@ -509,7 +509,7 @@ impl Registry {
     pub fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
         let mut todo = Vec::new();
         for Found { meta, dir } in self.store.scan()? {
-            let params = match TextureParams::from_flat(&meta.params) {
+            let params = match TextureParams::from_stored(&meta.params) {
                 Ok(p) => p,
                 Err(e) => {
                     tracing::warn!(dir = %dir.display(), error = %e, "skipping texture with unreadable parameters");

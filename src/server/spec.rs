@@ -64,6 +64,18 @@ impl TextureParams {
         Ok(TextureParams { analysis, synth })
     }
 
+    /// Parameters as a data directory stored them. Stored parameters are
+    /// complete, so a key added since they were written takes the value that
+    /// reproduces the texture's voxels as they were then, not today's
+    /// default: the same id keeps serving the same bytes across upgrades.
+    pub fn from_stored(obj: &Map<String, Value>) -> Result<TextureParams, ApiError> {
+        let mut obj = obj.clone();
+        for (key, then) in KEYS_ADDED_SINCE_VERSION_1 {
+            obj.entry(*key).or_insert_with(|| Value::from(*then));
+        }
+        Self::from_flat(&obj)
+    }
+
     /// Parses a JSON text holding a flat object of parameters.
     pub fn from_json(text: &str) -> Result<TextureParams, ApiError> {
         match serde_json::from_str::<Value>(text) {
@@ -107,6 +119,10 @@ impl TextureParams {
         m
     }
 }
+
+/// Synthesis keys added after the first stored layout, with the value that
+/// behaves as textures stored without them did.
+const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[("slices", "full")];
 
 fn invalid_params(message: String) -> ApiError {
     ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)
@@ -253,6 +269,29 @@ mod tests {
     }
 
     #[test]
+    fn stored_params_without_a_newer_key_keep_their_old_meaning() {
+        let new = TextureParams::default().to_flat();
+        assert_eq!(new["slices"], "sparse");
+        let mut old = new.clone();
+        old.remove("slices");
+        // A fresh upload that omits the key gets today's default...
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.slices,
+            crate::Slices::Sparse
+        );
+        // ...but a stored texture written before the key existed was
+        // synthesized with full slices and must stay so.
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.slices,
+            crate::Slices::Full
+        );
+        assert_eq!(
+            TextureParams::from_stored(&new).unwrap(),
+            TextureParams::default()
+        );
+    }
+
+    #[test]
     fn bad_params() {
         assert_eq!(
             TextureParams::from_json(r#"{"sed": 1}"#).unwrap_err().code,
@@ -294,9 +333,11 @@ mod tests {
             ("jitter", "0.5"),
             ("correct_init_level", "false"),
             ("contrast", "1.25"),
+            ("slices", "full"),
         ];
         let flat = TextureParams::flat_from_pairs(pairs.into_iter());
         let p = TextureParams::from_flat(&flat).unwrap();
+        assert_eq!(p.synth.slices, crate::Slices::Full);
         assert_eq!(p.synth.seed, 7);
         assert_eq!(p.synth.jitter, 0.5);
         assert!(!p.synth.correct_init_level);

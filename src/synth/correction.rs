@@ -10,6 +10,12 @@
 //! exemplars the blend lowers the histogram distance to the exemplar by
 //! 4–27 % against means alone.
 //!
+//! With sparse slices (the default, [`crate::Slices::Sparse`]) a correction
+//! reads only its direct neighbours: a slice voxel beyond them gets the
+//! triple that the nearest direct neighbour predicts for it (its triple
+//! moved by the offset, Zhang et al.'s `T + d`), so the query still covers
+//! N×N pixels while the dependency radius is 1 instead of N/2.
+//!
 //! Before matching, the gathered colours are stretched around their mean
 //! by the texture's `contrast`: averaged voxel colours are flatter than any
 //! exemplar patch, and flat queries drift to the exemplar's calm regions.
@@ -26,6 +32,7 @@
 use super::grid::{Box3, Grid};
 use crate::candidates::geometry::{AXES, Dims, offset_triple};
 use crate::candidates::{Candidates, Level, SIMILAR_DIMS, quantise};
+use crate::params::{Slices, SynthParams};
 use crate::stack::spacing;
 use rayon::prelude::*;
 
@@ -103,6 +110,8 @@ pub struct Corrector<'a> {
     /// Gain on neighbourhood colours around their mean (see
     /// [`crate::SynthParams::contrast`]).
     contrast: f32,
+    /// Reads only the direct neighbours (see [`Slices::Sparse`]).
+    sparse: bool,
 }
 
 /// Weight (out of 256) of a coherent triple's distance: favouring triples
@@ -118,9 +127,8 @@ const COHERENT_WEIGHT: u32 = 128;
 const FINE_3D_CANDIDATES: usize = 4;
 
 impl<'a> Corrector<'a> {
-    /// A corrector for level `k` whose queries stretch neighbourhood
-    /// colours by `contrast` around their mean.
-    pub fn new(cands: &'a Candidates, k: usize, contrast: f32) -> Self {
+    /// A corrector for level `k` with the texture's matching and contrast.
+    pub fn new(cands: &'a Candidates, k: usize, params: &SynthParams) -> Self {
         Corrector {
             level: cands.level(k),
             k,
@@ -129,7 +137,8 @@ impl<'a> Corrector<'a> {
             offsets: [0, 1, 2].map(|p| cands.level(k).appearance[p].pca.mean_offsets()),
             joint_offsets: cands.level(k).joint_pca().mean_offsets(),
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
-            contrast,
+            contrast: params.contrast,
+            sparse: params.slices == Slices::Sparse,
             max_3d: if k == 0 {
                 FINE_3D_CANDIDATES
             } else {
@@ -149,7 +158,6 @@ impl<'a> Corrector<'a> {
         p: [i64; 3],
         s: &mut Scratch,
     ) -> [u32; 3] {
-        let r = self.n / 2;
         let h = spacing(self.k) as i64;
         let strides = work.triples.strides();
         let centre = work.triples.index(p) as i64;
@@ -224,32 +232,9 @@ impl<'a> Corrector<'a> {
             }
         }
         let mut best2d = [0u32; 3];
-        for (plane, &(a, b)) in AXES.iter().enumerate() {
-            // The voxel's slice neighbourhood in this plane, u outer order
-            // matching the exemplar neighbourhoods (v rows, u columns).
-            let mut o = 0;
-            for j in -r..=r {
-                for i in -r..=r {
-                    let idx = (centre + i * strides[a] + j * strides[b]) as usize;
-                    let w = pick(a, i, b, j);
-                    // Half the voxel colour, half the plane's own exemplar.
-                    let avg = w.colours.data[idx];
-                    let own = self.plane_colours[plane][w.triples.data[idx][plane] as usize];
-                    let c = [0, 1, 2].map(|ch| 0.5 * (avg[ch] + own[ch]));
-                    s.neigh[o..o + 3].copy_from_slice(&c);
-                    o += 3;
-                }
-            }
-            if self.contrast != 1.0 {
-                stretch(&mut s.neigh[..o], self.contrast);
-            }
-            let app = &self.level.appearance[plane];
-            let dims = app.pca.dims;
-            app.pca.project_with(
-                &self.offsets[plane],
-                &s.neigh[..o],
-                &mut s.app[plane][..dims],
-            );
+        for plane in 0..3 {
+            self.slice_query(&pick, strides, centre, plane, s);
+            let dims = self.level.appearance[plane].pca.dims;
             let query = self.level.quantise_appearance(plane, &s.app[plane][..dims]);
             let mut best = (u32::MAX, u32::MAX);
             for &base in &bases[plane][..bases_n[plane]] {
@@ -320,6 +305,73 @@ impl<'a> Corrector<'a> {
         }
         best.1
     }
+
+    /// Plane `plane`'s query from the voxel's N×N colour slice, u outer
+    /// order matching the exemplar neighbourhoods (v rows, u columns).
+    fn slice_query<'w>(
+        &self,
+        pick: &impl Fn(usize, i64, usize, i64) -> &'w Work,
+        strides: [i64; 3],
+        centre: i64,
+        plane: usize,
+        s: &mut Scratch,
+    ) {
+        let r = self.n / 2;
+        let h = spacing(self.k) as i64;
+        let (a, b) = AXES[plane];
+        let mut o = 0;
+        for j in -r..=r {
+            for i in -r..=r {
+                let idx = (centre + i * strides[a] + j * strides[b]) as usize;
+                let (avg, own) = if self.sparse && (i.abs() > 1 || j.abs() > 1) {
+                    // Beyond the direct neighbours, the nearest direct
+                    // neighbour's triple predicts the voxel's triple.
+                    let (qi, qj) = (i.clamp(-1, 1), j.clamp(-1, 1));
+                    let qidx = (centre + qi * strides[a] + qj * strides[b]) as usize;
+                    let tq = pick(a, qi, b, qj).triples.data[qidx];
+                    let mut d = [0i64; 3];
+                    d[a] = i - qi;
+                    d[b] = j - qj;
+                    let t = offset_triple(self.dims, tq, d, h);
+                    (
+                        colour_at(self.plane_colours, t),
+                        self.plane_colours[plane][t[plane] as usize],
+                    )
+                } else {
+                    let w = pick(a, i, b, j);
+                    (
+                        w.colours.data[idx],
+                        self.plane_colours[plane][w.triples.data[idx][plane] as usize],
+                    )
+                };
+                // Half the voxel colour, half the plane's own exemplar.
+                let c = [0, 1, 2].map(|ch| 0.5 * (avg[ch] + own[ch]));
+                s.neigh[o..o + 3].copy_from_slice(&c);
+                o += 3;
+            }
+        }
+        if self.contrast != 1.0 {
+            stretch(&mut s.neigh[..o], self.contrast);
+        }
+        let app = &self.level.appearance[plane];
+        let dims = app.pca.dims;
+        app.pca.project_with(
+            &self.offsets[plane],
+            &s.neigh[..o],
+            &mut s.app[plane][..dims],
+        );
+    }
+}
+
+/// Mean of a triple's three exemplar colours.
+#[inline]
+fn colour_at(planes: [&[[f32; 3]]; 3], t: [u32; 3]) -> [f32; 3] {
+    let (a, b, d) = (
+        planes[0][t[0] as usize],
+        planes[1][t[1] as usize],
+        planes[2][t[2] as usize],
+    );
+    [0, 1, 2].map(|ch| (a[ch] + b[ch] + d[ch]) / 3.0)
 }
 
 /// Moves RGB colours away from their mean by `gain` (per channel).

@@ -33,7 +33,7 @@ pub mod plan;
 
 use crate::candidates::Candidates;
 use crate::error::Result;
-use crate::params::{Scheme, SynthParams};
+use crate::params::{Scheme, Slices, SynthParams};
 use crate::texture::{CutPlane, Filter, Region, SynthStats};
 use cache::{Claim, Tile, TileCache, TileData, TileKey};
 use correction::{Corrector, Scratch, Work, colour};
@@ -158,7 +158,10 @@ impl Engine {
         };
         Engine {
             init_level: cands.level_count() - 1,
-            radius: (cands.params().neighbourhood as i64 / 2).max(1),
+            radius: match params.slices {
+                Slices::Full => (cands.params().neighbourhood as i64 / 2).max(1),
+                Slices::Sparse => 1,
+            },
             cell: params.grid as i64,
             cands,
             params,
@@ -166,6 +169,11 @@ impl Engine {
             key,
             steps,
         }
+    }
+
+    /// How far a correction reads, in voxels of its level.
+    pub(crate) fn radius(&self) -> i64 {
+        self.radius
     }
 
     pub(crate) fn candidates(&self) -> &Candidates {
@@ -425,7 +433,7 @@ impl Engine {
             triples
         } else {
             let mut work = Work::new(&self.cands, k, triples);
-            let corrector = Corrector::new(&self.cands, k, self.params.contrast);
+            let corrector = Corrector::new(&self.cands, k, &self.params);
             let mut step_start: Option<(usize, Work)> = None;
             let mut current_pass = 0;
             let classes = (side * side * side) as usize;
