@@ -725,8 +725,13 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{}² axis slice at lod {} (level 0 = finest; what the engine computes from a cold cache)",
-        a.slice, a.src.lod
+        "{}² axis slice at lod {} (level 0 = finest; what the engine computes from a cold cache), {} slices",
+        a.slice,
+        a.src.lod,
+        match base.params().slices {
+            Slices::Sparse => "sparse (corrections read their direct neighbours)",
+            Slices::Full => "full (corrections read N/2 voxels away)",
+        }
     );
     println!(
         "{:<10} {:>5} {:>14} {:>14}",

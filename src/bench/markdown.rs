@@ -121,7 +121,10 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
     let _ = writeln!(
         w,
         "Voxels produced / corrections performed per level (level 0 is the finest), \
-         counted by the planner without synthesizing (`solidtex plan` shows the same).\n"
+         counted by the planner without synthesizing (`solidtex plan` shows the same). \
+         The texture uses sparse slices (the default: a correction reads its direct \
+         neighbours only); the rows marked full slices count the chains of corrections \
+         that read every voxel of their N×N slices (Dong et al.'s), geometry only.\n"
     );
     let _ = writeln!(w, "| scheme | request | per level, finest first (total) |");
     let _ = writeln!(w, "| --- | --- | --- |");
