@@ -52,7 +52,7 @@ fn quick_bench_measures_everything_and_writes_the_page() {
 
     // The dual grid's single-voxel chain is smaller than the standard one.
     let plans = v["plans"].as_array().unwrap();
-    assert_eq!(plans.len(), 6);
+    assert_eq!(plans.len(), 8);
     let chain = |scheme: &str| -> u64 {
         plans
             .iter()

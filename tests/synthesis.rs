@@ -145,7 +145,7 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
 #[test]
 fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
     // Measured when written: 13 % of the cold planes' corrections with full
-    // slices, 30 % with sparse ones.
+    // slices, 31 % with sparse ones.
     for (slices, max_percent) in [(Slices::Full, 25), (Slices::Sparse, 40)] {
         let params = SynthParams {
             slices,
@@ -172,6 +172,7 @@ fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
                 }
             }
         }
+        println!("{slices:?}: swept {swept_corrections} of {cold_corrections}, {free_planes} free");
         assert!(
             swept_corrections * 100 < cold_corrections * max_percent,
             "{slices:?}: a sweep corrected {swept_corrections} finest voxels, cold planes {cold_corrections}"
@@ -225,7 +226,7 @@ fn overlapping_requests_of_any_shape_share_work_and_keep_their_bytes() {
     // a pass inside a step are shared too.
     // Measured when written: 31 % (dual grid), 30 % (standard; 50 % while
     // only the last pass was shared), 29 % (three passes), all with full
-    // slices; 40 % with sparse slices, whose shorter chains overlap less.
+    // slices; 39 % with sparse slices, whose shorter chains overlap less.
     for (scheme, passes, slices, max_percent) in [
         (Scheme::DualGrid, 2, Slices::Full, 40),
         (Scheme::Standard, 2, Slices::Full, 40),
@@ -253,6 +254,7 @@ fn overlapping_requests_of_any_shape_share_work_and_keep_their_bytes() {
             cold_total += cold_n;
             shared_total += shared_n;
         }
+        println!("{scheme:?} ×{passes} {slices:?}: shared {shared_total} of {cold_total}");
         assert!(
             shared_total * 100 < cold_total * max_percent,
             "{scheme:?} ×{passes} {slices:?}: {shared_total} corrections shared, {cold_total} cold"
@@ -510,9 +512,9 @@ fn golden_regions_are_pinned() {
 }
 
 const GOLDEN_SPARSE: [u64; 3] = [
-    3188892440296145145,
-    12558430943281127111,
-    14804491177673891931,
+    18340570835836485773,
+    8913077148175013555,
+    9278384172460047680,
 ];
 
 const GOLDEN_FULL: [u64; 3] = [
