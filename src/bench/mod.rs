@@ -469,6 +469,23 @@ fn synthesis_rows(
                 || tex.slice(Axis::Z, 5, 0, 0, side, side, 0),
             )?);
         }
+        // Chains grow differently along each axis (the subpass order), so
+        // the other two axes get cold rows of their own.
+        for (axis, name, origin, size) in [
+            (Axis::X, "x", [5, 0, 0], [1, side, side]),
+            (Axis::Y, "y", [0, 5, 0], [side, 1, side]),
+        ] {
+            let tex = texture(c, Scheme::DualGrid);
+            let region = Region { origin, size };
+            rows.push(cold_row(
+                format!("axis slice {side}² cold, {name} axis"),
+                Some(&tex.plan(&region, 0)?),
+                predictor,
+                is_256.then_some("≤ 300 ms"),
+                None,
+                || Ok(tex.slice(axis, 5, 0, 0, side, side, 0)?),
+            )?);
+        }
         // A cut has no plan of its own; its dependency set is about that
         // of an axis slice of the same side, so the slice's plan decides.
         let plane = CutPlane {
