@@ -67,7 +67,7 @@ fn quick_bench_measures_everything_and_writes_the_page() {
     assert!(chain("dual-grid") < chain("standard"));
 
     let load = v["load"].as_array().unwrap();
-    assert_eq!(load.len(), 3);
+    assert_eq!(load.len(), 4);
     for l in load {
         let t = &l["report"]["total"];
         assert!(t["requests"].as_u64().unwrap() >= 1, "{l}");
