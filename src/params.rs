@@ -141,6 +141,7 @@ pub struct SynthParams {
     /// Cell side M of the dual-grid scheme, in voxels of the level.
     pub grid: u32,
     /// Jitter strength multiplier; 0 disables the deformation.
+    #[serde(serialize_with = "shortest_f32")]
     pub jitter: f32,
     /// Also correct the initialisation level after jitter.
     pub correct_init_level: bool,
@@ -149,6 +150,7 @@ pub struct SynthParams {
     /// mean of three exemplar colours, so synthesized neighbourhoods are
     /// flatter than the exemplar's and, matched as they are, pick its calm
     /// regions: rare dark or bright features fade (docs/quality.md).
+    #[serde(serialize_with = "shortest_f32")]
     pub contrast: f32,
     /// Which voxels a correction reads for its slice neighbourhoods.
     pub slices: Slices,
@@ -182,6 +184,12 @@ impl SynthParams {
     }
 }
 
+/// Writes an `f32` as the shortest decimal that reads back to it (`1.6`,
+/// not the `1.600000023841858` of its exact `f64` value).
+fn shortest_f32<S: serde::Serializer>(v: &f32, s: S) -> std::result::Result<S::Ok, S::Error> {
+    s.serialize_f64(v.to_string().parse().unwrap_or(*v as f64))
+}
+
 /// Checks `min ≤ v ≤ max` (NaN fails the test and is refused too).
 fn range<T: PartialOrd + Into<f64> + Copy>(name: &'static str, v: T, min: T, max: T) -> Result<()> {
     if (min..=max).contains(&v) {
@@ -199,6 +207,19 @@ fn range<T: PartialOrd + Into<f64> + Copy>(name: &'static str, v: T, min: T, max
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fractional_parameters_read_as_written() {
+        let p = SynthParams {
+            contrast: 1.6,
+            jitter: 0.3,
+            ..SynthParams::default()
+        };
+        let json = serde_json::to_string(&p).unwrap();
+        assert!(json.contains(r#""contrast":1.6,"#), "{json}");
+        assert!(json.contains(r#""jitter":0.3,"#), "{json}");
+        assert_eq!(serde_json::from_str::<SynthParams>(&json).unwrap(), p);
+    }
 
     #[test]
     fn synthesis_parameters_outside_their_ranges_are_refused() {

@@ -123,7 +123,13 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
         .enable_all()
         .build()?;
     // (name, clients, synthesis threads (0: every core), sweep, target)
-    type Run = (String, usize, usize, Option<SweepPlane>, Option<&'static str>);
+    type Run = (
+        String,
+        usize,
+        usize,
+        Option<SweepPlane>,
+        Option<&'static str>,
+    );
     let runs: [Run; 4] = [
         (
             format!("1 client, mixed, {}², lod {}", o.side, o.lod),
@@ -133,7 +139,10 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
             None,
         ),
         (
-            format!("1 client, mixed, {}², lod {}, one synthesis thread", o.side, o.lod),
+            format!(
+                "1 client, mixed, {}², lod {}, one synthesis thread",
+                o.side, o.lod
+            ),
             1,
             1,
             None,
