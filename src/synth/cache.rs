@@ -262,6 +262,22 @@ impl TileCache {
     /// some of them and nobody is computing it.
     pub fn claim(self: &Arc<Self>, key: TileKey, want: u64) -> Claim {
         let mut g = self.lock();
+        self.claim_locked(&mut g, key, want)
+    }
+
+    /// [`TileCache::claim`] for many tiles at once, atomically: two
+    /// requests for the same tiles arriving together do not split them
+    /// (each computing part, and both the shared chains below), the first
+    /// claims every missing tile and the second waits for all of them.
+    pub fn claim_all(self: &Arc<Self>, wants: &[(TileKey, u64)]) -> Vec<Claim> {
+        let mut g = self.lock();
+        wants
+            .iter()
+            .map(|&(key, want)| self.claim_locked(&mut g, key, want))
+            .collect()
+    }
+
+    fn claim_locked(self: &Arc<Self>, g: &mut Inner, key: TileKey, want: u64) -> Claim {
         let partial = match g.lru.get(&key) {
             Some(t) if t.covers(want) => {
                 let t = t.clone();
@@ -392,6 +408,45 @@ mod tests {
         version: 0,
         cell: [0, 0, 0],
     };
+
+    #[test]
+    fn requests_arriving_together_do_not_split_their_tiles() {
+        let keys: Vec<(TileKey, u64)> = (0..512)
+            .map(|i| {
+                let key = TileKey {
+                    cell: [i, 0, 0],
+                    ..KEY
+                };
+                (key, u64::MAX)
+            })
+            .collect();
+        for _ in 0..20 {
+            let cache = Arc::new(TileCache::new(1 << 20));
+            let start = std::sync::Barrier::new(2);
+            let mine: Vec<usize> = std::thread::scope(|s| {
+                let claimers: Vec<_> = (0..2)
+                    .map(|_| {
+                        s.spawn(|| {
+                            start.wait();
+                            let claims = cache.claim_all(&keys);
+                            let n = claims
+                                .iter()
+                                .filter(|c| matches!(c, Claim::Mine(_)))
+                                .count();
+                            // Tickets dropped unpublished release their tiles
+                            // only after both have claimed.
+                            start.wait();
+                            n
+                        })
+                    })
+                    .collect();
+                claimers.into_iter().map(|c| c.join().unwrap()).collect()
+            });
+            let mut mine = mine;
+            mine.sort();
+            assert_eq!(mine, vec![0, keys.len()], "one request claims every tile");
+        }
+    }
 
     #[test]
     fn a_partial_tile_lends_its_voxels_and_grows() {

@@ -255,14 +255,21 @@ impl Engine {
         let mut theirs = Vec::new();
         let in_pool = rayon::current_thread_index().is_some();
         let mut unclaimed = Vec::new();
-        for (&c, &want) in &wanted {
-            let key = TileKey {
-                texture: self.key,
-                level: k as u8,
-                version: 0,
-                cell: c,
-            };
-            match self.cache.claim(key, want) {
+        let keys: Vec<(TileKey, u64)> = wanted
+            .iter()
+            .map(|(&c, &want)| {
+                let key = TileKey {
+                    texture: self.key,
+                    level: k as u8,
+                    version: 0,
+                    cell: c,
+                };
+                (key, want)
+            })
+            .collect();
+        for ((key, want), claim) in keys.iter().zip(self.cache.claim_all(&keys)) {
+            let (c, want) = (key.cell, *want);
+            match claim {
                 Claim::Ready(t) => {
                     acc.cached.fetch_add(1, Ordering::Relaxed);
                     out.insert(c, t);
