@@ -52,14 +52,7 @@ pub struct Work {
 /// Colour of a triple at level `k`: the mean of its three exemplar colours.
 #[inline]
 pub fn colour(c: &Candidates, k: usize, t: [u32; 3]) -> [f32; 3] {
-    let a = c.stack(0).level(k)[t[0] as usize];
-    let b = c.stack(1).level(k)[t[1] as usize];
-    let d = c.stack(2).level(k)[t[2] as usize];
-    [
-        (a[0] + b[0] + d[0]) / 3.0,
-        (a[1] + b[1] + d[1]) / 3.0,
-        (a[2] + b[2] + d[2]) / 3.0,
-    ]
+    colour_at([0, 1, 2].map(|p| c.stack(p).level(k)), t)
 }
 
 impl Work {
