@@ -318,6 +318,12 @@ mod tests {
             "out_of_range"
         );
         assert_eq!(
+            TextureParams::from_json(r#"{"slices": "dense"}"#)
+                .unwrap_err()
+                .code,
+            "invalid_params"
+        );
+        assert_eq!(
             TextureParams::from_json(r#"{"neighbourhood": 4}"#)
                 .unwrap_err()
                 .code,

@@ -41,6 +41,10 @@ pub struct TileData {
 /// Bits per packed coordinate: exemplars have at most 512² = 2¹⁸ pixels.
 const COORD_BITS: u32 = 21;
 const COORD_MASK: u64 = (1 << COORD_BITS) - 1;
+const _: () = assert!(
+    (crate::exemplar::MAX_SIDE as u64).pow(2) <= COORD_MASK + 1,
+    "a pixel index must fit a packed coordinate"
+);
 
 /// A triple in one word: 8 bytes per cached voxel instead of 12, so the
 /// same cache budget holds half as many voxels again.

@@ -339,6 +339,27 @@ pub fn exact_chain(
     out
 }
 
+/// Order of the 2³ subpasses when corrections read only their direct
+/// neighbours, as phases x + 2y + 4z: each z layer of the 2×2×2 block in
+/// Gray-code order (000, 100, 110, 010, then 101, 001, 011, 111). Within a
+/// pass a chain can only step to an earlier subpass, so the order sets how
+/// far chains grow along each axis; this one measured the least work of
+/// all orders tried: 128² axis slices (z, x, y) 0.24 / 0.38 / 0.40 M
+/// corrections against 0.27 / 0.59 / 0.44 M in lexicographic order, and a
+/// 32³ region 0.16 M against 0.20 M. With radius 2 the lexicographic order
+/// is the cheaper one (a 32³ region 0.53 M against 0.76 M), so it stays.
+const DIRECT_NEIGHBOUR_ORDER: [i64; 8] = [0, 1, 3, 2, 5, 4, 6, 7];
+
+/// Phase of subpass `class` (voxels whose coordinates are congruent to it
+/// modulo `side` are corrected together) for reads `radius` voxels away.
+fn subpass_phase(class: i64, side: i64, radius: i64) -> [i64; 3] {
+    if side == 2 && radius == 1 {
+        let c = DIRECT_NEIGHBOUR_ORDER[class as usize];
+        return [c & 1, (c >> 1) & 1, c >> 2];
+    }
+    [class % side, (class / side) % side, class / (side * side)]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -396,32 +417,6 @@ mod tests {
         let total = |v: &[LevelPlan]| v.iter().map(|l| l.voxels).sum::<u64>();
         assert!(total(&dual) < total(&standard), "{dual:?} vs {standard:?}");
     }
-}
-
-/// Order of the 2³ subpasses when corrections read only their direct
-/// neighbours, as phases x + 2y + 4z: each z layer of the 2×2×2 block in
-/// Gray-code order (000, 100, 110, 010, then 101, 001, 011, 111). Within a
-/// pass a chain can only step to an earlier subpass, so the order sets how
-/// far chains grow along each axis; this one measured the least work of
-/// all orders tried: 128² axis slices (z, x, y) 0.24 / 0.38 / 0.40 M
-/// corrections against 0.27 / 0.59 / 0.44 M in lexicographic order, and a
-/// 32³ region 0.16 M against 0.20 M. With radius 2 the lexicographic order
-/// is the cheaper one (a 32³ region 0.53 M against 0.76 M), so it stays.
-const DIRECT_NEIGHBOUR_ORDER: [i64; 8] = [0, 1, 3, 2, 5, 4, 6, 7];
-
-/// Phase of subpass `class` (voxels whose coordinates are congruent to it
-/// modulo `side` are corrected together) for reads `radius` voxels away.
-fn subpass_phase(class: i64, side: i64, radius: i64) -> [i64; 3] {
-    if side == 2 && radius == 1 {
-        let c = DIRECT_NEIGHBOUR_ORDER[class as usize];
-        return [c & 1, (c >> 1) & 1, c >> 2];
-    }
-    [class % side, (class / side) % side, class / (side * side)]
-}
-
-#[cfg(test)]
-mod order_tests {
-    use super::*;
 
     #[test]
     fn every_subpass_order_visits_each_phase_once() {
