@@ -193,9 +193,12 @@ struct SynthArgs {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Correction passes per level.
+    /// Correction passes per level, the finest excepted.
     #[arg(long, default_value_t = 2)]
     passes: u32,
+    /// Correction passes at the finest level.
+    #[arg(long, default_value_t = 1)]
+    finest_passes: u32,
     /// Dual-grid cell side M.
     #[arg(long, default_value_t = 12)]
     grid: u32,
@@ -219,6 +222,7 @@ impl SynthArgs {
         SynthParams {
             seed: self.seed,
             passes: self.passes,
+            finest_passes: self.finest_passes,
             scheme,
             grid: self.grid,
             jitter: self.jitter,

@@ -77,6 +77,7 @@ pub fn evaluate(
             "slab-only",
             SynthParams {
                 passes: 0,
+                finest_passes: 0,
                 correct_init_level: false,
                 ..params.clone()
             },

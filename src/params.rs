@@ -132,8 +132,15 @@ pub const DEFAULT_CONTRAST: f32 = 1.6;
 pub struct SynthParams {
     /// Seed hashed with level and position for every random choice.
     pub seed: u64,
-    /// Correction passes P per level.
+    /// Correction passes P per level, the finest level excepted.
     pub passes: u32,
+    /// Correction passes at the finest level (level 0). Each pass there
+    /// widens a request's dependency set by the subpass chains of a whole
+    /// level at full resolution, so it costs far more than a coarse pass,
+    /// while the coarse passes have already settled which exemplar patches
+    /// the voxels continue; one pass keeps most of the quality of two
+    /// (docs/quality.md) for about a third of a cold slice's corrections.
+    pub finest_passes: u32,
     /// Subpass block side s: s³ subpasses per pass (2 gives 8).
     pub subpass_side: u32,
     /// Correction scheme.
@@ -161,6 +168,7 @@ impl Default for SynthParams {
         SynthParams {
             seed: 1,
             passes: 2,
+            finest_passes: 1,
             subpass_side: 2,
             scheme: Scheme::DualGrid,
             grid: 12,
@@ -176,6 +184,7 @@ impl SynthParams {
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
         range("passes", self.passes, 0, 6)?;
+        range("finest_passes", self.finest_passes, 0, 6)?;
         range("subpass_side", self.subpass_side, 1, 3)?;
         range("grid", self.grid, 4, 64)?;
         range("jitter", self.jitter, 0.0, 4.0)?;

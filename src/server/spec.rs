@@ -73,6 +73,12 @@ impl TextureParams {
         for (key, then) in KEYS_ADDED_SINCE_VERSION_1 {
             obj.entry(*key).or_insert_with(|| Value::from(*then));
         }
+        // Before `finest_passes`, the finest level had `passes` like the rest.
+        let passes = obj
+            .get("passes")
+            .cloned()
+            .unwrap_or(Value::from(SynthParams::default().passes));
+        obj.entry("finest_passes").or_insert(passes);
         Self::from_flat(&obj)
     }
 
@@ -121,7 +127,9 @@ impl TextureParams {
 }
 
 /// Synthesis keys added after the first stored layout, with the value that
-/// behaves as textures stored without them did.
+/// behaves as textures stored without them did (`finest_passes`, whose old
+/// value is the texture's own `passes`, is filled in by
+/// [`TextureParams::from_stored`]).
 const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[("slices", "full")];
 
 fn invalid_params(message: String) -> ApiError {
@@ -288,6 +296,29 @@ mod tests {
         assert_eq!(
             TextureParams::from_stored(&new).unwrap(),
             TextureParams::default()
+        );
+        // The finest level had the texture's own number of passes.
+        let mut old = new.clone();
+        old.remove("finest_passes");
+        old.insert("passes".into(), 3.into());
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.finest_passes,
+            1
+        );
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .finest_passes,
+            3
+        );
+        old.remove("passes");
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .finest_passes,
+            2
         );
     }
 

@@ -119,6 +119,29 @@ pub(crate) struct Engine {
     radius: i64,
     cell: i64,
     steps: Vec<Step>,
+    /// Steps of level 0 (see [`SynthParams::finest_passes`]).
+    finest_steps: Vec<Step>,
+}
+
+/// Correction steps for `passes` passes under the texture's scheme.
+fn steps_for(params: &SynthParams, passes: u32) -> Vec<Step> {
+    match params.scheme {
+        Scheme::DualGrid => [
+            Step {
+                offset: 0,
+                passes: passes.div_ceil(2),
+            },
+            Step {
+                offset: params.grid as i64 / 2,
+                passes: passes / 2,
+            },
+        ]
+        .into_iter()
+        .filter(|s| s.passes > 0)
+        .collect(),
+        Scheme::Standard if passes > 0 => vec![Step { offset: 0, passes }],
+        Scheme::Standard => Vec::new(),
+    }
 }
 
 fn fingerprint(bytes: &[u8]) -> u64 {
@@ -136,26 +159,8 @@ impl Engine {
         let mut bytes = cands.to_bytes();
         bytes.extend_from_slice(&serde_json::to_vec(&params).expect("params serialise"));
         let key = fingerprint(&bytes);
-        let steps = match params.scheme {
-            Scheme::DualGrid => [
-                Step {
-                    offset: 0,
-                    passes: params.passes.div_ceil(2),
-                },
-                Step {
-                    offset: params.grid as i64 / 2,
-                    passes: params.passes / 2,
-                },
-            ]
-            .into_iter()
-            .filter(|s| s.passes > 0)
-            .collect(),
-            Scheme::Standard if params.passes > 0 => vec![Step {
-                offset: 0,
-                passes: params.passes,
-            }],
-            Scheme::Standard => Vec::new(),
-        };
+        let steps = steps_for(&params, params.passes);
+        let finest_steps = steps_for(&params, params.finest_passes);
         Engine {
             init_level: cands.level_count() - 1,
             radius: match params.slices {
@@ -168,6 +173,7 @@ impl Engine {
             cache,
             key,
             steps,
+            finest_steps,
         }
     }
 
@@ -192,6 +198,8 @@ impl Engine {
     pub(crate) fn steps_at(&self, k: usize) -> &[Step] {
         if k == self.init_level && !self.params.correct_init_level {
             &[]
+        } else if k == 0 {
+            &self.finest_steps
         } else {
             &self.steps
         }
@@ -626,6 +634,7 @@ impl Engine {
             radius: self.radius,
             cell: self.cell,
             steps: self.steps.clone(),
+            finest_steps: self.finest_steps.clone(),
         };
         let acc = Acc::new(self.init_level + 1, true);
         let b = Box3::new(r.origin, r.size.map(|s| s as i64));
