@@ -76,7 +76,7 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
     );
     let _ = writeln!(
         w,
-        "| synthesis exemplar | {} ({} levels; otherwise default parameters: 2 passes, dual grid M = 12) |\n",
+        "| synthesis exemplar | {} ({} levels; otherwise default parameters: 2 passes, 1 at the finest level, dual grid M = 12) |\n",
         r.synthesis_exemplar, r.levels
     );
     let _ = writeln!(
@@ -123,8 +123,9 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         "Voxels produced / corrections performed per level (level 0 is the finest), \
          counted by the planner without synthesizing (`solidtex plan` shows the same). \
          The texture uses sparse slices (the default: a correction reads its direct \
-         neighbours only); the rows marked full slices count the chains of corrections \
-         that read every voxel of their N×N slices (Dong et al.'s), geometry only.\n"
+         neighbours only) and one pass at the finest level; the rows marked full slices \
+         count the chains of corrections that read every voxel of their N×N slices with \
+         two passes at every level (Dong et al.'s and Zhang et al.'s setting), geometry only.\n"
     );
     let _ = writeln!(w, "| scheme | request | per level, finest first (total) |");
     let _ = writeln!(w, "| --- | --- | --- |");
