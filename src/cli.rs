@@ -215,6 +215,10 @@ struct SynthArgs {
     /// each N×N slice extrapolated) or full (every voxel of the slices).
     #[arg(long, default_value = "sparse")]
     slices: Slices,
+    /// Penalty on coherent triples whose three exemplar colours disagree
+    /// (0 disables).
+    #[arg(long, default_value_t = solidtex::params::DEFAULT_CONSISTENCY)]
+    consistency: f32,
 }
 
 impl SynthArgs {
@@ -229,6 +233,7 @@ impl SynthArgs {
             subpass_side: self.subpass_side,
             contrast: self.contrast,
             slices: self.slices,
+            consistency: self.consistency,
             ..SynthParams::default()
         }
     }

@@ -161,7 +161,19 @@ pub struct SynthParams {
     pub contrast: f32,
     /// Which voxels a correction reads for its slice neighbourhoods.
     pub slices: Slices,
+    /// Penalty on coherent triples whose three exemplar colours disagree,
+    /// per squared colour difference (in units of a quantised
+    /// neighbourhood distance of one colour level); 0 disables it. Without
+    /// it, exemplar features that only one plane's exemplar has are
+    /// extruded along that plane's normal into straight streaks
+    /// (docs/quality.md).
+    #[serde(serialize_with = "shortest_f32")]
+    pub consistency: f32,
 }
+
+/// Default [`SynthParams::consistency`], measured on the shared exemplars
+/// (docs/quality.md).
+pub const DEFAULT_CONSISTENCY: f32 = 32.0;
 
 impl Default for SynthParams {
     fn default() -> Self {
@@ -176,6 +188,7 @@ impl Default for SynthParams {
             correct_init_level: true,
             contrast: DEFAULT_CONTRAST,
             slices: Slices::Sparse,
+            consistency: DEFAULT_CONSISTENCY,
         }
     }
 }
@@ -189,6 +202,7 @@ impl SynthParams {
         range("grid", self.grid, 4, 64)?;
         range("jitter", self.jitter, 0.0, 4.0)?;
         range("contrast", self.contrast, 1.0, 4.0)?;
+        range("consistency", self.consistency, 0.0, 1024.0)?;
         Ok(())
     }
 }

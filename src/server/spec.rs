@@ -71,7 +71,8 @@ impl TextureParams {
     pub fn from_stored(obj: &Map<String, Value>) -> Result<TextureParams, ApiError> {
         let mut obj = obj.clone();
         for (key, then) in KEYS_ADDED_SINCE_VERSION_1 {
-            obj.entry(*key).or_insert_with(|| Value::from(*then));
+            obj.entry(*key)
+                .or_insert_with(|| serde_json::from_str(then).expect("valid JSON"));
         }
         // Before `finest_passes`, the finest level had `passes` like the rest.
         let passes = obj
@@ -130,7 +131,9 @@ impl TextureParams {
 /// behaves as textures stored without them did (`finest_passes`, whose old
 /// value is the texture's own `passes`, is filled in by
 /// [`TextureParams::from_stored`]).
-const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[("slices", "full")];
+/// Values are JSON texts.
+const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] =
+    &[("slices", r#""full""#), ("consistency", "0")];
 
 fn invalid_params(message: String) -> ApiError {
     ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)

@@ -20,6 +20,14 @@
 //! by the texture's `contrast`: averaged voxel colours are flatter than any
 //! exemplar patch, and flat queries drift to the exemplar's calm regions.
 //!
+//! A coherent triple continues its neighbour's exemplar patches in all
+//! three planes, but nothing makes its three exemplar colours agree: along
+//! z a voxel's xy coordinate never changes, so a vein of the xy exemplar
+//! that the yz and zx exemplars do not share is extruded into a straight
+//! streak across x and y slices. Coherent triples therefore pay for the
+//! disagreement of their three colours ([`SynthParams::consistency`]); the
+//! precomputed 3D candidates agree by construction (low crossbar error).
+//!
 //! Candidates come in two stages. For each plane, the 3×3 in-plane
 //! neighbours' triples, moved back by their offset, point at exemplar
 //! pixels; those pixels' 2D similarity sets are compared in appearance space
@@ -105,6 +113,10 @@ pub struct Corrector<'a> {
     contrast: f32,
     /// Reads only the direct neighbours (see [`Slices::Sparse`]).
     sparse: bool,
+    /// Weight of a coherent triple's colour disagreement, in quantised
+    /// joint-distance units per squared colour difference (see
+    /// [`SynthParams::consistency`]).
+    consistency: f32,
 }
 
 /// Weight (out of 256) of a coherent triple's distance: favouring triples
@@ -132,6 +144,10 @@ impl<'a> Corrector<'a> {
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
             contrast: params.contrast,
             sparse: params.slices == Slices::Sparse,
+            consistency: {
+                let scale = cands.level(k).quant_scale();
+                params.consistency * scale * scale
+            },
             max_3d: if k == 0 {
                 FINE_3D_CANDIDATES
             } else {
@@ -278,7 +294,7 @@ impl<'a> Corrector<'a> {
                 let e = quantise(v, scale) as i32 - q as i32;
                 dist += (e * e) as u32;
             }
-            let dist = dist * COHERENT_WEIGHT / 256;
+            let dist = dist * COHERENT_WEIGHT / 256 + self.disagreement(t);
             if dist < best.0 || (dist == best.0 && t < best.1) {
                 best = (dist, t);
             }
@@ -297,6 +313,21 @@ impl<'a> Corrector<'a> {
             }
         }
         best.1
+    }
+
+    /// How much a triple's three exemplar colours disagree (squared
+    /// differences of each pair), weighted.
+    #[inline]
+    fn disagreement(&self, t: [u32; 3]) -> u32 {
+        if self.consistency == 0.0 {
+            return 0;
+        }
+        let [a, b, c] = [0, 1, 2].map(|p| self.plane_colours[p][t[p] as usize]);
+        let mut d = 0f32;
+        for ch in 0..3 {
+            d += (a[ch] - b[ch]).powi(2) + (b[ch] - c[ch]).powi(2) + (c[ch] - a[ch]).powi(2);
+        }
+        (d * self.consistency) as u32
     }
 
     /// Plane `plane`'s query from the voxel's N×N colour slice, u outer
