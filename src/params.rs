@@ -139,7 +139,7 @@ pub struct SynthParams {
     /// level at full resolution, so it costs far more than a coarse pass,
     /// while the coarse passes have already settled which exemplar patches
     /// the voxels continue; one pass keeps most of the quality of two
-    /// (docs/quality.md) for about a third of a cold slice's corrections.
+    /// (docs/quality.md) for about half of a cold slice's corrections.
     pub finest_passes: u32,
     /// Subpass block side s: s³ subpasses per pass (2 gives 8).
     pub subpass_side: u32,
@@ -263,13 +263,40 @@ mod tests {
                 "contrast {contrast} accepted"
             );
         }
-        let p = SynthParams {
-            passes: 7,
-            ..SynthParams::default()
-        };
-        assert!(matches!(
-            p.validate(),
-            Err(Error::InvalidRange { name: "passes", .. })
-        ));
+        for (p, name) in [
+            (
+                SynthParams {
+                    passes: 7,
+                    ..SynthParams::default()
+                },
+                "passes",
+            ),
+            (
+                SynthParams {
+                    finest_passes: 7,
+                    ..SynthParams::default()
+                },
+                "finest_passes",
+            ),
+            (
+                SynthParams {
+                    consistency: -1.0,
+                    ..SynthParams::default()
+                },
+                "consistency",
+            ),
+            (
+                SynthParams {
+                    consistency: f32::NAN,
+                    ..SynthParams::default()
+                },
+                "consistency",
+            ),
+        ] {
+            assert!(
+                matches!(p.validate(), Err(Error::InvalidRange { name: n, .. }) if n == name),
+                "{name} accepted: {p:?}"
+            );
+        }
     }
 }

@@ -541,3 +541,22 @@ const GOLDEN_FULL_TWO_FINEST_PASSES: [u64; 3] = [
     14953532832689202602,
     16306211498347164830,
 ];
+
+#[test]
+fn consistency_at_the_ends_of_its_range_synthesizes() {
+    // The largest weight the parameters accept synthesizes deterministically
+    // and, against none, changes the voxels.
+    let with = |consistency| {
+        let t = texture_with(
+            SynthParams {
+                consistency,
+                ..SynthParams::default()
+            },
+            64 << 20,
+        );
+        region(&t, [3, -5, 7], [12, 12, 2])
+    };
+    let (none, most) = (with(0.0), with(1024.0));
+    assert_eq!(most, with(1024.0));
+    assert_ne!(none, most);
+}

@@ -323,6 +323,16 @@ mod tests {
                 .finest_passes,
             2
         );
+        // Nor did it penalise inconsistent triples.
+        old.remove("consistency");
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.consistency,
+            0.0
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.consistency,
+            crate::params::DEFAULT_CONSISTENCY
+        );
     }
 
     #[test]

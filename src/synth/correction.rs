@@ -294,7 +294,8 @@ impl<'a> Corrector<'a> {
                 let e = quantise(v, scale) as i32 - q as i32;
                 dist += (e * e) as u32;
             }
-            let dist = dist * COHERENT_WEIGHT / 256 + self.disagreement(t);
+            // Saturating: a large `consistency` can push the penalty to u32::MAX.
+            let dist = (dist * COHERENT_WEIGHT / 256).saturating_add(self.disagreement(t));
             if dist < best.0 || (dist == best.0 && t < best.1) {
                 best = (dist, t);
             }
