@@ -219,6 +219,10 @@ struct SynthArgs {
     /// (0 disables).
     #[arg(long, default_value_t = solidtex::params::DEFAULT_CONSISTENCY)]
     consistency: f32,
+    /// Thickness of the candidate slab's layers, in voxels of the
+    /// initialisation level (Dong et al.: N).
+    #[arg(long, default_value_t = solidtex::params::DEFAULT_SLAB_THICKNESS)]
+    slab_thickness: u32,
 }
 
 impl SynthArgs {
@@ -234,6 +238,7 @@ impl SynthArgs {
             contrast: self.contrast,
             slices: self.slices,
             consistency: self.consistency,
+            slab_thickness: self.slab_thickness,
             ..SynthParams::default()
         }
     }

@@ -1,10 +1,11 @@
 //! `solidtex eval`: scores synthesized slices against their exemplar
-//! (nearest-patch coherence and completeness, colour histogram distance) in
-//! the xy, yz, zx and an oblique orientation, next to two baselines computed
-//! the same way: the slab initialisation without correction, and a
-//! per-pixel shuffle of the exemplar.
+//! (nearest-patch coherence and completeness, colour histogram distance,
+//! and for axis slices the anisotropy against the exemplar's) in the xy,
+//! yz, zx and an oblique orientation, next to two baselines computed the
+//! same way: the slab initialisation without correction, and a per-pixel
+//! shuffle of the exemplar.
 
-use solidtex::eval::{RgbView, SliceScores, score_slice, shuffled_exemplar};
+use solidtex::eval::{RgbView, SliceScores, anisotropy, score_slice, shuffled_exemplar};
 use solidtex::{
     AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Scheme, SynthParams,
     Texture, TileCache,
@@ -26,6 +27,11 @@ pub struct Score {
     pub completeness: f64,
     /// Colour histogram distance (lower is better).
     pub histogram: f64,
+    /// Axis slices: how much more the slice is stretched along one of its
+    /// axes than the exemplar along the matching one (lower is better;
+    /// see [`solidtex::eval::anisotropy`]). None for the oblique cut and
+    /// the shuffle, which have no matching exemplar axes.
+    pub anisotropy: Option<f64>,
 }
 
 fn slices(tex: &Texture, side: u32) -> anyhow::Result<Vec<(&'static str, Vec<u8>)>> {
@@ -93,7 +99,11 @@ pub fn evaluate(
         ));
     }
     let mut out = Vec::new();
-    let push = |out: &mut Vec<Score>, orientation: &str, method: &str, s: SliceScores| {
+    let push = |out: &mut Vec<Score>,
+                orientation: &str,
+                method: &str,
+                s: SliceScores,
+                anisotropy: Option<f64>| {
         out.push(Score {
             exemplar: name.to_string(),
             orientation: orientation.to_string(),
@@ -101,6 +111,7 @@ pub fn evaluate(
             coherence: s.coherence,
             completeness: s.completeness,
             histogram: s.histogram,
+            anisotropy,
         })
     };
     for (method, params) in methods {
@@ -111,7 +122,16 @@ pub fn evaluate(
                 height: side,
                 rgb: &rgb,
             };
-            push(&mut out, orientation, method, score_slice(view, ex, 7));
+            // An axis slice's (u, v) are its plane's exemplar axes (the
+            // eval uses one exemplar for all three planes).
+            let aniso = (orientation != "oblique").then(|| anisotropy(view, ex));
+            push(
+                &mut out,
+                orientation,
+                method,
+                score_slice(view, ex, 7),
+                aniso,
+            );
         }
     }
     let shuffled = shuffled_exemplar(ex, side, side, 7);
@@ -120,20 +140,21 @@ pub fn evaluate(
         height: side,
         rgb: &shuffled,
     };
-    push(&mut out, "any", "shuffled", score_slice(view, ex, 7));
+    push(&mut out, "any", "shuffled", score_slice(view, ex, 7), None);
     Ok(out)
 }
 
 /// Prints scores as a table.
 pub fn print(scores: &[Score]) {
     println!(
-        "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10}",
-        "exemplar", "plane", "method", "coherence", "completeness", "histogram"
+        "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10} {:>10}",
+        "exemplar", "plane", "method", "coherence", "completeness", "histogram", "anisotropy"
     );
     for s in scores {
+        let aniso = s.anisotropy.map_or("-".to_string(), |a| format!("{a:.3}"));
         println!(
-            "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4}",
-            s.exemplar, s.orientation, s.method, s.coherence, s.completeness, s.histogram
+            "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4} {:>10}",
+            s.exemplar, s.orientation, s.method, s.coherence, s.completeness, s.histogram, aniso
         );
     }
 }
@@ -162,6 +183,13 @@ mod tests {
                 .collect()
         };
         assert_eq!(rows(&default, "dual-grid").len(), 4, "xy, yz, zx, oblique");
+        // Only axis slices have exemplar axes to compare stretch with.
+        let has_anisotropy: Vec<bool> = default
+            .iter()
+            .filter(|r| r.method == "dual-grid")
+            .map(|r| r.anisotropy.is_some_and(f64::is_finite))
+            .collect();
+        assert_eq!(has_anisotropy, [true, true, true, false]);
         assert_ne!(rows(&default, "dual-grid"), rows(&flat, "dual-grid"));
         assert_eq!(rows(&default, "slab-only"), rows(&flat, "slab-only"));
     }

@@ -80,6 +80,11 @@ impl TextureParams {
             .cloned()
             .unwrap_or(Value::from(SynthParams::default().passes));
         obj.entry("finest_passes").or_insert(passes);
+        // Before `slab_thickness`, the slab was N (`neighbourhood`) thick.
+        let n = obj.get("neighbourhood").cloned().unwrap_or(Value::from(
+            crate::params::AnalysisParams::default().neighbourhood,
+        ));
+        obj.entry("slab_thickness").or_insert(n);
         Self::from_flat(&obj)
     }
 
@@ -332,6 +337,28 @@ mod tests {
         assert_eq!(
             TextureParams::from_flat(&old).unwrap().synth.consistency,
             crate::params::DEFAULT_CONSISTENCY
+        );
+        // Its slab was N thick.
+        old.remove("slab_thickness");
+        old.insert("neighbourhood".into(), 7.into());
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .slab_thickness,
+            7
+        );
+        old.remove("neighbourhood");
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .slab_thickness,
+            5
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.slab_thickness,
+            crate::params::DEFAULT_SLAB_THICKNESS
         );
     }
 

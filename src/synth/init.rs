@@ -15,13 +15,14 @@ const TAG_JITTER: u32 = 2;
 const GAUSSIANS_PER_CELL: u64 = 3;
 
 /// The candidate slab (Dong et al.): every xy pixel's first candidate,
-/// thickened along z by its own neighbourhoods, N voxels thick. It is tiled
-/// over space in blocks (half an exemplar period wide, one slab thick), each
-/// block shifted by a hashed offset, so the initialisation has no period at
-/// all; the seams between blocks are what the correction then repairs
-/// (Zhang et al.'s subpart initialisation, §4.1).
-pub fn slab_triple(c: &Candidates, seed: u64, k: usize, p: [i64; 3]) -> [u32; 3] {
-    let n = c.params().neighbourhood as i64;
+/// thickened along z by its own neighbourhoods, `thickness` voxels thick
+/// (Dong et al.: N). It is tiled over space in blocks (half an exemplar
+/// period wide, one layer thick), each block shifted by a hashed offset, so
+/// the initialisation has no period at all; the seams between blocks are
+/// what the correction then repairs (Zhang et al.'s subpart initialisation,
+/// §4.1).
+pub fn slab_triple(c: &Candidates, seed: u64, thickness: u32, k: usize, p: [i64; 3]) -> [u32; 3] {
+    let n = thickness as i64;
     let r = n / 2;
     let h = spacing(k) as i64;
     let dims = c.dims();
@@ -154,13 +155,14 @@ impl JitterField {
 pub fn initial_triple(
     c: &Candidates,
     seed: u64,
+    slab_thickness: u32,
     field: &JitterField,
     k: usize,
     p: [i64; 3],
 ) -> [u32; 3] {
     let d = field.displacement(p);
     let q = [0, 1, 2].map(|a| p[a] + d[a].round() as i64);
-    slab_triple(c, seed, k, q)
+    slab_triple(c, seed, slab_thickness, k, q)
 }
 
 /// Upsampling (Zhang et al. eq. 3–4): a child inherits its parent's triple

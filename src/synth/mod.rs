@@ -594,7 +594,14 @@ impl Engine {
                 .for_each(|(dst, &z)| {
                     for p in need.layer(z) {
                         let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
-                        dst[i] = init::initial_triple(&self.cands, self.params.seed, &field, k, p);
+                        dst[i] = init::initial_triple(
+                            &self.cands,
+                            self.params.seed,
+                            self.params.slab_thickness,
+                            &field,
+                            k,
+                            p,
+                        );
                     }
                 });
             return g;
