@@ -10,6 +10,10 @@
 //! Patch distances are the mean squared difference per pixel-channel with
 //! colours scaled to `0..=1`, so a distance lies in `0..=1`.
 //!
+//! [`anisotropy`] adds what patch distances miss: whether a slice is
+//! stretched along one of its axes (streaks, extruded blocks) more than
+//! the exemplar is along the matching axis.
+//!
 //! # Nearest-patch search
 //!
 //! Exhaustive search over `p*p*3`-dimensional patch vectors is far too slow for
