@@ -3,6 +3,7 @@
 mod common;
 
 use common::*;
+use solidtex::eval::{RgbView, anisotropy};
 use solidtex::params::DEFAULT_CONSISTENCY;
 use solidtex::{Axis, CutPlane, Filter, Region, Scheme, Slices, SynthParams, Texture};
 
@@ -577,4 +578,43 @@ fn consistency_at_the_ends_of_its_range_synthesizes() {
     let (none, most) = (with(0.0), with(1024.0));
     assert_eq!(most, with(1024.0));
     assert_ne!(none, most);
+}
+
+#[test]
+fn thin_slab_layers_do_not_extrude_along_z() {
+    // N-thick slab layers keep each layer's xy coordinates along z, and
+    // x slices inherit the streaks: stretched along z against the exemplar.
+    // One-voxel layers take most of that away (on this fixture x-slice
+    // anisotropy 0.04–0.08 against 0.30–0.39).
+    let e = small_exemplar();
+    let rgb: Vec<u8> = e.pixels().iter().flatten().copied().collect();
+    let exemplar = RgbView {
+        width: e.width(),
+        height: e.height(),
+        rgb: &rgb,
+    };
+    for seed in [1, 2] {
+        let x_slice_anisotropy = |slab_thickness| {
+            let t = texture_with(
+                SynthParams {
+                    slab_thickness,
+                    seed,
+                    ..SynthParams::default()
+                },
+                64 << 20,
+            );
+            let (img, _) = t.slice(Axis::X, 7, 0, 0, 96, 96, 0).unwrap();
+            let slice = RgbView {
+                width: 96,
+                height: 96,
+                rgb: &img,
+            };
+            anisotropy(slice, exemplar)
+        };
+        let (thin, thick) = (x_slice_anisotropy(1), x_slice_anisotropy(5));
+        assert!(
+            thin < 0.5 * thick,
+            "seed {seed}: one-voxel layers {thin:.3}, five-voxel layers {thick:.3}"
+        );
+    }
 }
