@@ -133,9 +133,9 @@ impl TextureParams {
 }
 
 /// Synthesis keys added after the first stored layout, with the value that
-/// behaves as textures stored without them did (`finest_passes`, whose old
-/// value is the texture's own `passes`, is filled in by
-/// [`TextureParams::from_stored`]).
+/// behaves as textures stored without them did (`finest_passes` and
+/// `slab_thickness`, whose old values are the texture's own `passes` and
+/// `neighbourhood`, are filled in by [`TextureParams::from_stored`]).
 /// Values are JSON texts.
 const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] =
     &[("slices", r#""full""#), ("consistency", "0")];
