@@ -258,11 +258,14 @@ pub fn directional_ratio(image: RgbView) -> f64 {
         }
         sum / ((h - dv) * (w - du)) as f64
     };
+    if w <= ANISOTROPY_SHIFTS[0] || h <= ANISOTROPY_SHIFTS[0] {
+        // Too short along an axis to compare: no direction is preferred.
+        return 1.0;
+    }
     let along_v: f64 = ANISOTROPY_SHIFTS.iter().map(|&d| mean_sq(0, d)).sum();
     let along_u: f64 = ANISOTROPY_SHIFTS.iter().map(|&d| mean_sq(d, 0)).sum();
     if along_u == 0.0 || along_v == 0.0 {
-        // Constant along one axis (or too small to tell): as flat as the
-        // other axis only when both are.
+        // Constant along one axis: as flat as the other only when both are.
         return if along_u == along_v {
             1.0
         } else if along_u == 0.0 {
@@ -1013,6 +1016,8 @@ mod tests {
         assert_eq!(directional_ratio(view(w, h, &flat)), 1.0);
         let tiny = view(1, 1, &flat);
         assert_eq!(directional_ratio(tiny), 1.0);
+        // One row changes along u but cannot be measured along v.
+        assert_eq!(directional_ratio(view(w, 1, &stripes[..w * 3])), 1.0);
         assert!(anisotropy(tiny, n).is_finite());
     }
 

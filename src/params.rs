@@ -277,50 +277,18 @@ mod tests {
                 "contrast {contrast} accepted"
             );
         }
-        for (p, name) in [
-            (
-                SynthParams {
-                    passes: 7,
-                    ..SynthParams::default()
-                },
-                "passes",
-            ),
-            (
-                SynthParams {
-                    finest_passes: 7,
-                    ..SynthParams::default()
-                },
-                "finest_passes",
-            ),
-            (
-                SynthParams {
-                    consistency: -1.0,
-                    ..SynthParams::default()
-                },
-                "consistency",
-            ),
-            (
-                SynthParams {
-                    consistency: f32::NAN,
-                    ..SynthParams::default()
-                },
-                "consistency",
-            ),
-            (
-                SynthParams {
-                    slab_thickness: 0,
-                    ..SynthParams::default()
-                },
-                "slab_thickness",
-            ),
-            (
-                SynthParams {
-                    slab_thickness: 10,
-                    ..SynthParams::default()
-                },
-                "slab_thickness",
-            ),
-        ] {
+        type Setter = fn(&mut SynthParams);
+        let bad: [(Setter, &str); 6] = [
+            (|p| p.passes = 7, "passes"),
+            (|p| p.finest_passes = 7, "finest_passes"),
+            (|p| p.consistency = -1.0, "consistency"),
+            (|p| p.consistency = f32::NAN, "consistency"),
+            (|p| p.slab_thickness = 0, "slab_thickness"),
+            (|p| p.slab_thickness = 10, "slab_thickness"),
+        ];
+        for (set, name) in bad {
+            let mut p = SynthParams::default();
+            set(&mut p);
             assert!(
                 matches!(p.validate(), Err(Error::InvalidRange { name: n, .. }) if n == name),
                 "{name} accepted: {p:?}"
