@@ -603,10 +603,11 @@ fn quant_scale(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], pc
     let mut max = 1e-6f32;
     let mut buf = Vec::new();
     let mut out = vec![0f32; pca.dims];
+    let offsets = pca.mean_offsets();
     for c in planes {
         for t in &c.triples {
             concat(appearance, *t, &mut buf);
-            pca.project(&buf, &mut out);
+            pca.project_with(&offsets, &buf, &mut out);
             for v in &out {
                 max = max.max(v.abs());
             }
@@ -631,6 +632,9 @@ fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) 
         .map(|(k, s)| {
             let appearance: [AppearanceLevel; 3] =
                 [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &s.appearance_pca[p]));
+            // The projected mean once per level, not once per candidate
+            // (`project_with` computes what `project` does, bit for bit).
+            let joint_offsets = s.joint_pca.mean_offsets();
             let vectors = [0, 1, 2].map(|p| {
                 let c = &s.candidates[p];
                 let d = s.joint_pca.dims;
@@ -642,7 +646,7 @@ fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) 
                         || (Vec::new(), vec![0f32; d]),
                         |(buf, out), (dst, t)| {
                             concat(&appearance, *t, buf);
-                            s.joint_pca.project(buf, out);
+                            s.joint_pca.project_with(&joint_offsets, buf, out);
                             for (b, v) in dst.iter_mut().zip(out.iter()) {
                                 *b = quantise(*v, s.quant_scale);
                             }
