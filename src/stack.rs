@@ -4,6 +4,7 @@
 //! sub-pixel phase. Boundaries wrap (exemplars are treated as tileable).
 
 use crate::exemplar::Exemplar;
+use std::sync::Arc;
 
 /// Spacing of level `k` (0 = finest).
 pub fn spacing(level: usize) -> u32 {
@@ -15,7 +16,10 @@ pub fn spacing(level: usize) -> u32 {
 pub struct GaussianStack {
     width: u32,
     height: u32,
-    levels: Vec<Vec<[f32; 3]>>,
+    /// Shared, so that the three planes of a single exemplar hold one copy:
+    /// the correction reads all three at random, and one copy stays in
+    /// cache where three would not.
+    levels: Arc<Vec<Vec<[f32; 3]>>>,
 }
 
 impl GaussianStack {
@@ -39,7 +43,7 @@ impl GaussianStack {
         GaussianStack {
             width: w,
             height: h,
-            levels,
+            levels: Arc::new(levels),
         }
     }
 

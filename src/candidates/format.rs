@@ -277,7 +277,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
                 offsets.push(triples.len() as u32);
             }
             cands.push(PlaneCandidates {
-                offsets,
+                offsets: std::sync::Arc::new(offsets),
                 triples,
                 errors,
             });

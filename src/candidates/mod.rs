@@ -20,6 +20,7 @@ use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 use search::{Scored, Strips};
 use std::num::NonZero;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Stages of the precomputation, for progress reports.
@@ -62,8 +63,9 @@ pub struct PrecomputeReport {
 /// Candidate triples of one plane at one level, in compressed-row form.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlaneCandidates {
-    /// `offsets[c]..offsets[c + 1]` indexes the candidates of pixel c.
-    pub offsets: Vec<u32>,
+    /// `offsets[c]..offsets[c + 1]` indexes the candidates of pixel c
+    /// (shared by the rotated copies of a single exemplar's planes).
+    pub offsets: Arc<Vec<u32>>,
     /// Triples (xy, yz, zx pixel indices), best first per pixel.
     pub triples: Vec<[u32; 3]>,
     /// Crossbar error of each triple.
@@ -84,7 +86,7 @@ impl PlaneCandidates {
             offsets.push(triples.len() as u32);
         }
         PlaneCandidates {
-            offsets,
+            offsets: Arc::new(offsets),
             triples,
             errors,
         }
@@ -144,6 +146,7 @@ pub struct Level {
     /// The appearance vectors of each pixel's 2D similarity set, quantised
     /// and stored beside the set, so that one correction reads one cache
     /// line per neighbour instead of chasing every similar pixel.
+    /// With one exemplar, only plane 0's (see [`Level::alias`]).
     similar_vectors: [Vec<[i16; SIMILAR_DIMS]>; 3],
     /// Scale of [`Level::similar_vectors`] per plane (see [`quantise_wide`]).
     similar_scale: [f32; 3],
@@ -152,6 +155,11 @@ pub struct Level {
     /// three shares less the projected mean, so triples that are not
     /// precomputed candidates (coherent ones) are scored cheaply.
     joint_shares: [Vec<f32>; 3],
+    /// The plane whose 2D tables (similarity sets and their vectors) plane
+    /// p reads: with one exemplar for all three planes those tables are
+    /// equal, and reading one copy keeps it in cache where three would not
+    /// stay.
+    alias: [usize; 3],
 }
 
 impl Level {
@@ -163,7 +171,7 @@ impl Level {
     /// The 2D similarity set of pixel `c` in plane `p`.
     pub fn similar(&self, p: usize, c: u32) -> &[u32] {
         let k2 = self.stored.k2;
-        &self.stored.similar[p][c as usize * k2..(c as usize + 1) * k2]
+        &self.stored.similar[self.alias[p]][c as usize * k2..(c as usize + 1) * k2]
     }
 
     /// Quantised appearance vectors of the similarity set of pixel `c` in
@@ -171,7 +179,7 @@ impl Level {
     #[inline]
     pub fn similar_vectors(&self, p: usize, c: u32) -> &[[i16; SIMILAR_DIMS]] {
         let k2 = self.stored.k2;
-        &self.similar_vectors[p][c as usize * k2..(c as usize + 1) * k2]
+        &self.similar_vectors[self.alias[p]][c as usize * k2..(c as usize + 1) * k2]
     }
 
     /// Quantises an appearance vector of plane `p` like
@@ -399,7 +407,7 @@ impl Candidates {
             });
             progress(Stage::Finish, (k + 1) as f32 / levels_n as f32);
         }
-        let levels = derive_levels(&stacks, stored, n);
+        let levels = derive_levels(&stacks, stored, n, single);
         lap(&mut report, "finish");
         Ok(Candidates {
             exemplars: exemplars.clone(),
@@ -429,7 +437,7 @@ impl Candidates {
             )));
         }
         let stacks = build_stacks(&exemplars, stored.len());
-        let levels = derive_levels(&stacks, stored, params.neighbourhood);
+        let levels = derive_levels(&stacks, stored, params.neighbourhood, exemplars.is_single());
         Ok(Candidates {
             exemplars,
             params,
@@ -625,13 +633,26 @@ pub fn quantise(v: f32, scale: f32) -> u8 {
     (v * scale + 128.5).clamp(0.0, 255.0) as u8
 }
 
-fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) -> Vec<Level> {
+/// Derives each level's synthesis tables. `single`: one exemplar serves
+/// all three planes, so their stacks, PCAs and similarity sets are equal and
+/// the per-plane 2D tables are computed once.
+fn derive_levels(
+    stacks: &[GaussianStack; 3],
+    stored: Vec<StoredLevel>,
+    n: u32,
+    single: bool,
+) -> Vec<Level> {
+    let alias = if single { [0, 0, 0] } else { [0, 1, 2] };
     stored
         .into_iter()
         .enumerate()
         .map(|(k, s)| {
-            let appearance: [AppearanceLevel; 3] =
-                [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &s.appearance_pca[p]));
+            let appearance: [AppearanceLevel; 3] = if single {
+                let a = appearance::project_all(&stacks[0], k, n, &s.appearance_pca[0]);
+                [a.clone(), a.clone(), a]
+            } else {
+                [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &s.appearance_pca[p]))
+            };
             // The projected mean once per level, not once per candidate
             // (`project_with` computes what `project` does, bit for bit).
             let joint_offsets = s.joint_pca.mean_offsets();
@@ -664,6 +685,9 @@ fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) 
                 WIDE_MAX / max
             });
             let similar_vectors = [0, 1, 2].map(|p| {
+                if alias[p] != p {
+                    return Vec::new();
+                }
                 let d = appearance[p].pca.dims.min(SIMILAR_DIMS);
                 s.similar[p]
                     .iter()
@@ -683,6 +707,7 @@ fn derive_levels(stacks: &[GaussianStack; 3], stored: Vec<StoredLevel>, n: u32) 
                 similar_vectors,
                 similar_scale,
                 joint_shares,
+                alias,
             }
         })
         .collect()
@@ -772,4 +797,53 @@ fn mean_random_error(stacks: &[GaussianStack; 3], k: usize, n: u32, dims: Dims) 
         sum += triple_error(stacks, k, n, dims, t) as f64;
     }
     sum / samples as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::exemplar::Exemplar;
+
+    fn pattern(w: u32, seed: u32) -> Exemplar {
+        let rgb: Vec<u8> = (0..w * w * 3)
+            .map(|i| ((i ^ seed.wrapping_mul(0x9e37_79b9)).wrapping_mul(2_654_435_761) >> 24) as u8)
+            .collect();
+        Exemplar::from_rgb(w, w, &rgb).unwrap()
+    }
+
+    fn compute(set: &ExemplarSet) -> Candidates {
+        let params = AnalysisParams {
+            levels: 2,
+            ..AnalysisParams::default()
+        };
+        Candidates::compute(set, &params, &|_, _| {}).unwrap()
+    }
+
+    /// Planes 1 and 2 of a single exemplar read plane 0's 2D tables, which
+    /// is only right while the three planes' tables are equal.
+    #[test]
+    fn single_exemplar_planes_share_equal_2d_tables() {
+        let single = compute(&ExemplarSet::single(pattern(16, 1)));
+        for level in &single.levels {
+            assert_eq!(level.alias, [0, 0, 0]);
+            for p in 1..3 {
+                assert_eq!(level.stored.similar[p], level.stored.similar[0]);
+                assert_eq!(level.appearance[p].vectors, level.appearance[0].vectors);
+                assert_eq!(level.similar_scale[p], level.similar_scale[0]);
+            }
+        }
+        let reloaded = Candidates::load(&single.to_bytes()).unwrap();
+        assert!(reloaded.levels.iter().all(|l| l.alias == [0, 0, 0]));
+
+        let triple =
+            compute(&ExemplarSet::triple(pattern(16, 1), pattern(16, 2), pattern(16, 3)).unwrap());
+        for level in &triple.levels {
+            assert_eq!(level.alias, [0, 1, 2]);
+            assert_ne!(level.stored.similar[1], level.stored.similar[0]);
+            assert_eq!(
+                level.similar_vectors[2].len(),
+                level.similar_vectors[0].len()
+            );
+        }
+    }
 }
