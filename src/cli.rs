@@ -196,9 +196,13 @@ struct SynthArgs {
     /// Correction passes per level, the finest excepted.
     #[arg(long, default_value_t = 2)]
     passes: u32,
-    /// Correction passes at the finest level.
+    /// Correction passes at the finest levels (see `--fine-levels`).
     #[arg(long, default_value_t = 1)]
     finest_passes: u32,
+    /// Levels, counted from the finest, corrected with `--finest-passes`
+    /// passes instead of `--passes`.
+    #[arg(long, default_value_t = solidtex::params::DEFAULT_FINE_LEVELS)]
+    fine_levels: u32,
     /// Dual-grid cell side M.
     #[arg(long, default_value_t = 12)]
     grid: u32,
@@ -231,6 +235,7 @@ impl SynthArgs {
             seed: self.seed,
             passes: self.passes,
             finest_passes: self.finest_passes,
+            fine_levels: self.fine_levels,
             scheme,
             grid: self.grid,
             jitter: self.jitter,

@@ -385,6 +385,35 @@ fn levels_of_detail_and_limits() {
 }
 
 #[test]
+fn fine_levels_take_the_finest_passes() {
+    let region = Region {
+        origin: [0, 0, 5],
+        size: [48, 48, 1],
+    };
+    let plan = |fine_levels, finest_passes| {
+        texture_with(
+            SynthParams {
+                fine_levels,
+                finest_passes,
+                ..SynthParams::default()
+            },
+            1 << 20,
+        )
+        .plan(&region, 0)
+        .unwrap()
+        .corrections_per_level
+    };
+    let (one, two) = (plan(1, 1), plan(2, 1));
+    // Level 0 is the same; level 1 drops to one pass, which needs fewer
+    // of its voxels and of the coarser level's.
+    assert_eq!(one[0], two[0]);
+    assert!(two[1] * 2 < one[1], "{one:?} vs {two:?}");
+    assert!(two[2] < one[2], "{one:?} vs {two:?}");
+    // With as many finest passes as coarse ones the split does not matter.
+    assert_eq!(plan(1, 2), plan(3, 2));
+}
+
+#[test]
 fn dual_grid_needs_fewer_voxels_than_standard() {
     let region = Region {
         origin: [0, 0, 0],
@@ -500,25 +529,42 @@ fn a_long_slice_does_not_repeat_at_the_exemplar_period() {
 fn golden_regions_are_pinned() {
     // Any change to the method changes these on purpose; update them only
     // together with a note on why the output changed.
-    // N-thick slabs, two finest passes, no consistency penalty and full
-    // slices were the defaults when the stored textures of earlier versions
+    // One fine level, N-thick slabs, two finest passes, no consistency
+    // penalty and full slices were the defaults when the stored textures of earlier versions
     // were written: their bytes stay pinned.
-    for (slices, finest_passes, consistency, slab_thickness, golden) in [
-        (Slices::Sparse, 1, DEFAULT_CONSISTENCY, 1, GOLDEN_SPARSE),
+    for (slices, finest_passes, fine_levels, consistency, slab_thickness, golden) in [
+        (Slices::Sparse, 1, 2, DEFAULT_CONSISTENCY, 1, GOLDEN_SPARSE),
         (
             Slices::Sparse,
+            1,
+            1,
+            DEFAULT_CONSISTENCY,
+            1,
+            GOLDEN_SPARSE_ONE_FINE_LEVEL,
+        ),
+        (
+            Slices::Sparse,
+            1,
             1,
             DEFAULT_CONSISTENCY,
             5,
             GOLDEN_SPARSE_THICK_SLAB,
         ),
-        (Slices::Sparse, 2, 0.0, 5, GOLDEN_SPARSE_TWO_FINEST_PASSES),
-        (Slices::Full, 2, 0.0, 5, GOLDEN_FULL_TWO_FINEST_PASSES),
+        (
+            Slices::Sparse,
+            2,
+            1,
+            0.0,
+            5,
+            GOLDEN_SPARSE_TWO_FINEST_PASSES,
+        ),
+        (Slices::Full, 2, 1, 0.0, 5, GOLDEN_FULL_TWO_FINEST_PASSES),
     ] {
         let t = texture_with(
             SynthParams {
                 slices,
                 finest_passes,
+                fine_levels,
                 consistency,
                 slab_thickness,
                 ..SynthParams::default()
@@ -529,17 +575,21 @@ fn golden_regions_are_pinned() {
         let b = region(&t, [-1000, 77, -5], [7, 9, 3]);
         let (c, _) = t.slice(Axis::X, 12, -4, 9, 20, 10, 1).unwrap();
         let got = [fnv(&a), fnv(&b), fnv(&c)];
-        println!(
-            "golden {slices:?}, {finest_passes} finest passes, slab {slab_thickness}: {got:?}"
+        let case = format!(
+            "{slices:?}, {finest_passes} finest passes on {fine_levels} levels, slab {slab_thickness}"
         );
-        assert_eq!(
-            got, golden,
-            "{slices:?}, {finest_passes} finest passes, slab {slab_thickness}"
-        );
+        println!("golden {case}: {got:?}");
+        assert_eq!(got, golden, "{case}");
     }
 }
 
 const GOLDEN_SPARSE: [u64; 3] = [
+    6973526302261758673,
+    4735467199559300683,
+    9007905815778258688,
+];
+
+const GOLDEN_SPARSE_ONE_FINE_LEVEL: [u64; 3] = [
     6684542806508697053,
     2443003119394448522,
     4237861342871352536,

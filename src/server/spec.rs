@@ -136,9 +136,13 @@ impl TextureParams {
 /// behaves as textures stored without them did (`finest_passes` and
 /// `slab_thickness`, whose old values are the texture's own `passes` and
 /// `neighbourhood`, are filled in by [`TextureParams::from_stored`]).
-/// Values are JSON texts.
-const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] =
-    &[("slices", r#""full""#), ("consistency", "0")];
+/// Values are JSON texts. (`fine_levels` 1: `finest_passes` applied to
+/// level 0 alone.)
+const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
+    ("slices", r#""full""#),
+    ("consistency", "0"),
+    ("fine_levels", "1"),
+];
 
 fn invalid_params(message: String) -> ApiError {
     ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)
@@ -327,6 +331,16 @@ mod tests {
                 .synth
                 .finest_passes,
             2
+        );
+        // Only level 0 took `finest_passes`.
+        old.remove("fine_levels");
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.fine_levels,
+            1
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.fine_levels,
+            crate::params::DEFAULT_FINE_LEVELS
         );
         // Nor did it penalise inconsistent triples.
         old.remove("consistency");

@@ -119,7 +119,8 @@ pub(crate) struct Engine {
     radius: i64,
     cell: i64,
     steps: Vec<Step>,
-    /// Steps of level 0 (see [`SynthParams::finest_passes`]).
+    /// Steps of the finest levels (see [`SynthParams::finest_passes`] and
+    /// [`SynthParams::fine_levels`]).
     finest_steps: Vec<Step>,
 }
 
@@ -198,7 +199,7 @@ impl Engine {
     pub(crate) fn steps_at(&self, k: usize) -> &[Step] {
         if k == self.init_level && !self.params.correct_init_level {
             &[]
-        } else if k == 0 {
+        } else if k < self.params.fine_levels as usize {
             &self.finest_steps
         } else {
             &self.steps
