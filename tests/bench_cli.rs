@@ -44,7 +44,7 @@ fn quick_bench_measures_everything_and_writes_the_page() {
     // Cold synthesis allocates; a warm request is a cheap copy.
     let cold = row("axis slice 32² cold")["peak_bytes"].as_u64().unwrap();
     let warm = row("axis slice 32² warm")["peak_bytes"].as_u64().unwrap();
-    assert!(cold > 1 << 20 && warm < cold, "{cold} {warm}");
+    assert!(cold > 1 << 18 && warm * 8 < cold, "{cold} {warm}");
     assert!(
         row("axis slice 32² warm")["seconds"].as_f64()
             < row("axis slice 32² cold")["seconds"].as_f64()
