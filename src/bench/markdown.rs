@@ -74,10 +74,11 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         "| machine | {}, {} cores, {:.0} GiB, {} |",
         m.cpu, m.cores, m.memory_gib, m.os
     );
+    let d = solidtex::SynthParams::default();
     let _ = writeln!(
         w,
-        "| synthesis exemplar | {} ({} levels; otherwise default parameters: 2 passes, 1 at the finest level, dual grid M = 12) |\n",
-        r.synthesis_exemplar, r.levels
+        "| synthesis exemplar | {} ({} levels; otherwise default parameters: {} passes, {} at the {} finest levels, dual grid M = {}) |\n",
+        r.synthesis_exemplar, r.levels, d.passes, d.finest_passes, d.fine_levels, d.grid
     );
     let _ = writeln!(
         w,
@@ -123,7 +124,7 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         "Voxels produced / corrections performed per level (level 0 is the finest), \
          counted by the planner without synthesizing (`solidtex plan` shows the same). \
          The texture uses sparse slices (the default: a correction reads its direct \
-         neighbours only) and one pass at the finest level; the rows marked full slices \
+         neighbours only) and one pass at the two finest levels; the rows marked full slices \
          count the chains of corrections that read every voxel of their N×N slices with \
          two passes at every level (Dong et al.'s and Zhang et al.'s setting), geometry only.\n"
     );
