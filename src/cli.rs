@@ -193,7 +193,7 @@ struct SynthArgs {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Correction passes per level, the finest excepted.
+    /// Correction passes per level, the fine levels excepted.
     #[arg(long, default_value_t = 2)]
     passes: u32,
     /// Correction passes at the finest levels (see `--fine-levels`).

@@ -132,9 +132,11 @@ pub const DEFAULT_CONTRAST: f32 = 1.6;
 pub struct SynthParams {
     /// Seed hashed with level and position for every random choice.
     pub seed: u64,
-    /// Correction passes P per level, the finest level excepted.
+    /// Correction passes P per level, the fine levels excepted (see
+    /// [`SynthParams::fine_levels`]).
     pub passes: u32,
-    /// Correction passes at the finest level (level 0). Each pass there
+    /// Correction passes at the fine levels (the finest
+    /// [`SynthParams::fine_levels`] levels). Each pass there
     /// widens a request's dependency set by the subpass chains of a whole
     /// level at full resolution, so it costs far more than a coarse pass,
     /// while the coarse passes have already settled which exemplar patches
