@@ -95,28 +95,18 @@ impl Pca {
     }
 
     /// Projects many vectors (`input` floats each) into `out` (`dims`
-    /// floats each), with the same arithmetic as [`Pca::project_with`].
+    /// floats each), with the same arithmetic as [`Pca::project`].
     pub fn project_many(&self, vs: &[f32], out: &mut [f32]) {
-        let offsets = self.mean_offsets();
+        let projector = Projector::new(self);
         for (v, o) in vs
             .chunks_exact(self.input)
             .zip(out.chunks_exact_mut(self.dims))
         {
-            self.project_with(&offsets, v, o);
+            projector.project(v, o);
         }
     }
 
-    /// Like [`Pca::project`] with `offsets` = the projected mean, saving
-    /// half the work when many vectors share one basis.
-    #[inline]
-    pub fn project_with(&self, offsets: &[f32], v: &[f32], out: &mut [f32]) {
-        for (d, o) in out.iter_mut().enumerate().take(self.dims) {
-            let row = &self.basis[d * self.input..(d + 1) * self.input];
-            *o = dot(v, row) - offsets[d];
-        }
-    }
-
-    /// The projected mean, for [`Pca::project_with`].
+    /// The projected mean: what [`Pca::project`] subtracts.
     pub fn mean_offsets(&self) -> Vec<f32> {
         (0..self.dims)
             .map(|d| {
@@ -126,6 +116,78 @@ impl Pca {
                 )
             })
             .collect()
+    }
+}
+
+/// A [`Pca`] laid out for projecting one vector at a time into all its
+/// outputs at once: the basis is transposed into blocks of four outputs, so
+/// each input is broadcast once per block instead of being read once per
+/// output. Each output keeps [`dot`]'s eight accumulators and summation
+/// order, so the results are the same floats as [`Pca::project`].
+#[derive(Clone, Debug)]
+pub struct Projector {
+    input: usize,
+    dims: usize,
+    /// Per block of four outputs, `input` rows of four weights.
+    blocks: Vec<[f32; 4]>,
+    /// The projected mean, padded to whole blocks.
+    offsets: Vec<f32>,
+}
+
+impl Projector {
+    /// Transposes `pca`'s basis.
+    pub fn new(pca: &Pca) -> Projector {
+        let nb = pca.dims.div_ceil(4);
+        let mut blocks = vec![[0f32; 4]; nb * pca.input];
+        for d in 0..pca.dims {
+            for i in 0..pca.input {
+                blocks[(d / 4) * pca.input + i][d % 4] = pca.basis[d * pca.input + i];
+            }
+        }
+        let mut offsets = pca.mean_offsets();
+        offsets.resize(nb * 4, 0.0);
+        Projector {
+            input: pca.input,
+            dims: pca.dims,
+            blocks,
+            offsets,
+        }
+    }
+
+    /// Number of output dimensions.
+    pub fn dims(&self) -> usize {
+        self.dims
+    }
+
+    /// Projects `v` (`input` floats) into `out` (at least `dims` floats).
+    #[inline]
+    pub fn project(&self, v: &[f32], out: &mut [f32]) {
+        let v = &v[..self.input];
+        let (chunks, tail) = v.as_chunks::<8>();
+        for (b, rows) in self.blocks.chunks_exact(self.input).enumerate() {
+            let (row_chunks, row_tail) = rows.as_chunks::<8>();
+            let mut acc = [[0f32; 4]; 8];
+            for (x, w) in chunks.iter().zip(row_chunks) {
+                for l in 0..8 {
+                    for d in 0..4 {
+                        acc[l][d] += x[l] * w[l][d];
+                    }
+                }
+            }
+            let mut rest = [0f32; 4];
+            for (&x, w) in tail.iter().zip(row_tail) {
+                for d in 0..4 {
+                    rest[d] += x * w[d];
+                }
+            }
+            let n = (self.dims - 4 * b).min(4);
+            for d in 0..n {
+                let sum = ((acc[0][d] + acc[4][d]) + (acc[1][d] + acc[5][d]))
+                    + ((acc[2][d] + acc[6][d]) + (acc[3][d] + acc[7][d]))
+                    + rest[d];
+                out[4 * b + d] = sum - self.offsets[4 * b + d];
+            }
+        }
     }
 }
 
@@ -243,5 +305,29 @@ mod tests {
         let b = &p.basis[0..3];
         let norm = (1.0f32 + 4.0).sqrt();
         assert!((b[0] - 1.0 / norm).abs() < 0.01 && (b[1] - 2.0 / norm).abs() < 0.01);
+    }
+
+    #[test]
+    fn projector_gives_the_same_floats_as_project() {
+        // Awkward sizes: a tail after the chunks of eight, a partial block.
+        for (input, dims) in [(75, 8), (24, 12), (27, 5), (7, 3)] {
+            let samples: Vec<f32> = (0..input * 40)
+                .map(|i| ((i * 7919) % 997) as f32 / 97.0 - 5.0 + (i % 13) as f32 * 0.01)
+                .collect();
+            let pca = Pca::fit(&samples, input, dims);
+            let projector = Projector::new(&pca);
+            assert_eq!(projector.dims(), dims);
+            for v in samples.chunks_exact(input) {
+                let mut want = vec![0f32; dims];
+                pca.project(v, &mut want);
+                let mut got = vec![0f32; dims];
+                projector.project(v, &mut got);
+                assert_eq!(
+                    want.iter().map(|f| f.to_bits()).collect::<Vec<_>>(),
+                    got.iter().map(|f| f.to_bits()).collect::<Vec<_>>(),
+                    "input {input}, dims {dims}"
+                );
+            }
+        }
     }
 }

@@ -10,7 +10,7 @@ mod format;
 pub mod geometry;
 pub mod search;
 
-use crate::appearance::{self, AppearanceLevel, Pca};
+use crate::appearance::{self, AppearanceLevel, Pca, Projector};
 use crate::error::{Error, Result};
 use crate::exemplar::ExemplarSet;
 use crate::params::AnalysisParams;
@@ -611,11 +611,11 @@ fn quant_scale(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], pc
     let mut max = 1e-6f32;
     let mut buf = Vec::new();
     let mut out = vec![0f32; pca.dims];
-    let offsets = pca.mean_offsets();
+    let projector = Projector::new(pca);
     for c in planes {
         for t in &c.triples {
             concat(appearance, *t, &mut buf);
-            pca.project_with(&offsets, &buf, &mut out);
+            projector.project(&buf, &mut out);
             for v in &out {
                 max = max.max(v.abs());
             }
@@ -654,8 +654,8 @@ fn derive_levels(
                 [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &s.appearance_pca[p]))
             };
             // The projected mean once per level, not once per candidate
-            // (`project_with` computes what `project` does, bit for bit).
-            let joint_offsets = s.joint_pca.mean_offsets();
+            // (`Projector` computes what `Pca::project` does, bit for bit).
+            let joint = Projector::new(&s.joint_pca);
             let vectors = [0, 1, 2].map(|p| {
                 let c = &s.candidates[p];
                 let d = s.joint_pca.dims;
@@ -667,7 +667,7 @@ fn derive_levels(
                         || (Vec::new(), vec![0f32; d]),
                         |(buf, out), (dst, t)| {
                             concat(&appearance, *t, buf);
-                            s.joint_pca.project_with(&joint_offsets, buf, out);
+                            joint.project(buf, out);
                             for (b, v) in dst.iter_mut().zip(out.iter()) {
                                 *b = quantise(*v, s.quant_scale);
                             }

@@ -38,6 +38,7 @@
 //! exemplar patch.
 
 use super::grid::{Box3, Grid};
+use crate::appearance::Projector;
 use crate::candidates::geometry::{AXES, Dims, offset_triple};
 use crate::candidates::{Candidates, Level, SIMILAR_DIMS, quantise};
 use crate::params::{Slices, SynthParams};
@@ -102,7 +103,9 @@ pub struct Corrector<'a> {
     k: usize,
     n: i64,
     dims: Dims,
-    offsets: [Vec<f32>; 3],
+    /// Each plane's appearance projection, and the joint one.
+    projectors: [Projector; 3],
+    joint: Projector,
     joint_offsets: Vec<f32>,
     /// 3D candidates tried per pixel (best crossbar error first).
     max_3d: usize,
@@ -139,7 +142,8 @@ impl<'a> Corrector<'a> {
             k,
             n: cands.params().neighbourhood as i64,
             dims: cands.dims(),
-            offsets: [0, 1, 2].map(|p| cands.level(k).appearance[p].pca.mean_offsets()),
+            projectors: [0, 1, 2].map(|p| Projector::new(&cands.level(k).appearance[p].pca)),
+            joint: Projector::new(cands.level(k).joint_pca()),
             joint_offsets: cands.level(k).joint_pca().mean_offsets(),
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
             contrast: params.contrast,
@@ -277,9 +281,8 @@ impl<'a> Corrector<'a> {
             s.concat[len..len + d].copy_from_slice(&s.app[plane][..d]);
             len += d;
         }
-        let joint = self.level.joint_pca();
-        let jd = joint.dims;
-        joint.project_with(&self.joint_offsets, &s.concat[..len], &mut s.joint[..jd]);
+        let jd = self.joint.dims();
+        self.joint.project(&s.concat[..len], &mut s.joint[..jd]);
         let scale = self.level.quant_scale();
         let mut query = [0u8; MAX_DIMS];
         for (q, &v) in query.iter_mut().zip(&s.joint[..jd]) {
@@ -378,13 +381,8 @@ impl<'a> Corrector<'a> {
         if self.contrast != 1.0 {
             stretch(&mut s.neigh[..o], self.contrast);
         }
-        let app = &self.level.appearance[plane];
-        let dims = app.pca.dims;
-        app.pca.project_with(
-            &self.offsets[plane],
-            &s.neigh[..o],
-            &mut s.app[plane][..dims],
-        );
+        let dims = self.projectors[plane].dims();
+        self.projectors[plane].project(&s.neigh[..o], &mut s.app[plane][..dims]);
     }
 }
 
