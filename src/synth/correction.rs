@@ -171,9 +171,6 @@ impl<'a> Corrector<'a> {
         p: [i64; 3],
         s: &mut Scratch,
     ) -> [u32; 3] {
-        let h = spacing(self.k) as i64;
-        let strides = work.triples.strides();
-        let centre = work.triples.index(p) as i64;
         // Offsets along each axis that stay inside the barrier cell (every
         // offset when there is none); `start` has the same layout as `work`.
         let (start, inside) = match barrier {
@@ -183,10 +180,35 @@ impl<'a> Corrector<'a> {
             ),
             None => (work, [(i64::MIN, i64::MAX); 3]),
         };
+        // Most voxels read no neighbour across the cell wall: their copy of
+        // the correction has no version choices to make.
+        let reach = if self.sparse { 1 } else { (self.n / 2).max(1) };
+        if inside.iter().all(|&(lo, hi)| lo <= -reach && hi >= reach) {
+            self.correct_with::<false>(work, start, inside, p, s)
+        } else {
+            self.correct_with::<true>(work, start, inside, p, s)
+        }
+    }
+
+    /// [`Corrector::correct`] with the history window resolved:
+    /// `BY_WALL` says whether some neighbours lie outside the barrier cell
+    /// (`inside` bounds the offsets that do not).
+    #[inline(always)]
+    fn correct_with<const BY_WALL: bool>(
+        &self,
+        work: &Work,
+        start: &Work,
+        inside: [(i64, i64); 3],
+        p: [i64; 3],
+        s: &mut Scratch,
+    ) -> [u32; 3] {
+        let h = spacing(self.k) as i64;
+        let strides = work.triples.strides();
+        let centre = work.triples.index(p) as i64;
         let pick = |a: usize, i: i64, b: usize, j: i64| -> &Work {
             let (la, ha) = inside[a];
             let (lb, hb) = inside[b];
-            if i >= la && i <= ha && j >= lb && j <= hb {
+            if !BY_WALL || (i >= la && i <= ha && j >= lb && j <= hb) {
                 work
             } else {
                 start
@@ -216,7 +238,8 @@ impl<'a> Corrector<'a> {
                 }
             }
         }
-        let inside3 = |d: [i64; 3]| (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
+        let inside3 =
+            |d: [i64; 3]| !BY_WALL || (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
         let mut coherent = [[u32::MAX; 3]; 19];
         let mut coherent_n = 0;
         // Coherent triples: each neighbour's triple moved back by its
