@@ -85,7 +85,9 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         "Times are wall clock (median of the runs column); \"cold\" starts from an empty \
          tile cache, \"warm\" repeats the request on the texture that just served it. \
          Peak heap is the most bytes allocated at once during one run, above what was \
-         allocated before it (a counting allocator in the binary). The targets are the \
+         allocated before it (a counting allocator in the binary). A cold row's \
+         \"µs·thread each\" is its time × the synthesis threads ÷ its corrections: \
+         corrections are most of the work, and the targets need about 1.5 µs. The targets are the \
          project's for a 2-core machine; the papers' figures are for other hardware \
          (Dong et al. 2008: GPU; Zhang et al. 2011: 8 CPU cores). On a shared 2-core \
          machine other processes compete for the cores, so these numbers are noisy and \
