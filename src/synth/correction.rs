@@ -116,6 +116,8 @@ pub struct Corrector<'a> {
     contrast: f32,
     /// Reads only the direct neighbours (see [`Slices::Sparse`]).
     sparse: bool,
+    /// How far a correction reads (see [`reach`]).
+    reach: i64,
     /// Weight of a coherent triple's colour disagreement, in quantised
     /// joint-distance units per squared colour difference (see
     /// [`SynthParams::consistency`]).
@@ -148,6 +150,7 @@ impl<'a> Corrector<'a> {
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
             contrast: params.contrast,
             sparse: params.slices == Slices::Sparse,
+            reach: reach(params.slices, cands.params().neighbourhood),
             consistency: {
                 let scale = cands.level(k).quant_scale();
                 params.consistency * scale * scale
@@ -182,8 +185,8 @@ impl<'a> Corrector<'a> {
         };
         // Most voxels read no neighbour across the cell wall: their copy of
         // the correction has no version choices to make.
-        let reach = if self.sparse { 1 } else { (self.n / 2).max(1) };
-        if inside.iter().all(|&(lo, hi)| lo <= -reach && hi >= reach) {
+        let r = self.reach;
+        if inside.iter().all(|&(lo, hi)| lo <= -r && hi >= r) {
             self.correct_with::<false>(work, start, inside, p, s)
         } else {
             self.correct_with::<true>(work, start, inside, p, s)
@@ -406,6 +409,16 @@ impl<'a> Corrector<'a> {
         }
         let dims = self.projectors[plane].dims();
         self.projectors[plane].project(&s.neigh[..o], &mut s.app[plane][..dims]);
+    }
+}
+
+/// How far a correction reads, in voxels of its level along each axis:
+/// its direct neighbours with sparse slices, half the neighbourhood with
+/// full ones. The dependency planner and the barrier test share it.
+pub fn reach(slices: Slices, neighbourhood: u32) -> i64 {
+    match slices {
+        Slices::Full => (neighbourhood as i64 / 2).max(1),
+        Slices::Sparse => 1,
     }
 }
 

@@ -33,7 +33,7 @@ pub mod plan;
 
 use crate::candidates::Candidates;
 use crate::error::Result;
-use crate::params::{Scheme, Slices, SynthParams};
+use crate::params::{Scheme, SynthParams};
 use crate::texture::{CutPlane, Filter, Region, SynthStats};
 use cache::{Claim, Tile, TileCache, TileData, TileKey};
 use correction::{Corrector, Scratch, Work, colour};
@@ -164,10 +164,7 @@ impl Engine {
         let finest_steps = steps_for(&params, params.finest_passes);
         Engine {
             init_level: cands.level_count() - 1,
-            radius: match params.slices {
-                Slices::Full => (cands.params().neighbourhood as i64 / 2).max(1),
-                Slices::Sparse => 1,
-            },
+            radius: correction::reach(params.slices, cands.params().neighbourhood),
             cell: params.grid as i64,
             cands,
             params,
