@@ -160,9 +160,32 @@ struct BenchArgs {
 struct PlanArgs {
     #[command(flatten)]
     src: SourceArgs,
-    /// Slice side (an axis-z slice at z = 0).
+    /// Slice side: a square slice normal to `--axis` at `--at`.
     #[arg(long, default_value_t = 256)]
     slice: u32,
+    /// Axis normal to the slice: x, y or z.
+    #[arg(long, default_value = "z")]
+    axis: Axis,
+    /// Position of the slice along its axis. Where a slice lies changes
+    /// its chain: with subpasses, voxels of later classes read their
+    /// neighbours' new values.
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+    at: i64,
+    /// Slice corner along its u axis (x for z slices, y for x, z for y).
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+    u0: i64,
+    /// Slice corner along its v axis (y for z slices, z for x, x for y).
+    #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
+    v0: i64,
+    /// Plan a box instead of a slice: X,Y,Z,W,H,D (corner, then size).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        conflicts_with_all = ["slice", "axis", "at", "u0", "v0"]
+    )]
+    region: Option<Vec<i64>>,
     /// Also count the slice's exact chains for these neighbourhood sides
     /// (geometry only, no precomputation; Zhang et al. measured N = 9).
     #[arg(long = "neighbourhood", value_delimiter = ',')]
@@ -668,14 +691,62 @@ fn heat(t: f32) -> [u8; 3] {
     [(r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8]
 }
 
+/// Most voxels `plan` follows exactly (the library's limit for exact
+/// dependency chains).
+const PLAN_MAX_VOXELS: u64 = 1 << 20;
+
+/// The box `plan` counts, and how to name it.
+fn plan_request(a: &PlanArgs) -> anyhow::Result<(Region, String)> {
+    let (region, what) = plan_box(a)?;
+    let voxels: u64 = region.size.iter().map(|&s| s as u64).product();
+    if voxels > PLAN_MAX_VOXELS {
+        bail!("plan follows every voxel's chain: at most {PLAN_MAX_VOXELS} voxels, not {voxels}");
+    }
+    Ok((region, what))
+}
+
+fn plan_box(a: &PlanArgs) -> anyhow::Result<(Region, String)> {
+    if let Some(r) = &a.region {
+        let [x, y, z, w, h, d] = r[..] else {
+            bail!("--region takes six numbers: X,Y,Z,W,H,D");
+        };
+        let size = [w, h, d].map(|s| u32::try_from(s).unwrap_or(0));
+        if size.contains(&0) {
+            bail!("--region sizes must be between 1 and {}", u32::MAX);
+        }
+        let what = format!("{w}×{h}×{d} box at ({x}, {y}, {z})");
+        return Ok((
+            Region {
+                origin: [x, y, z],
+                size,
+            },
+            what,
+        ));
+    }
+    let (n, u, v) = a.axis.frame();
+    let name = |i: usize| ["x", "y", "z"][i];
+    let what = format!(
+        "{}² {}-axis slice at {} = {} ({} from {}, {} from {})",
+        a.slice,
+        name(n),
+        name(n),
+        a.at,
+        name(u),
+        a.u0,
+        name(v),
+        a.v0
+    );
+    Ok((
+        Region::slice(a.axis, a.at, a.u0, a.v0, a.slice, a.slice),
+        what,
+    ))
+}
+
 fn plan(a: &PlanArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     let mut by_neighbourhood = Vec::new();
+    let (region, what) = plan_request(a)?;
     let base = load_source(&a.src)?;
-    let region = Region {
-        origin: [0, 0, 0],
-        size: [a.slice, a.slice, 1],
-    };
     for scheme in [Scheme::Standard, Scheme::DualGrid] {
         let params = SynthParams {
             scheme,
@@ -685,9 +756,7 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
         let tex = Texture::new(cands, params, Arc::new(TileCache::new(1 << 20)))?;
         let slice = tex.plan(&region, a.src.lod)?;
         let chain = tex.dependency_chain(&[[0, 0, 0]], a.src.lod)?;
-        let plane: Vec<[i64; 3]> = (0..a.slice as i64 * a.slice as i64)
-            .map(|i| [i % a.slice as i64, i / a.slice as i64, 0])
-            .collect();
+        let plane: Vec<[i64; 3]> = region.voxels().collect();
         let exact = tex.dependency_chain(&plane, a.src.lod)?;
         let mut other_n = Vec::new();
         for &n in &a.neighbourhoods {
@@ -719,10 +788,12 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
             .map(|(scheme, slice, chain, exact)| {
                 serde_json::json!({
                     "scheme": scheme,
-                    "slice": a.slice,
-                    "slice_voxels_per_level": slice.voxels_per_level,
-                    "slice_corrections_per_level": slice.corrections_per_level,
-                    "slice_exact_per_level": exact.iter().map(|(v, c)| serde_json::json!({"voxels": v, "corrections": c})).collect::<Vec<_>>(),
+                    "request": what,
+                    "origin": region.origin,
+                    "size": region.size,
+                    "voxels_per_level": slice.voxels_per_level,
+                    "corrections_per_level": slice.corrections_per_level,
+                    "exact_per_level": exact.iter().map(|(v, c)| serde_json::json!({"voxels": v, "corrections": c})).collect::<Vec<_>>(),
                     "single_voxel_chain": chain.iter().map(|(v, c)| serde_json::json!({"voxels": v, "corrections": c})).collect::<Vec<_>>(),
                 })
             })
@@ -744,8 +815,7 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!(
-        "{}² axis slice at lod {} (level 0 = finest; what the engine computes from a cold cache), {} slices",
-        a.slice,
+        "{what} at lod {} (level 0 = finest; what the engine computes from a cold cache), {} slices",
         a.src.lod,
         match base.params().slices {
             Slices::Sparse => "sparse (corrections read their direct neighbours)",

@@ -26,6 +26,32 @@ pub struct Region {
     pub size: [u32; 3],
 }
 
+impl Region {
+    /// The `width` × `height` slice normal to `axis` at `at`, with its
+    /// (u, v) corner at (`u0`, `v0`); (u, v) is (x, y) for z, (y, z) for x
+    /// and (z, x) for y.
+    pub fn slice(axis: Axis, at: i64, u0: i64, v0: i64, width: u32, height: u32) -> Region {
+        let (n, u, v) = axis.frame();
+        let mut origin = [0i64; 3];
+        let mut size = [1u32; 3];
+        origin[n] = at;
+        origin[u] = u0;
+        origin[v] = v0;
+        size[u] = width;
+        size[v] = height;
+        Region { origin, size }
+    }
+
+    /// Every voxel of the box, x fastest, then y, then z.
+    pub fn voxels(&self) -> impl Iterator<Item = [i64; 3]> + '_ {
+        let [w, h, d] = self.size.map(|s| s as i64);
+        let o = self.origin;
+        (0..d).flat_map(move |z| {
+            (0..h).flat_map(move |y| (0..w).map(move |x| [o[0] + x, o[1] + y, o[2] + z]))
+        })
+    }
+}
+
 /// A volume axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Axis {
@@ -186,15 +212,8 @@ impl Texture {
         lod: u32,
     ) -> Result<(Vec<u8>, SynthStats)> {
         check_side(width, height)?;
-        let (n, u, v) = axis.frame();
-        let mut origin = [0i64; 3];
-        let mut size = [1u32; 3];
-        origin[n] = at;
-        origin[u] = u0;
-        origin[v] = v0;
-        size[u] = width;
-        size[v] = height;
-        let region = Region { origin, size };
+        let (_, u, v) = axis.frame();
+        let region = Region::slice(axis, at, u0, v0, width, height);
         let (rgb, stats) = self.region(&region, lod)?;
         if u < v {
             // Region order is x fastest: for z slices (u=x, v=y) and x

@@ -668,3 +668,38 @@ fn thin_slab_layers_do_not_extrude_along_z() {
         );
     }
 }
+
+#[test]
+fn a_slice_region_spans_its_axes_and_lists_voxels_x_fastest() {
+    // y slices: u is z, v is x.
+    let r = Region::slice(Axis::Y, 7, 2, 3, 4, 5);
+    assert_eq!(r.origin, [3, 7, 2]);
+    assert_eq!(r.size, [5, 1, 4]);
+    let v: Vec<[i64; 3]> = r.voxels().collect();
+    assert_eq!(v.len(), 20);
+    assert_eq!(&v[..2], &[[3, 7, 2], [4, 7, 2]]);
+    assert_eq!(v[5], [3, 7, 3]);
+    assert_eq!(v[19], [7, 7, 5]);
+    assert_eq!(
+        Region::slice(Axis::X, -1, 10, 20, 2, 3),
+        Region {
+            origin: [-1, 10, 20],
+            size: [1, 2, 3]
+        }
+    );
+}
+
+#[test]
+fn where_a_slice_lies_changes_its_chain() {
+    // Subpass classes run z-even first: an even z plane's finest pass
+    // reads its z neighbours before they are corrected, an odd one after,
+    // so the odd plane pulls in corrections of both neighbour planes.
+    let t = texture();
+    let finest = |at| {
+        t.plan(&Region::slice(Axis::Z, at, 0, 0, 32, 32), 0)
+            .unwrap()
+            .corrections_per_level[0]
+    };
+    let (even, odd) = (finest(4), finest(5));
+    assert!(even >= 32 * 32 && odd >= 2 * even, "{even} {odd}");
+}
