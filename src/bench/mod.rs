@@ -336,26 +336,28 @@ fn plans(c: &Arc<Candidates>, side: u32) -> anyhow::Result<Vec<PlanRow>> {
         // a later class reads its neighbours' new values, and which axis
         // and parity come later depends on the class order. The slice at
         // z = 0 above is one of the cheapest for the standard scheme.
-        let mut sum = Vec::<(u64, u64)>::new();
-        for axis in [Axis::X, Axis::Y, Axis::Z] {
-            for at in [4, 5] {
-                let plane: Vec<[i64; 3]> =
-                    Region::slice(axis, at, 0, 0, side, side).voxels().collect();
-                let chain = two_finest.dependency_chain_for(&plane, 0, 5)?;
-                sum.resize(chain.len(), (0, 0));
-                for (s, l) in sum.iter_mut().zip(&chain) {
-                    *s = (s.0 + l.0, s.1 + l.1);
+        for n in [5, 9] {
+            let mut sum = Vec::<(u64, u64)>::new();
+            for axis in [Axis::X, Axis::Y, Axis::Z] {
+                for at in [4, 5] {
+                    let plane: Vec<[i64; 3]> =
+                        Region::slice(axis, at, 0, 0, side, side).voxels().collect();
+                    let chain = two_finest.dependency_chain_for(&plane, 0, n)?;
+                    sum.resize(chain.len(), (0, 0));
+                    for (s, l) in sum.iter_mut().zip(&chain) {
+                        *s = (s.0 + l.0, s.1 + l.1);
+                    }
                 }
             }
+            out.push(PlanRow {
+                scheme: name,
+                request: format!(
+                    "six {side}² axis slices (x, y and z at 4 and 5, summed), full slices at N = {n}, P = 2 at every level (exact chain, geometry only)"
+                ),
+                voxels_per_level: sum.iter().map(|l| l.0).collect(),
+                corrections_per_level: sum.iter().map(|l| l.1).collect(),
+            });
         }
-        out.push(PlanRow {
-            scheme: name,
-            request: format!(
-                "six {side}² axis slices (x, y and z at 4 and 5, summed), full slices at N = 5, P = 2 at every level (exact chain, geometry only)"
-            ),
-            voxels_per_level: sum.iter().map(|l| l.0).collect(),
-            corrections_per_level: sum.iter().map(|l| l.1).collect(),
-        });
     }
     Ok(out)
 }
