@@ -132,6 +132,7 @@ pub struct Projector {
     blocks: Vec<[f32; 4]>,
     /// The same weights in blocks of eight outputs, for CPUs with AVX
     /// (empty without): one 256-bit register per accumulator lane.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
     wide: Vec<[f32; 8]>,
     /// The projected mean, padded to whole blocks.
     offsets: Vec<f32>,

@@ -54,7 +54,7 @@ fn quick_bench_measures_everything_and_writes_the_page() {
     // slice, and never more for a single voxel (with one finest pass and
     // two levels, the chain stays inside one cell and both are equal).
     let plans = v["plans"].as_array().unwrap();
-    assert_eq!(plans.len(), 12);
+    assert_eq!(plans.len(), 14);
     let total = |scheme: &str, request: &str| -> u64 {
         plans
             .iter()
