@@ -1,0 +1,54 @@
+//! `solidtex plan` end to end: where the slice lies, boxes, and boxes too
+//! large for exact chains.
+
+use serde_json::Value;
+
+fn plan(args: &[&str]) -> Value {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
+        .args(["plan", "../shared/exemplars/animal_leather.png", "--json"])
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+fn total(scheme: &Value, key: &str) -> u64 {
+    scheme[key]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .sum()
+}
+
+#[test]
+fn plan_places_slices_and_counts_boxes() {
+    // An x slice at x = 5: u is y, v is z.
+    let v = plan(&["--slice", "16", "--axis", "x", "--at", "5", "--v0", "-3"]);
+    let schemes = v["schemes"].as_array().unwrap();
+    assert_eq!(schemes.len(), 2);
+    for s in schemes {
+        assert_eq!(s["origin"], serde_json::json!([5, 0, -3]), "{s}");
+        assert_eq!(s["size"], serde_json::json!([1, 16, 16]), "{s}");
+        // Every requested voxel is corrected at the finest level.
+        let finest = &s["exact_per_level"][0];
+        assert!(finest["corrections"].as_u64().unwrap() >= 256, "{s}");
+    }
+    // The same voxels asked for as a box give the same counts.
+    let b = plan(&["--region", "5,0,-3,1,16,16"]);
+    for (s, t) in schemes.iter().zip(b["schemes"].as_array().unwrap()) {
+        assert_eq!(s["voxels_per_level"], t["voxels_per_level"]);
+        assert_eq!(s["exact_per_level"], t["exact_per_level"]);
+    }
+    // Beyond 2^20 voxels only the engine's counts are given.
+    let big = plan(&["--region", "0,0,0,128,128,65"]);
+    for s in big["schemes"].as_array().unwrap() {
+        assert!(s["exact_per_level"].is_null(), "{s}");
+        assert!(total(s, "corrections_per_level") >= 128 * 128 * 65, "{s}");
+    }
+}
