@@ -364,7 +364,7 @@ fn plans(c: &Arc<Candidates>, side: u32) -> anyhow::Result<Vec<PlanRow>> {
             out.push(PlanRow {
                 scheme: name,
                 request: format!(
-                    "six {side}² axis slices (x, y and z at 4 and 5, summed), full slices at N = {n}, P = 2 at every level, M = {grid} (exact chain, geometry only)"
+                    "six {side}² axis slices (x, y and z at 4 and 5, summed), full slices at N = {n}, P = 2 at every level, dual-grid cell M = {grid} (exact chain, geometry only)"
                 ),
                 voxels_per_level: sum.iter().map(|l| l.0).collect(),
                 corrections_per_level: sum.iter().map(|l| l.1).collect(),
