@@ -747,6 +747,11 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
         );
     }
     let base = load_source(&a.src)?;
+    let plane: Vec<[i64; 3]> = if exact_too {
+        region.voxels().collect()
+    } else {
+        Vec::new()
+    };
     for scheme in [Scheme::Standard, Scheme::DualGrid] {
         let params = SynthParams {
             scheme,
@@ -756,16 +761,9 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
         let tex = Texture::new(cands, params, Arc::new(TileCache::new(1 << 20)))?;
         let slice = tex.plan(&region, a.src.lod)?;
         let chain = tex.dependency_chain(&[[0, 0, 0]], a.src.lod)?;
-        let plane: Vec<[i64; 3]> = if exact_too {
-            region.voxels().collect()
-        } else {
-            Vec::new()
-        };
-        let exact = if exact_too {
-            Some(tex.dependency_chain(&plane, a.src.lod)?)
-        } else {
-            None
-        };
+        let exact = exact_too
+            .then(|| tex.dependency_chain(&plane, a.src.lod))
+            .transpose()?;
         let mut other_n = Vec::new();
         for &n in &a.neighbourhoods {
             other_n.push((n, tex.dependency_chain_for(&plane, a.src.lod, n)?));

@@ -1,25 +1,29 @@
 //! `solidtex bench --quick` end to end, as CI runs it: the engine suite,
 //! both schemes' dependency sets, a short load test, and the Markdown page.
 
+mod common;
+
+use common::solidtex_json;
 use serde_json::Value;
 
 #[test]
 fn quick_bench_measures_everything_and_writes_the_page() {
     let dir = tempfile::tempdir().unwrap();
     let page = dir.path().join("BENCHMARKS.md");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
-        .args(["bench", "--quick", "--json", "--load"])
-        .args(["--load-duration", "1s", "--load-clients", "4"])
-        .args(["--exemplars", "../shared/exemplars", "--markdown"])
-        .arg(&page)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v: Value = solidtex_json(&[
+        "bench",
+        "--quick",
+        "--json",
+        "--load",
+        "--load-duration",
+        "1s",
+        "--load-clients",
+        "4",
+        "--exemplars",
+        "../shared/exemplars",
+        "--markdown",
+        page.to_str().unwrap(),
+    ]);
     let rows = v["rows"].as_array().unwrap();
     let row = |name: &str| {
         rows.iter()

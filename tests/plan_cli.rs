@@ -1,20 +1,14 @@
 //! `solidtex plan` end to end: where the slice lies, boxes, and boxes too
 //! large for exact chains.
 
+mod common;
+
+use common::solidtex_json;
 use serde_json::Value;
 
 fn plan(args: &[&str]) -> Value {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
-        .args(["plan", "../shared/exemplars/animal_leather.png", "--json"])
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
+    let leather = ["plan", "../shared/exemplars/animal_leather.png", "--json"];
+    solidtex_json(&[&leather[..], args].concat())
 }
 
 fn total(scheme: &Value, key: &str) -> u64 {

@@ -22,6 +22,8 @@ use solidtex::{
     AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Region, Scheme,
     SynthParams, SynthStats, Texture, TileCache,
 };
+use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -71,6 +73,18 @@ pub struct PlanRow {
     pub voxels_per_level: Vec<u64>,
     /// Corrections per level.
     pub corrections_per_level: Vec<u64>,
+}
+
+impl PlanRow {
+    /// A row from per-level (voxels, corrections) pairs.
+    fn from_chain(scheme: &'static str, request: String, chain: &[(u64, u64)]) -> PlanRow {
+        PlanRow {
+            scheme,
+            request,
+            voxels_per_level: chain.iter().map(|l| l.0).collect(),
+            corrections_per_level: chain.iter().map(|l| l.1).collect(),
+        }
+    }
 }
 
 /// Everything one run of the suite measured.
@@ -286,92 +300,92 @@ fn plans(c: &Arc<Candidates>, side: u32) -> anyhow::Result<Vec<PlanRow>> {
         (Scheme::DualGrid, "dual-grid"),
     ] {
         let tex = texture(c, scheme);
-        let slice = Region {
-            origin: [0, 0, 0],
-            size: [side, side, 1],
-        };
-        let p = tex.plan(&slice, 0)?;
+        let z0 = [Region::slice(Axis::Z, 0, 0, 0, side, side)];
+        let p = tex.plan(&z0[0], 0)?;
         out.push(PlanRow {
             scheme: name,
             request: format!("{side}² axis slice (4³ tiles, cold cache)"),
             voxels_per_level: p.voxels_per_level,
             corrections_per_level: p.corrections_per_level,
         });
-        let chain = tex.dependency_chain(&[[0, 0, 0]], 0)?;
-        out.push(PlanRow {
-            scheme: name,
-            request: "single voxel (exact dependency chain)".into(),
-            voxels_per_level: chain.iter().map(|l| l.0).collect(),
-            corrections_per_level: chain.iter().map(|l| l.1).collect(),
-        });
+        out.push(PlanRow::from_chain(
+            name,
+            "single voxel (exact dependency chain)".into(),
+            &tex.dependency_chain(&[[0, 0, 0]], 0)?,
+        ));
         // Zhang et al. measured their dual grid at N = 9, where the
-        // standard chain is much thicker; the chain is geometry only.
-        let plane: Vec<[i64; 3]> = (0..side as i64 * side as i64)
-            .map(|i| [i % side as i64, i / side as i64, 0])
-            .collect();
+        // standard chain is much thicker; the chains are geometry only.
         // Full slices read N/2 = 2 voxels away (the N = 5 setting)
         // and 4 at N = 9, Zhang et al.'s; both papers correct every level,
         // the finest included, with P = 2 passes.
-        let two_finest = Texture::new(
-            c.clone(),
-            SynthParams {
-                scheme,
-                finest_passes: 2,
-                ..SynthParams::default()
-            },
-            Arc::new(TileCache::new(1 << 20)),
-        )?;
         for n in [5, 9] {
-            let wide = two_finest.dependency_chain_for(&plane, 0, n)?;
-            out.push(PlanRow {
-                scheme: name,
-                request: format!(
+            out.push(PlanRow::from_chain(
+                name,
+                format!(
                     "{side}² axis slice, full slices at N = {n}, P = 2 at every level (exact chain, geometry only)"
                 ),
-                voxels_per_level: wide.iter().map(|l| l.0).collect(),
-                corrections_per_level: wide.iter().map(|l| l.1).collect(),
-            });
+                &full_slice_chain(c, scheme, 12, n, &z0)?,
+            ));
         }
         // Where a slice lies changes its chain: with subpasses, a voxel of
         // a later class reads its neighbours' new values, and which axis
         // and parity come later depends on the class order. The slice at
         // z = 0 above is one of the cheapest for the standard scheme.
-        // The smallest cell the dual grid allows (M = 4) against the
+        // The smallest cell the parameters accept (M = 4) against the
         // default 12 at N = 5: M = 10–15 suits Zhang et al.'s N = 9.
+        let six: Vec<Region> = [Axis::X, Axis::Y, Axis::Z]
+            .into_iter()
+            .flat_map(|axis| [4, 5].map(|at| Region::slice(axis, at, 0, 0, side, side)))
+            .collect();
+        let mut counted = HashMap::new();
         for (n, grid) in [(5, 12), (5, 4), (9, 12)] {
-            let tex = Texture::new(
-                c.clone(),
-                SynthParams {
-                    scheme,
-                    finest_passes: 2,
-                    grid,
-                    ..SynthParams::default()
-                },
-                Arc::new(TileCache::new(1 << 20)),
-            )?;
-            let mut sum = Vec::<(u64, u64)>::new();
-            for axis in [Axis::X, Axis::Y, Axis::Z] {
-                for at in [4, 5] {
-                    let plane: Vec<[i64; 3]> =
-                        Region::slice(axis, at, 0, 0, side, side).voxels().collect();
-                    let chain = tex.dependency_chain_for(&plane, 0, n)?;
-                    sum.resize(chain.len(), (0, 0));
-                    for (s, l) in sum.iter_mut().zip(&chain) {
-                        *s = (s.0 + l.0, s.1 + l.1);
-                    }
-                }
-            }
-            out.push(PlanRow {
-                scheme: name,
-                request: format!(
+            // The cell only matters to the dual grid.
+            let key = (n, if scheme == Scheme::DualGrid { grid } else { 0 });
+            let chain = match counted.entry(key) {
+                Entry::Occupied(known) => known.into_mut(),
+                Entry::Vacant(slot) => slot.insert(full_slice_chain(c, scheme, grid, n, &six)?),
+            };
+            out.push(PlanRow::from_chain(
+                name,
+                format!(
                     "six {side}² axis slices (x, y and z at 4 and 5, summed), full slices at N = {n}, P = 2 at every level, dual-grid cell M = {grid} (exact chain, geometry only)"
                 ),
-                voxels_per_level: sum.iter().map(|l| l.0).collect(),
-                corrections_per_level: sum.iter().map(|l| l.1).collect(),
-            });
+                chain,
+            ));
         }
     }
     Ok(out)
+}
+
+/// Exact chains of every voxel of `slices` with full N×N slices and two
+/// passes at every level, summed per level: (voxels, corrections).
+fn full_slice_chain(
+    c: &Arc<Candidates>,
+    scheme: Scheme,
+    grid: u32,
+    n: u32,
+    slices: &[Region],
+) -> anyhow::Result<Vec<(u64, u64)>> {
+    let tex = Texture::new(
+        c.clone(),
+        SynthParams {
+            scheme,
+            finest_passes: 2,
+            grid,
+            ..SynthParams::default()
+        },
+        Arc::new(TileCache::new(1 << 20)),
+    )?;
+    let mut sum = Vec::<(u64, u64)>::new();
+    for slice in slices {
+        let voxels: Vec<[i64; 3]> = slice.voxels().collect();
+        let chain = tex.dependency_chain_for(&voxels, 0, n)?;
+        sum.resize(chain.len(), (0, 0));
+        for (s, l) in sum.iter_mut().zip(&chain) {
+            *s = (s.0 + l.0, s.1 + l.1);
+        }
+    }
+    Ok(sum)
 }
 
 /// A row for a cold request, or a skipped row when its plan is too big.

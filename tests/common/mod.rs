@@ -76,3 +76,18 @@ pub fn fnv(bytes: &[u8]) -> u64 {
     }
     h
 }
+
+/// Runs the `solidtex` binary with `args`, expects success, and parses
+/// what it prints as JSON.
+pub fn solidtex_json<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> serde_json::Value {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
