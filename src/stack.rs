@@ -20,6 +20,9 @@ pub struct GaussianStack {
     /// the correction reads all three at random, and one copy stays in
     /// cache where three would not.
     levels: Arc<Vec<Vec<[f32; 3]>>>,
+    /// The same colours padded to four floats (the fourth is 0), so that
+    /// the correction loads a colour as one 16-byte vector.
+    padded: Arc<Vec<Vec<[f32; 4]>>>,
 }
 
 impl GaussianStack {
@@ -40,10 +43,15 @@ impl GaussianStack {
             let horizontal = blur(prev, w, h, step, 0);
             levels.push(blur(&horizontal, w, h, 0, step));
         }
+        let padded = levels
+            .iter()
+            .map(|l| l.iter().map(|&[r, g, b]| [r, g, b, 0.0]).collect())
+            .collect();
         GaussianStack {
             width: w,
             height: h,
             levels: Arc::new(levels),
+            padded: Arc::new(padded),
         }
     }
 
@@ -70,6 +78,11 @@ impl GaussianStack {
     /// All pixels of level `k`.
     pub fn level(&self, k: usize) -> &[[f32; 3]] {
         &self.levels[k]
+    }
+
+    /// All pixels of level `k`, padded to four floats.
+    pub fn level_padded(&self, k: usize) -> &[[f32; 4]] {
+        &self.padded[k]
     }
 
     /// Colour of level `k` at (x, y), wrapping.

@@ -80,7 +80,9 @@ impl Work {
 
 /// Reusable per-thread buffers.
 pub struct Scratch {
-    neigh: [f32; MAX_NEIGHBOURHOOD],
+    /// One float of slack: gathered colours are written four floats at a
+    /// time, three apart.
+    neigh: [f32; MAX_NEIGHBOURHOOD + 1],
     app: [[f32; MAX_DIMS]; 3],
     concat: [f32; 3 * MAX_DIMS],
     joint: [f32; MAX_DIMS],
@@ -89,7 +91,7 @@ pub struct Scratch {
 impl Default for Scratch {
     fn default() -> Self {
         Scratch {
-            neigh: [0.0; MAX_NEIGHBOURHOOD],
+            neigh: [0.0; MAX_NEIGHBOURHOOD + 1],
             app: [[0.0; MAX_DIMS]; 3],
             concat: [0.0; 3 * MAX_DIMS],
             joint: [0.0; MAX_DIMS],
@@ -111,6 +113,10 @@ pub struct Corrector<'a> {
     max_3d: usize,
     /// Each plane's exemplar colours at this level.
     plane_colours: [&'a [[f32; 3]]; 3],
+    /// The same, padded to four floats.
+    padded_colours: [&'a [[f32; 4]]; 3],
+    /// Each plane's sparse query, pixel by pixel (see [`SparsePixel`]).
+    sparse_pixels: [Vec<SparsePixel>; 3],
     /// Gain on neighbourhood colours around their mean (see
     /// [`crate::SynthParams::contrast`]).
     contrast: f32,
@@ -148,6 +154,8 @@ impl<'a> Corrector<'a> {
             joint: Projector::new(cands.level(k).joint_pca()),
             joint_offsets: cands.level(k).joint_pca().mean_offsets(),
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
+            padded_colours: [0, 1, 2].map(|p| cands.stack(p).level_padded(k)),
+            sparse_pixels: [0, 1, 2].map(|p| sparse_pixels(p, cands.params().neighbourhood)),
             contrast: params.contrast,
             sparse: params.slices == Slices::Sparse,
             reach: reach(params.slices, cands.params().neighbourhood),
@@ -217,18 +225,35 @@ impl<'a> Corrector<'a> {
                 start
             }
         };
-        // The exemplar pixels whose similarity sets each plane scans, and
-        // the coherent triples, are known from the triples alone: gather
-        // them first and prefetch their tables, so the cache misses overlap
-        // the neighbourhood gathering and projection below.
+        // The direct neighbours (the 19 offsets with a zero coordinate,
+        // which the three in-plane 3×3 windows hold), read once in the
+        // version their history window gives; corners are never read.
+        let inside3 =
+            |d: [i64; 3]| !BY_WALL || (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
+        let mut near = Near::default();
+        // Coherent triples: each neighbour's triple moved back by its
+        // offset, in all three planes at once.
+        let mut moved = [[u32::MAX; 3]; 27];
+        for &d in &DIRECT {
+            let k = near_slot(d);
+            let idx = (centre + d[0] * strides[0] + d[1] * strides[1] + d[2] * strides[2]) as usize;
+            let src = if inside3(d) { work } else { start };
+            near.triples[k] = src.triples.data[idx];
+            let [r, g, b] = src.colours.data[idx];
+            near.colours[k] = [r, g, b, 0.0];
+            moved[k] = offset_triple(self.dims, near.triples[k], d.map(|v| -v), h);
+        }
+        // The exemplar pixels whose similarity sets each plane scans (the
+        // in-plane neighbours' coherent pixels), and the coherent triples,
+        // are known from the triples alone: prefetch their tables, so the
+        // cache misses overlap the neighbourhood gathering and projection
+        // below.
         let mut bases = [[u32::MAX; 9]; 3];
         let mut bases_n = [0usize; 3];
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             for j in -1..=1i64 {
                 for i in -1..=1i64 {
-                    let idx = (centre + i * strides[a] + j * strides[b]) as usize;
-                    let t = pick(a, i, b, j).triples.data[idx];
-                    let base = self.dims.shift(t[plane], -i * h, -j * h);
+                    let base = moved[in_plane_slot(a, i, b, j)][plane];
                     // Coherent neighbours usually point at the same pixel:
                     // visit each base pixel once.
                     if bases[plane][..bases_n[plane]].contains(&base) {
@@ -241,38 +266,26 @@ impl<'a> Corrector<'a> {
                 }
             }
         }
-        let inside3 =
-            |d: [i64; 3]| !BY_WALL || (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
         let mut coherent = [[u32::MAX; 3]; 19];
         let mut coherent_n = 0;
-        // Coherent triples: each neighbour's triple moved back by its
-        // offset, in all three planes at once (the neighbours the shape
-        // holds: those with at least one zero offset).
-        for dz in -1..=1i64 {
-            for dy in -1..=1i64 {
-                for dx in -1..=1i64 {
-                    if dx != 0 && dy != 0 && dz != 0 {
-                        continue;
-                    }
-                    let d = [dx, dy, dz];
-                    let idx =
-                        (centre + dx * strides[0] + dy * strides[1] + dz * strides[2]) as usize;
-                    let src = if inside3(d) { work } else { start };
-                    let t = offset_triple(self.dims, src.triples.data[idx], d.map(|v| -v), h);
-                    if coherent[..coherent_n].contains(&t) {
-                        continue;
-                    }
-                    coherent[coherent_n] = t;
-                    coherent_n += 1;
-                    for (p, &c) in t.iter().enumerate() {
-                        prefetch(self.level.joint_share(p, c));
-                    }
-                }
+        for &d in &DIRECT {
+            let t = moved[near_slot(d)];
+            if coherent[..coherent_n].contains(&t) {
+                continue;
+            }
+            coherent[coherent_n] = t;
+            coherent_n += 1;
+            for (p, &c) in t.iter().enumerate() {
+                prefetch(self.level.joint_share(p, c));
             }
         }
         let mut best2d = [0u32; 3];
         for plane in 0..3 {
-            self.slice_query(&pick, strides, centre, plane, s);
+            if self.sparse {
+                self.sparse_query(&near, plane, s);
+            } else {
+                self.slice_query(&pick, strides, centre, plane, s);
+            }
             let dims = self.level.appearance[plane].pca.dims;
             let query = self.level.quantise_appearance(plane, &s.app[plane][..dims]);
             let mut best = (u32::MAX, u32::MAX);
@@ -360,8 +373,8 @@ impl<'a> Corrector<'a> {
         (d * self.consistency) as u32
     }
 
-    /// Plane `plane`'s query from the voxel's N×N colour slice, u outer
-    /// order matching the exemplar neighbourhoods (v rows, u columns).
+    /// Plane `plane`'s query from the voxel's full N×N colour slice, v
+    /// rows and u columns like the exemplar neighbourhoods.
     fn slice_query<'w>(
         &self,
         pick: &impl Fn(usize, i64, usize, i64) -> &'w Work,
@@ -371,45 +384,156 @@ impl<'a> Corrector<'a> {
         s: &mut Scratch,
     ) {
         let r = self.n / 2;
-        let h = spacing(self.k) as i64;
         let (a, b) = AXES[plane];
         let mut o = 0;
         for j in -r..=r {
             for i in -r..=r {
                 let idx = (centre + i * strides[a] + j * strides[b]) as usize;
-                let (avg, own) = if self.sparse && (i.abs() > 1 || j.abs() > 1) {
-                    // Beyond the direct neighbours, the nearest direct
-                    // neighbour's triple predicts the voxel's triple.
-                    let (qi, qj) = (i.clamp(-1, 1), j.clamp(-1, 1));
-                    let qidx = (centre + qi * strides[a] + qj * strides[b]) as usize;
-                    let tq = pick(a, qi, b, qj).triples.data[qidx];
-                    let mut d = [0i64; 3];
-                    d[a] = i - qi;
-                    d[b] = j - qj;
-                    let t = offset_triple(self.dims, tq, d, h);
-                    (
-                        colour_at(self.plane_colours, t),
-                        self.plane_colours[plane][t[plane] as usize],
-                    )
-                } else {
-                    let w = pick(a, i, b, j);
-                    (
-                        w.colours.data[idx],
-                        self.plane_colours[plane][w.triples.data[idx][plane] as usize],
-                    )
-                };
-                // Half the voxel colour, half the plane's own exemplar.
-                let c = [0, 1, 2].map(|ch| 0.5 * (avg[ch] + own[ch]));
-                s.neigh[o..o + 3].copy_from_slice(&c);
+                let w = pick(a, i, b, j);
+                let own = self.plane_colours[plane][w.triples.data[idx][plane] as usize];
+                s.neigh[o..o + 3].copy_from_slice(&blend(w.colours.data[idx], own));
                 o += 3;
             }
         }
+        self.project_query(plane, o, s);
+    }
+
+    /// Plane `plane`'s query with sparse slices: the direct neighbours'
+    /// colours, and beyond them the colours of the triples that the nearest
+    /// direct neighbour predicts (its triple moved by the offset, Zhang et
+    /// al.'s `T + d`). An in-plane offset (du, dv) moves the plane's own
+    /// coordinate by both, the next plane's (which shares the v axis as
+    /// its u) by dv along u, and the previous plane's (which shares the u
+    /// axis as its v) by du along v.
+    fn sparse_query(&self, near: &Near, plane: usize, s: &mut Scratch) {
+        let h = spacing(self.k) as i64;
+        let (next, prev) = ((plane + 1) % 3, (plane + 2) % 3);
+        let colours = self.padded_colours;
+        let pixels = &self.sparse_pixels[plane];
+        for (o, px) in pixels.iter().enumerate() {
+            let slot = px.slot as usize;
+            let t = near.triples[slot];
+            let c = if px.du == 0 && px.dv == 0 {
+                blend4(near.colours[slot], colours[plane][t[plane] as usize])
+            } else {
+                let (du, dv) = (px.du as i64 * h, px.dv as i64 * h);
+                let mut m = t;
+                m[plane] = self.dims.shift(t[plane], du, dv);
+                m[next] = self.dims.shift(t[next], dv, 0);
+                m[prev] = self.dims.shift(t[prev], 0, du);
+                let moved = [0, 1, 2].map(|p| colours[p][m[p] as usize]);
+                let mean = [0, 1, 2, 3].map(|ch| third(moved[0][ch] + moved[1][ch] + moved[2][ch]));
+                blend4(mean, moved[plane])
+            };
+            // Four floats written three apart: the slack float of the last
+            // one is never read.
+            s.neigh[3 * o..3 * o + 4].copy_from_slice(&c);
+        }
+        self.project_query(plane, 3 * pixels.len(), s);
+    }
+
+    /// Stretches the `len` gathered floats and projects them into plane
+    /// `plane`'s appearance space.
+    fn project_query(&self, plane: usize, len: usize, s: &mut Scratch) {
         if self.contrast != 1.0 {
-            stretch(&mut s.neigh[..o], self.contrast);
+            stretch(&mut s.neigh[..len], self.contrast);
         }
         let dims = self.projectors[plane].dims();
-        self.projectors[plane].project(&s.neigh[..o], &mut s.app[plane][..dims]);
+        self.projectors[plane].project(&s.neigh[..len], &mut s.app[plane][..dims]);
     }
+}
+
+/// A neighbour's colour in a plane's query: half its voxel colour, half
+/// the plane's own exemplar colour.
+#[inline(always)]
+fn blend(voxel: [f32; 3], own: [f32; 3]) -> [f32; 3] {
+    [0, 1, 2].map(|ch| 0.5 * (voxel[ch] + own[ch]))
+}
+
+/// [`blend`] on padded colours.
+#[inline(always)]
+fn blend4(voxel: [f32; 4], own: [f32; 4]) -> [f32; 4] {
+    [0, 1, 2, 3].map(|ch| 0.5 * (voxel[ch] + own[ch]))
+}
+
+/// The direct neighbours a sparse correction reads: offsets in {-1, 0, 1}³
+/// with at least one zero coordinate (the union of the three in-plane 3×3
+/// windows), z outermost.
+const DIRECT: [[i64; 3]; 19] = {
+    let mut out = [[0i64; 3]; 19];
+    let mut n = 0;
+    let mut k = 0;
+    while k < 27 {
+        let d = [
+            (k % 3) as i64 - 1,
+            ((k / 3) % 3) as i64 - 1,
+            (k / 9) as i64 - 1,
+        ];
+        if d[0] == 0 || d[1] == 0 || d[2] == 0 {
+            out[n] = d;
+            n += 1;
+        }
+        k += 1;
+    }
+    out
+};
+
+/// Slot of offset `d` (in {-1, 0, 1}³) in a [`Near`] table.
+#[inline(always)]
+fn near_slot(d: [i64; 3]) -> usize {
+    (13 + d[0] + 3 * d[1] + 9 * d[2]) as usize
+}
+
+/// Slot of the in-plane offset (i along axis `a`, j along axis `b`).
+#[inline(always)]
+fn in_plane_slot(a: usize, i: i64, b: usize, j: i64) -> usize {
+    const STEP: [i64; 3] = [1, 3, 9];
+    (13 + i * STEP[a] + j * STEP[b]) as usize
+}
+
+/// The direct neighbours' triples and colours, by [`near_slot`], in the
+/// version the correction's history window reads.
+struct Near {
+    triples: [[u32; 3]; 27],
+    colours: [[f32; 4]; 27],
+}
+
+impl Default for Near {
+    fn default() -> Self {
+        Near {
+            triples: [[0; 3]; 27],
+            colours: [[0.0; 4]; 27],
+        }
+    }
+}
+
+/// One pixel of a sparse query: the direct neighbour it comes from (its
+/// [`near_slot`]) and how far beyond it the pixel lies along the plane's
+/// u and v axes, in voxels (0, 0 for the neighbour itself).
+#[derive(Clone, Copy, Debug)]
+struct SparsePixel {
+    slot: u8,
+    du: i8,
+    dv: i8,
+}
+
+/// Plane `plane`'s sparse query pixels for an N×N neighbourhood, v rows
+/// and u columns like the exemplar neighbourhoods.
+fn sparse_pixels(plane: usize, neighbourhood: u32) -> Vec<SparsePixel> {
+    let r = neighbourhood as i64 / 2;
+    let (a, b) = AXES[plane];
+    let mut out = Vec::with_capacity((2 * r as usize + 1).pow(2));
+    for j in -r..=r {
+        for i in -r..=r {
+            let (qi, qj) = (i.clamp(-1, 1), j.clamp(-1, 1));
+            out.push(SparsePixel {
+                slot: in_plane_slot(a, qi, b, qj) as u8,
+                du: (i - qi) as i8,
+                dv: (j - qj) as i8,
+            });
+        }
+    }
+    out
 }
 
 /// How far a correction reads, in voxels of its level along each axis:
@@ -524,7 +648,53 @@ fn sq_dist_i16(a: &[i16; SIMILAR_DIMS], b: &[i16; SIMILAR_DIMS]) -> u32 {
 
 #[cfg(test)]
 mod tests {
-    use super::third;
+    use super::*;
+
+    #[test]
+    fn the_direct_neighbours_are_the_three_in_plane_windows() {
+        let mut windows: Vec<[i64; 3]> = Vec::new();
+        for &(a, b) in &AXES {
+            for j in -1..=1 {
+                for i in -1..=1 {
+                    let mut d = [0; 3];
+                    d[a] = i;
+                    d[b] = j;
+                    assert_eq!(in_plane_slot(a, i, b, j), near_slot(d));
+                    if !windows.contains(&d) {
+                        windows.push(d);
+                    }
+                }
+            }
+        }
+        windows.sort();
+        let mut direct = DIRECT.to_vec();
+        direct.sort();
+        assert_eq!(direct, windows);
+    }
+
+    #[test]
+    fn sparse_pixels_extrapolate_from_the_nearest_direct_neighbour() {
+        for n in [3, 5, 9] {
+            let r = n as i64 / 2;
+            for (plane, &(a, b)) in AXES.iter().enumerate() {
+                let pixels = sparse_pixels(plane, n);
+                assert_eq!(pixels.len(), (n * n) as usize);
+                for (o, px) in pixels.iter().enumerate() {
+                    // v rows, u columns.
+                    let (i, j) = ((o as i64 % n as i64) - r, (o as i64 / n as i64) - r);
+                    let (qi, qj) = (i - px.du as i64, j - px.dv as i64);
+                    assert!(
+                        qi.abs() <= 1 && qj.abs() <= 1,
+                        "({i}, {j}) from ({qi}, {qj})"
+                    );
+                    // Nearest: no step of the offset could have been saved.
+                    assert!(i.abs() <= 1 || qi.abs() == 1);
+                    assert!(j.abs() <= 1 || qj.abs() == 1);
+                    assert_eq!(px.slot as usize, in_plane_slot(a, qi, b, qj));
+                }
+            }
+        }
+    }
 
     #[test]
     fn a_third_rounds_like_the_division() {
