@@ -222,6 +222,23 @@ impl Default for SynthParams {
 }
 
 impl SynthParams {
+    /// Parameters for previews and interactive cutting: one correction
+    /// pass per level, and the finest level upsampled from level 1 without
+    /// correction. A cold slice needs about a quarter of the defaults'
+    /// corrections, which on the 2-core reference machine meets the speed
+    /// targets that the defaults miss (BENCHMARKS.md). The price is about
+    /// 10 % worse patch coherence and visibly more broken-up features on
+    /// spotted or blocky exemplars (docs/quality.md). Their voxels differ
+    /// from the defaults', as any other parameter change makes them.
+    pub fn preview() -> SynthParams {
+        SynthParams {
+            passes: 1,
+            finest_passes: 0,
+            fine_levels: 1,
+            ..SynthParams::default()
+        }
+    }
+
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
         range("passes", self.passes, 0, 6)?;

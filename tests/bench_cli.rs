@@ -54,6 +54,30 @@ fn quick_bench_measures_everything_and_writes_the_page() {
             < row("axis slice 32² cold")["seconds"].as_f64()
     );
 
+    // The preview parameters skip the finest level's correction and a
+    // pass at the coarse ones: far fewer corrections for the same slice.
+    let corrections = |name: &str| -> u64 {
+        let r = row(name);
+        let detail = r["detail"].as_str().unwrap();
+        let words: Vec<&str> = detail.split_whitespace().collect();
+        let at = words
+            .iter()
+            .position(|w| w.starts_with("corrections"))
+            .unwrap_or_else(|| panic!("{r}"));
+        words[at - 1].parse().unwrap()
+    };
+    for name in [
+        "preview: axis slice 16² cold",
+        "preview: brick 8³ cold",
+        "preview: full volume 16³ cold",
+    ] {
+        assert!(row(name)["seconds"].as_f64().unwrap() > 0.0);
+    }
+    assert!(
+        4 * corrections("preview: axis slice 16² cold") < corrections("axis slice 16² cold"),
+        "{v}"
+    );
+
     // The dual grid needs fewer voxels than the standard scheme for a
     // slice, and never more for a single voxel (with one finest pass and
     // two levels, the chain stays inside one cell and both are equal).
@@ -76,7 +100,7 @@ fn quick_bench_measures_everything_and_writes_the_page() {
     assert!(total("dual-grid", single) <= total("standard", single));
 
     let load = v["load"].as_array().unwrap();
-    assert_eq!(load.len(), 4);
+    assert_eq!(load.len(), 5);
     for l in load {
         let t = &l["report"]["total"];
         assert!(t["requests"].as_u64().unwrap() >= 1, "{l}");
@@ -92,6 +116,7 @@ fn quick_bench_measures_everything_and_writes_the_page() {
         "Dong 2008",
         "## Service under load",
         "dual-grid",
+        "preview parameters",
     ] {
         assert!(md.contains(needle), "page lacks {needle:?}:\n{md}");
     }

@@ -142,10 +142,16 @@ fn measure<T>(runs: usize, mut f: impl FnMut() -> T) -> Measured<T> {
 }
 
 fn texture(c: &Arc<Candidates>, scheme: Scheme) -> Texture {
-    let params = SynthParams {
-        scheme,
-        ..SynthParams::default()
-    };
+    texture_with(
+        c,
+        SynthParams {
+            scheme,
+            ..SynthParams::default()
+        },
+    )
+}
+
+fn texture_with(c: &Arc<Candidates>, params: SynthParams) -> Texture {
     Texture::new(c.clone(), params, Arc::new(TileCache::new(2 << 30))).expect("valid params")
 }
 
@@ -278,6 +284,7 @@ pub fn run(opts: &Options) -> anyhow::Result<Results> {
         max_seconds: opts.max_seconds,
     };
     synthesis_rows(&c, sizes, &mut predictor, &mut rows)?;
+    preview_rows(&c, sizes, &mut predictor, &mut rows)?;
     let load = match &opts.load {
         Some(l) => service::measure(&opts.exemplars.join(sizes.synthesis), sizes.levels, l)?,
         None => Vec::new(),
@@ -588,6 +595,65 @@ fn synthesis_rows(
                 || tex.cut(&plane, 0, Filter::Nearest),
             )?);
         }
+    }
+    Ok(())
+}
+
+/// The targeted requests again with [`SynthParams::preview`]: what the
+/// speed targets cost in quality (docs/quality.md weighs it).
+fn preview_rows(
+    c: &Arc<Candidates>,
+    sizes: &Sizes,
+    predictor: &mut Predictor,
+    rows: &mut Vec<Row>,
+) -> anyhow::Result<()> {
+    let side = sizes.sides[0];
+    let b = sizes.brick;
+    let n = *sizes.volumes.last().expect("a volume size");
+    let target = |full: bool, t: &'static str| full.then_some(t);
+    let requests = [
+        (
+            format!("preview: axis slice {side}² cold"),
+            Region::slice(Axis::Z, 5, 0, 0, side, side),
+            target(side == 256, "≤ 300 ms"),
+        ),
+        (
+            format!("preview: axis slice {side}² cold, x axis"),
+            Region::slice(Axis::X, 5, 0, 0, side, side),
+            target(side == 256, "≤ 300 ms"),
+        ),
+        (
+            format!("preview: axis slice {side}² cold, y axis"),
+            Region::slice(Axis::Y, 5, 0, 0, side, side),
+            target(side == 256, "≤ 300 ms"),
+        ),
+        (
+            format!("preview: brick {b}³ cold"),
+            Region {
+                origin: [640, -320, 128],
+                size: [b; 3],
+            },
+            target(b == 64, "≤ 300 ms"),
+        ),
+        (
+            format!("preview: full volume {n}³ cold"),
+            Region {
+                origin: [0, 0, 0],
+                size: [n; 3],
+            },
+            target(n == 128, "≤ 2 s"),
+        ),
+    ];
+    for (name, region, target) in requests {
+        let tex = texture_with(c, SynthParams::preview());
+        rows.push(cold_row(
+            name,
+            Some(&tex.plan(&region, 0)?),
+            predictor,
+            target,
+            None,
+            || Ok(tex.region(&region, 0)?),
+        )?);
     }
     Ok(())
 }

@@ -9,6 +9,7 @@
 
 use anyhow::{Context, bail};
 use serde::Serialize;
+use solidtex::SynthParams;
 use solidtex::loadtest::report::{KindSummary, Report};
 use solidtex::loadtest::workload::{Kind, SweepPlane};
 use solidtex::loadtest::{self, LoadConfig};
@@ -122,20 +123,24 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
         .worker_threads(2)
         .enable_all()
         .build()?;
-    // (name, clients, synthesis threads (0: every core), sweep, target)
+    // (name, clients, synthesis threads (0: every core), sweep, preview
+    // parameters, target)
     type Run = (
         String,
         usize,
         usize,
         Option<SweepPlane>,
+        bool,
         Option<&'static str>,
     );
-    let runs: [Run; 4] = [
+    let sweep_target = Some("≥ 20 cuts/s at 256², lod 0");
+    let runs: [Run; 5] = [
         (
             format!("1 client, mixed, {}², lod {}", o.side, o.lod),
             1,
             0,
             None,
+            false,
             None,
         ),
         (
@@ -146,6 +151,7 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
             1,
             1,
             None,
+            false,
             None,
         ),
         (
@@ -153,6 +159,7 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
             o.clients,
             0,
             None,
+            false,
             Some("p99 ≤ 3 s; no errors but 503; RSS ≤ cache + 256 MiB"),
         ),
         (
@@ -160,18 +167,31 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
             1,
             0,
             Some(SweepPlane::Axis),
-            Some("≥ 20 cuts/s at 256², lod 0"),
+            false,
+            sweep_target,
+        ),
+        (
+            format!(
+                "sweep, axis {}², lod {}, preview parameters",
+                o.sweep_side, o.sweep_lod
+            ),
+            1,
+            0,
+            Some(SweepPlane::Axis),
+            true,
+            sweep_target,
         ),
     ];
     let mut rows = Vec::new();
-    let mut id = None;
-    for (i, (name, clients, threads, sweep, target)) in runs.into_iter().enumerate() {
+    // The default texture's id, and the preview texture's.
+    let mut ids: [Option<String>; 2] = [None, None];
+    for (i, (name, clients, threads, sweep, preview, target)) in runs.into_iter().enumerate() {
         let server = ServerProcess::start(&dir.0, o, threads)?;
         let base = server.base.clone();
         let report = runtime.block_on(async {
-            let id = match &id {
+            let id = match &mut ids[preview as usize] {
                 Some(id) => id,
-                None => id.insert(upload(&base, png.clone(), levels).await?),
+                slot @ None => slot.insert(upload(&base, png.clone(), levels, preview).await?),
             };
             let cfg = LoadConfig {
                 concurrency: clients,
@@ -214,14 +234,27 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
             100.0 * many / (single * cores)
         );
     }
-    rows[3].note = format!("{:.2} cuts/s", rows[3].report.total.requests_per_s);
+    for row in &mut rows[3..] {
+        row.note = format!("{:.2} cuts/s", row.report.total.requests_per_s);
+    }
     Ok(rows)
 }
 
-async fn upload(base: &str, png: Vec<u8>, levels: u32) -> anyhow::Result<String> {
+/// Uploads the exemplar with `levels` levels, and with
+/// [`SynthParams::preview`]'s passes when `preview` is set; waits until the
+/// texture is ready.
+async fn upload(base: &str, png: Vec<u8>, levels: u32, preview: bool) -> anyhow::Result<String> {
     let c = reqwest::Client::builder().no_proxy().build()?;
+    let mut query = format!("levels={levels}");
+    if preview {
+        let p = SynthParams::preview();
+        query += &format!(
+            "&passes={}&finest_passes={}&fine_levels={}",
+            p.passes, p.finest_passes, p.fine_levels
+        );
+    }
     let r = c
-        .post(format!("{base}/v1/textures?levels={levels}"))
+        .post(format!("{base}/v1/textures?{query}"))
         .header("content-type", "image/png")
         .body(png)
         .send()
