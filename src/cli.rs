@@ -216,6 +216,11 @@ struct SynthArgs {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Preview parameters: one correction pass per level and the finest
+    /// level upsampled without correction; cold slices 5–7× faster for
+    /// about 10 % worse patch coherence (docs/quality.md).
+    #[arg(long, conflicts_with_all = ["passes", "finest_passes", "fine_levels"])]
+    preview: bool,
     /// Correction passes per level, the fine levels excepted.
     #[arg(long, default_value_t = 2)]
     passes: u32,
@@ -254,11 +259,21 @@ struct SynthArgs {
 
 impl SynthArgs {
     fn params(&self, scheme: Scheme) -> SynthParams {
+        let passes = if self.preview {
+            SynthParams::preview()
+        } else {
+            SynthParams {
+                passes: self.passes,
+                finest_passes: self.finest_passes,
+                fine_levels: self.fine_levels,
+                ..SynthParams::default()
+            }
+        };
         SynthParams {
             seed: self.seed,
-            passes: self.passes,
-            finest_passes: self.finest_passes,
-            fine_levels: self.fine_levels,
+            passes: passes.passes,
+            finest_passes: passes.finest_passes,
+            fine_levels: passes.fine_levels,
             scheme,
             grid: self.grid,
             jitter: self.jitter,

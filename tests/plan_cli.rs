@@ -46,3 +46,33 @@ fn plan_places_slices_and_counts_boxes() {
         assert!(total(s, "corrections_per_level") >= 128 * 128 * 65, "{s}");
     }
 }
+
+#[test]
+fn the_preview_flag_spells_out_the_preview_parameters() {
+    let preview = plan(&["--slice", "16", "--at", "3", "--preview"]);
+    let spelled = plan(&[
+        "--slice",
+        "16",
+        "--at",
+        "3",
+        "--passes",
+        "1",
+        "--finest-passes",
+        "0",
+        "--fine-levels",
+        "1",
+    ]);
+    assert_eq!(preview["schemes"], spelled["schemes"]);
+    for s in preview["schemes"].as_array().unwrap() {
+        // The finest level is upsampled, never corrected.
+        assert_eq!(s["corrections_per_level"][0], 0, "{s}");
+        assert!(s["corrections_per_level"][1].as_u64().unwrap() > 0, "{s}");
+    }
+    // The preview sets the passes: giving them too is a contradiction.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
+        .args(["plan", "--preview", "--passes", "2"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--preview"));
+}

@@ -382,6 +382,39 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_preset_upload_is_the_texture_it_spells_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let png = exemplar_png(32, 3);
+    let (st, preset) = upload(&c, &s, png.clone(), "levels=3&preset=preview").await;
+    assert_eq!(st, 202, "{preset}");
+    let params = &preset["params"];
+    assert_eq!(
+        (
+            &params["passes"],
+            &params["finest_passes"],
+            &params["fine_levels"]
+        ),
+        (&1.into(), &0.into(), &1.into()),
+        "{preset}"
+    );
+    assert!(params.get("preset").is_none(), "{preset}");
+    let id = preset["id"].as_str().unwrap().to_string();
+    wait_ready(&c, &s, &id).await;
+    let spelled = "levels=3&passes=1&finest_passes=0&fine_levels=1";
+    let (st, v) = upload(&c, &s, png.clone(), spelled).await;
+    assert_eq!((st, v["id"].as_str()), (201, Some(id.as_str())), "{v}");
+    // Keys beside the preset win; an unknown preset is a 400.
+    let (_, v) = upload(&c, &s, png.clone(), "levels=3&preset=preview&passes=2").await;
+    assert_eq!(v["params"]["passes"], 2, "{v}");
+    assert_eq!(v["params"]["finest_passes"], 0, "{v}");
+    let (st, v) = upload(&c, &s, png, "levels=3&preset=fast").await;
+    assert_eq!(st, 400, "{v}");
+    assert_eq!(v["error"]["code"], "invalid_params", "{v}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn multipart_uploads() {
     let dir = tempfile::tempdir().unwrap();
     let s = TestServer::start(test_args(dir.path())).await;

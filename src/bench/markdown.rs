@@ -107,8 +107,8 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         w,
         "Rows marked \"preview\" (and the preview sweep below) use \
          `SynthParams::preview()`: {} pass per level and {} at the finest level, which is \
-         upsampled from level 1 without correction (upload parameters `passes={}`, \
-         `finest_passes={}`, `fine_levels={}`). They show what the speed targets cost in \
+         upsampled from level 1 without correction (upload `preset=preview`, which spells \
+         out as `passes={}&finest_passes={}&fine_levels={}`; CLI `--preview`). They show what the speed targets cost in \
          quality: about 10 % worse patch coherence (docs/quality.md, \"Preview parameters\").\n",
         p.passes, p.finest_passes, p.passes, p.finest_passes, p.fine_levels
     );

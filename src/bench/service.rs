@@ -9,7 +9,6 @@
 
 use anyhow::{Context, bail};
 use serde::Serialize;
-use solidtex::SynthParams;
 use solidtex::loadtest::report::{KindSummary, Report};
 use solidtex::loadtest::workload::{Kind, SweepPlane};
 use solidtex::loadtest::{self, LoadConfig};
@@ -240,18 +239,14 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
     Ok(rows)
 }
 
-/// Uploads the exemplar with `levels` levels, and with
-/// [`SynthParams::preview`]'s passes when `preview` is set; waits until the
-/// texture is ready.
+/// Uploads the exemplar with `levels` levels, and with the preview
+/// parameters (`SynthParams::preview`) when `preview` is set; waits until
+/// the texture is ready.
 async fn upload(base: &str, png: Vec<u8>, levels: u32, preview: bool) -> anyhow::Result<String> {
     let c = reqwest::Client::builder().no_proxy().build()?;
     let mut query = format!("levels={levels}");
     if preview {
-        let p = SynthParams::preview();
-        query += &format!(
-            "&passes={}&finest_passes={}&fine_levels={}",
-            p.passes, p.finest_passes, p.fine_levels
-        );
+        query += "&preset=preview";
     }
     let r = c
         .post(format!("{base}/v1/textures?{query}"))

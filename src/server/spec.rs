@@ -35,18 +35,45 @@ impl TextureParams {
     /// Splits a flat object of parameters into analysis and synthesis
     /// parameters, rejecting unknown keys, wrong types and out-of-range
     /// values.
+    ///
+    /// `preset` names a set of synthesis parameters to start from instead
+    /// of the defaults (`preview`: [`SynthParams::preview`]); keys given
+    /// beside it win. It is not kept: the texture's parameters, and so its
+    /// id, are those the preset expands to.
     pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, ApiError> {
         let analysis_keys = keys_of::<AnalysisParams>();
         let synth_keys = keys_of::<SynthParams>();
         let mut a = Map::new();
         let mut s = Map::new();
+        if let Some(preset) = obj.get("preset") {
+            let base = match preset.as_str() {
+                Some("default") => SynthParams::default(),
+                Some("preview") => SynthParams::preview(),
+                _ => {
+                    return Err(invalid_params(format!(
+                        "unknown preset {preset} (known: default, preview)"
+                    )));
+                }
+            };
+            if let Ok(Value::Object(m)) = serde_json::to_value(base) {
+                s = m;
+            }
+        }
         for (k, v) in obj {
+            if k == "preset" {
+                continue;
+            }
             if analysis_keys.contains(k) {
                 a.insert(k.clone(), v.clone());
             } else if synth_keys.contains(k) {
                 s.insert(k.clone(), v.clone());
             } else {
-                let mut known: Vec<&String> = analysis_keys.iter().chain(&synth_keys).collect();
+                let preset = "preset".to_string();
+                let mut known: Vec<&String> = analysis_keys
+                    .iter()
+                    .chain(&synth_keys)
+                    .chain([&preset])
+                    .collect();
                 known.sort();
                 let known: Vec<&str> = known.iter().map(|k| k.as_str()).collect();
                 return Err(invalid_params(format!(
@@ -272,6 +299,30 @@ mod tests {
             .map(|i| (i as u8).wrapping_mul(seed))
             .collect();
         Exemplar::from_rgb(16, 16, &rgb).unwrap()
+    }
+
+    #[test]
+    fn a_preset_expands_to_its_parameters_and_yields_to_explicit_keys() {
+        let flat = |text: &str| match serde_json::from_str::<Value>(text).unwrap() {
+            Value::Object(m) => TextureParams::from_flat(&m),
+            _ => unreachable!(),
+        };
+        let preview = flat(r#"{"preset": "preview", "seed": 7}"#).unwrap();
+        let spelled = flat(r#"{"passes": 1, "finest_passes": 0, "fine_levels": 1, "seed": 7}"#);
+        assert_eq!(preview, spelled.unwrap());
+        assert_eq!(preview.synth.seed, 7);
+        assert!(!preview.to_flat().contains_key("preset"));
+        let overridden = flat(r#"{"preset": "preview", "passes": 2}"#).unwrap();
+        assert_eq!(overridden.synth.passes, 2);
+        assert_eq!(overridden.synth.finest_passes, 0);
+        assert_eq!(
+            flat(r#"{"preset": "default"}"#).unwrap(),
+            TextureParams::default()
+        );
+        for bad in [r#"{"preset": "fast"}"#, r#"{"preset": 1}"#] {
+            let e = flat(bad).unwrap_err();
+            assert!(format!("{e:?}").contains("preset"), "{bad}: {e:?}");
+        }
     }
 
     #[test]
