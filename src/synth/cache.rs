@@ -9,7 +9,7 @@
 use super::TILE;
 use super::grid::Grid;
 use lru::LruCache;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 use std::sync::{Arc, Condvar, Mutex};
 
 /// Identifies a tile: texture, level, version and cell position.
@@ -257,7 +257,7 @@ impl TileCache {
             max_bytes,
             inner: Mutex::new(Inner {
                 lru: LruCache::unbounded(),
-                flights: HashMap::new(),
+                flights: HashMap::default(),
                 stats: CacheStats::default(),
             }),
         }

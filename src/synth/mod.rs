@@ -39,7 +39,8 @@ use cache::{Claim, Tile, TileCache, TileData, TileKey};
 use correction::{Corrector, Scratch, Work, colour};
 use grid::{Box3, Grid};
 use rayon::prelude::*;
-use std::collections::{BTreeMap, HashMap};
+use rustc_hash::FxHashMap as HashMap;
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -256,7 +257,7 @@ impl Engine {
     /// the cache or computed; a tile another request is computing is
     /// waited for (outside rayon).
     fn tiles(&self, k: usize, wanted: Wanted, acc: &Acc) -> HashMap<[i64; 3], Tile> {
-        let mut out = HashMap::new();
+        let mut out = HashMap::default();
         let mut mine = Vec::new();
         let mut theirs = Vec::new();
         let in_pool = rayon::current_thread_index().is_some();
@@ -340,7 +341,7 @@ impl Engine {
     fn compute(&self, k: usize, tiles: &[([i64; 3], u64)], acc: &Acc) -> HashMap<[i64; 3], Tile> {
         let masks: HashMap<[i64; 3], u64> = tiles.iter().copied().collect();
         let cells: Vec<[i64; 3]> = tiles.iter().map(|t| t.0).collect();
-        let mut out = HashMap::new();
+        let mut out = HashMap::default();
         for group in plan::group_cells(&cells, MAX_GROUP_TILES) {
             let group: Vec<([i64; 3], u64)> = group.into_iter().map(|c| (c, masks[&c])).collect();
             out.extend(self.compute_group(k, &group, acc));
@@ -369,8 +370,8 @@ impl Engine {
         // there (see `plan::backward`), so that overlapping requests (a
         // sweeping cut) share their work instead of redoing it; by forward
         // subpass.
-        let mut ends: HashMap<usize, Vec<KnownVoxel>> = HashMap::new();
-        let mut peeked: HashMap<([i64; 3], usize), Option<Tile>> = HashMap::new();
+        let mut ends: HashMap<usize, Vec<KnownVoxel>> = HashMap::default();
+        let mut peeked: HashMap<([i64; 3], usize), Option<Tile>> = HashMap::default();
         let chain = plan::backward(
             &targets,
             steps,
@@ -441,7 +442,7 @@ impl Engine {
         };
         // Voxels corrected in the current pass: their values after it,
         // cached once it ends.
-        let mut ended: HashMap<[i64; 3], u64> = HashMap::new();
+        let mut ended: HashMap<[i64; 3], u64> = HashMap::default();
         let triples = if acc.dry {
             triples
         } else {
