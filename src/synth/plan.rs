@@ -140,20 +140,49 @@ impl Mask {
     /// Shrinks the box to the members' bounding box (no change when
     /// empty), so grids laid over [`Mask::bounds`] hold no dead margin.
     pub fn shrink_to_fit(&mut self) {
-        let mut members = self.positions();
-        let Some(first) = members.next() else {
+        let b = self.shape.bounds;
+        let s = b.size();
+        let (sx, sy) = (s[0] as usize, s[1] as usize);
+        if self.flags.is_empty() {
+            return;
+        }
+        let member = |f: &AtomicBool| f.load(Ordering::Relaxed);
+        // Each x row's first and last member, as a box; their union.
+        let tight = self
+            .flags
+            .par_chunks(sx)
+            .enumerate()
+            .with_min_len(64)
+            .filter_map(|(row, flags)| {
+                let first = flags.iter().position(member)? as i64;
+                let last = flags.iter().rposition(member)? as i64;
+                let (y, z) = ((row % sy) as i64, (row / sy) as i64);
+                let lo = [b.lo[0] + first, b.lo[1] + y, b.lo[2] + z];
+                Some(Box3::new(lo, [last - first + 1, 1, 1]))
+            })
+            .reduce_with(|a, c| a.union(&c));
+        let Some(tight) = tight else {
             return;
         };
-        let tight = members.fold(Box3::new(first, [1, 1, 1]), |b, p| {
-            b.union(&Box3::new(p, [1, 1, 1]))
-        });
-        if tight == self.shape.bounds {
+        if tight == b {
             return;
         }
         let mut smaller = Mask::new(tight);
-        for p in self.positions() {
-            smaller.mark(p);
-        }
+        let t = tight.size();
+        let (tx, ty) = (t[0] as usize, t[1] as usize);
+        smaller
+            .flags
+            .par_chunks(tx)
+            .enumerate()
+            .with_min_len(64)
+            .for_each(|(row, dst)| {
+                let y = tight.lo[1] + (row % ty) as i64;
+                let z = tight.lo[2] + (row / ty) as i64;
+                let from = self.shape.index([tight.lo[0], y, z]);
+                for (d, f) in dst.iter().zip(&self.flags[from..from + tx]) {
+                    d.store(member(f), Ordering::Relaxed);
+                }
+            });
         smaller.count = self.count;
         *self = smaller;
     }
