@@ -259,7 +259,8 @@ struct SynthArgs {
 
 impl SynthArgs {
     fn params(&self, scheme: Scheme) -> SynthParams {
-        let passes = if self.preview {
+        // The preview sets the passes (clap refuses them beside it).
+        let base = if self.preview {
             SynthParams::preview()
         } else {
             SynthParams {
@@ -271,9 +272,6 @@ impl SynthArgs {
         };
         SynthParams {
             seed: self.seed,
-            passes: passes.passes,
-            finest_passes: passes.finest_passes,
-            fine_levels: passes.fine_levels,
             scheme,
             grid: self.grid,
             jitter: self.jitter,
@@ -282,7 +280,7 @@ impl SynthArgs {
             slices: self.slices,
             consistency: self.consistency,
             slab_thickness: self.slab_thickness,
-            ..SynthParams::default()
+            ..base
         }
     }
 }
