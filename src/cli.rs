@@ -6,8 +6,8 @@ use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use solidtex::{
-    AnalysisParams, Axis, Candidates, Exemplar, ExemplarSet, Region, Scheme, Slices, Stage,
-    SynthParams, Texture, TileCache,
+    AnalysisParams, Axis, Candidates, Correction, Exemplar, ExemplarSet, Region, Scheme, Slices,
+    Stage, SynthParams, Texture, TileCache,
 };
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -255,6 +255,11 @@ struct SynthArgs {
     /// initialisation level (Dong et al.: N).
     #[arg(long, default_value_t = solidtex::params::DEFAULT_SLAB_THICKNESS)]
     slab_thickness: u32,
+    /// What a correction matches: appearance (sparse appearance-space
+    /// neighbourhoods, 12 diagonal locations) or colour (N×N colour
+    /// neighbourhoods).
+    #[arg(long, default_value_t = SynthParams::default().correction)]
+    correction: Correction,
 }
 
 impl SynthArgs {
@@ -280,6 +285,7 @@ impl SynthArgs {
             slices: self.slices,
             consistency: self.consistency,
             slab_thickness: self.slab_thickness,
+            correction: self.correction,
             ..base
         }
     }

@@ -27,7 +27,7 @@ pub mod texture;
 pub use candidates::{Candidates, PrecomputeReport, Stage};
 pub use error::{CorruptKind, Error, Result};
 pub use exemplar::{Exemplar, ExemplarSet};
-pub use params::{AnalysisParams, Scheme, Slices, SynthParams};
+pub use params::{AnalysisParams, Correction, Scheme, Slices, SynthParams};
 pub use synth::cache::{CacheStats, TileCache};
 pub use synth::cancel::{CancelFlag, Cancelled, run_cancellable};
 pub use texture::{Axis, CutPlane, Filter, Region, SynthStats, Texture};

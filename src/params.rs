@@ -121,6 +121,43 @@ impl std::str::FromStr for Slices {
     }
 }
 
+/// What a correction matches (see [`SynthParams::correction`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum Correction {
+    /// Sparse appearance-space neighbourhoods (Lin 2009 §3.4.3, after
+    /// Lefebvre and Hoppe 2006): in each plane the appearance vectors at
+    /// the 4 diagonal locations, each averaged over the 3 direct
+    /// neighbours that predict it; candidates by k-coherence.
+    Appearance,
+    /// N×N colour neighbourhoods projected per query (Dong et al.), with
+    /// the colour blend, contrast and consistency that patch it.
+    #[default]
+    Colour,
+}
+
+impl std::fmt::Display for Correction {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Correction::Appearance => "appearance",
+            Correction::Colour => "colour",
+        })
+    }
+}
+
+impl std::str::FromStr for Correction {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "appearance" => Ok(Correction::Appearance),
+            "colour" | "color" => Ok(Correction::Colour),
+            _ => Err(Error::InvalidRequest(format!(
+                "unknown correction `{s}` (expected appearance or colour)"
+            ))),
+        }
+    }
+}
+
 /// Default [`SynthParams::contrast`], measured on the shared exemplars
 /// (docs/quality.md).
 pub const DEFAULT_CONTRAST: f32 = 1.6;
@@ -187,6 +224,8 @@ pub struct SynthParams {
     /// removes. One-voxel layers start those slices isotropic
     /// (docs/quality.md).
     pub slab_thickness: u32,
+    /// What a correction matches.
+    pub correction: Correction,
 }
 
 /// Default [`SynthParams::fine_levels`], measured on the shared exemplars
@@ -217,6 +256,7 @@ impl Default for SynthParams {
             slices: Slices::Sparse,
             consistency: DEFAULT_CONSISTENCY,
             slab_thickness: DEFAULT_SLAB_THICKNESS,
+            correction: Correction::default(),
         }
     }
 }

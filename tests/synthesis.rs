@@ -5,7 +5,7 @@ mod common;
 use common::*;
 use solidtex::eval::{RgbView, anisotropy};
 use solidtex::params::DEFAULT_CONSISTENCY;
-use solidtex::{Axis, CutPlane, Filter, Region, Scheme, Slices, SynthParams, Texture};
+use solidtex::{Axis, Correction, CutPlane, Filter, Region, Scheme, Slices, SynthParams, Texture};
 
 fn region(t: &Texture, origin: [i64; 3], size: [u32; 3]) -> Vec<u8> {
     t.region(&Region { origin, size }, 0).unwrap().0
@@ -703,3 +703,60 @@ fn where_a_slice_lies_changes_its_chain() {
     let (even, odd) = (finest(4), finest(5));
     assert!(even >= 32 * 32 && odd >= 2 * even, "{even} {odd}");
 }
+
+fn appearance_texture(cache_bytes: usize) -> Texture {
+    texture_with(
+        SynthParams {
+            correction: Correction::Appearance,
+            ..SynthParams::default()
+        },
+        cache_bytes,
+    )
+}
+
+#[test]
+fn the_appearance_correction_reads_its_direct_neighbours_and_keeps_its_bytes() {
+    // Whatever the slices setting, it reads the 19 direct neighbours: its
+    // 12 diagonal locations are predicted from them.
+    for slices in [Slices::Sparse, Slices::Full] {
+        let t = texture_with(
+            SynthParams {
+                correction: Correction::Appearance,
+                slices,
+                ..SynthParams::default()
+            },
+            1 << 20,
+        );
+        let chain = t.dependency_chain(&[[0, 0, 0]], 0).unwrap();
+        assert_eq!(chain[0].0, 19, "{slices:?}: {chain:?}");
+    }
+    let (o, s) = ([3, -5, 7], [9u32, 6, 5]);
+    let alone = region(&appearance_texture(256 << 20), o, s);
+    let (bo, bs) = ([-10, -20, 0], [40u32, 30, 20]);
+    let big = region(&appearance_texture(256 << 20), bo, bs);
+    assert_eq!(alone, crop(&big, bo, bs, o, s));
+    let threads = |n: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+            .install(|| region(&appearance_texture(1 << 16), o, s))
+    };
+    assert_eq!(threads(1), alone);
+    assert_eq!(threads(3), alone);
+    // It is a different synthesis from the colour correction's.
+    assert_ne!(alone, region(&texture(), o, s));
+    // Pinned like the other goldens.
+    let got = [
+        fnv(&alone),
+        fnv(&region(
+            &appearance_texture(256 << 20),
+            [-1000, 77, -5],
+            [7, 9, 3],
+        )),
+    ];
+    println!("golden appearance: {got:?}");
+    assert_eq!(got, GOLDEN_APPEARANCE);
+}
+
+const GOLDEN_APPEARANCE: [u64; 2] = [146141518276135704, 18337101810861605043];

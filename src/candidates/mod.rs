@@ -9,6 +9,7 @@ pub mod coherence;
 mod format;
 pub mod geometry;
 pub mod search;
+pub mod sparse;
 
 use crate::appearance::{self, AppearanceLevel, Pca, Projector};
 use crate::error::{Error, Result};
@@ -160,6 +161,9 @@ pub struct Level {
     /// equal, and reading one copy keeps it in cache where three would not
     /// stay.
     alias: [usize; 3],
+    /// Sparse appearance-space neighbourhoods, built when a correction
+    /// first needs them.
+    sparse: std::sync::OnceLock<sparse::SparseTables>,
 }
 
 impl Level {
@@ -209,6 +213,19 @@ impl Level {
     /// Quantisation scale of the 3-neighbourhood vectors.
     pub fn quant_scale(&self) -> f32 {
         self.stored.quant_scale
+    }
+
+    /// The sparse appearance-space tables of this level (level `k` of an
+    /// exemplar of size `dims`), built on first use.
+    pub fn sparse_tables(&self, dims: Dims, k: usize) -> &sparse::SparseTables {
+        self.sparse.get_or_init(|| {
+            sparse::SparseTables::new(
+                &self.appearance,
+                &self.stored.candidates,
+                dims,
+                spacing(k) as i64,
+            )
+        })
     }
 }
 
@@ -708,6 +725,7 @@ fn derive_levels(
                 similar_scale,
                 joint_shares,
                 alias,
+                sparse: std::sync::OnceLock::new(),
             }
         })
         .collect()

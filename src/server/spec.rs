@@ -169,6 +169,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("slices", r#""full""#),
     ("consistency", "0"),
     ("fine_levels", "1"),
+    ("correction", r#""colour""#),
 ];
 
 fn invalid_params(message: String) -> ApiError {
@@ -402,6 +403,12 @@ mod tests {
         assert_eq!(
             TextureParams::from_flat(&old).unwrap().synth.consistency,
             crate::params::DEFAULT_CONSISTENCY
+        );
+        // It matched colour neighbourhoods.
+        old.remove("correction");
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.correction,
+            crate::params::Correction::Colour
         );
         // Its slab was N thick.
         old.remove("slab_thickness");

@@ -37,12 +37,15 @@
 //! triple moved back by its offset), which get a bonus for continuing an
 //! exemplar patch.
 
+mod appearance;
+
 use super::grid::{Box3, Grid};
 use crate::appearance::Projector;
 use crate::candidates::geometry::{AXES, Dims, offset_triple};
 use crate::candidates::{Candidates, Level, SIMILAR_DIMS, quantise};
-use crate::params::{Slices, SynthParams};
+use crate::params::{Correction, Slices, SynthParams};
 use crate::stack::spacing;
+use appearance::AppearanceCorrector;
 use rayon::prelude::*;
 
 const MAX_NEIGHBOURHOOD: usize = 9 * 9 * 3;
@@ -100,7 +103,7 @@ impl Default for Scratch {
 }
 
 /// Everything the correction of one level reads.
-pub struct Corrector<'a> {
+pub struct ColourCorrector<'a> {
     level: &'a Level,
     k: usize,
     n: i64,
@@ -130,6 +133,44 @@ pub struct Corrector<'a> {
     consistency: f32,
 }
 
+/// The correction of one level, as the texture's parameters choose it.
+pub enum Corrector<'a> {
+    /// Sparse appearance-space neighbourhoods.
+    Appearance(AppearanceCorrector<'a>),
+    /// Colour neighbourhoods.
+    Colour(Box<ColourCorrector<'a>>),
+}
+
+impl<'a> Corrector<'a> {
+    /// The corrector of level `k`.
+    pub fn new(cands: &'a Candidates, k: usize, params: &SynthParams) -> Self {
+        match params.correction {
+            Correction::Appearance => {
+                Corrector::Appearance(AppearanceCorrector::new(cands, k, params))
+            }
+            Correction::Colour => {
+                Corrector::Colour(Box::new(ColourCorrector::new(cands, k, params)))
+            }
+        }
+    }
+
+    /// The best candidate triple for the voxel at `p` (see
+    /// [`ColourCorrector::correct`] for the history window).
+    #[inline]
+    pub fn correct(
+        &self,
+        work: &Work,
+        barrier: Option<(&Work, &Box3)>,
+        p: [i64; 3],
+        s: &mut Scratch,
+    ) -> [u32; 3] {
+        match self {
+            Corrector::Appearance(c) => c.correct(work, barrier, p),
+            Corrector::Colour(c) => c.correct(work, barrier, p, s),
+        }
+    }
+}
+
 /// Weight (out of 256) of a coherent triple's distance: favouring triples
 /// that continue their neighbours keeps exemplar patches together
 /// (Ashikhmin's and Lefebvre and Hoppe's coherence parameter). On the
@@ -142,10 +183,10 @@ const COHERENT_WEIGHT: u32 = 128;
 /// coarser levels).
 const FINE_3D_CANDIDATES: usize = 4;
 
-impl<'a> Corrector<'a> {
+impl<'a> ColourCorrector<'a> {
     /// A corrector for level `k` with the texture's matching and contrast.
     pub fn new(cands: &'a Candidates, k: usize, params: &SynthParams) -> Self {
-        Corrector {
+        ColourCorrector {
             level: cands.level(k),
             k,
             n: cands.params().neighbourhood as i64,
@@ -158,7 +199,7 @@ impl<'a> Corrector<'a> {
             sparse_pixels: [0, 1, 2].map(|p| sparse_pixels(p, cands.params().neighbourhood)),
             contrast: params.contrast,
             sparse: params.slices == Slices::Sparse,
-            reach: reach(params.slices, cands.params().neighbourhood),
+            reach: reach(params, cands.params().neighbourhood),
             consistency: {
                 let scale = cands.level(k).quant_scale();
                 params.consistency * scale * scale
@@ -182,26 +223,17 @@ impl<'a> Corrector<'a> {
         p: [i64; 3],
         s: &mut Scratch,
     ) -> [u32; 3] {
-        // Offsets along each axis that stay inside the barrier cell (every
-        // offset when there is none); `start` has the same layout as `work`.
-        let (start, inside) = match barrier {
-            Some((start, cell)) => (
-                start,
-                [0, 1, 2].map(|a| (cell.lo[a] - p[a], cell.hi[a] - 1 - p[a])),
-            ),
-            None => (work, [(i64::MIN, i64::MAX); 3]),
-        };
+        let (start, inside) = history_window(work, barrier, p);
         // Most voxels read no neighbour across the cell wall: their copy of
         // the correction has no version choices to make.
-        let r = self.reach;
-        if inside.iter().all(|&(lo, hi)| lo <= -r && hi >= r) {
+        if all_inside(&inside, self.reach) {
             self.correct_with::<false>(work, start, inside, p, s)
         } else {
             self.correct_with::<true>(work, start, inside, p, s)
         }
     }
 
-    /// [`Corrector::correct`] with the history window resolved:
+    /// [`ColourCorrector::correct`] with the history window resolved:
     /// `BY_WALL` says whether some neighbours lie outside the barrier cell
     /// (`inside` bounds the offsets that do not).
     #[inline(always)]
@@ -228,21 +260,7 @@ impl<'a> Corrector<'a> {
         // The direct neighbours (the 19 offsets with a zero coordinate,
         // which the three in-plane 3×3 windows hold), read once in the
         // version their history window gives; corners are never read.
-        let inside3 =
-            |d: [i64; 3]| !BY_WALL || (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
-        let mut near = Near::default();
-        // Coherent triples: each neighbour's triple moved back by its
-        // offset, in all three planes at once.
-        let mut moved = [[u32::MAX; 3]; 27];
-        for &d in &DIRECT {
-            let k = near_slot(d);
-            let idx = (centre + d[0] * strides[0] + d[1] * strides[1] + d[2] * strides[2]) as usize;
-            let src = if inside3(d) { work } else { start };
-            near.triples[k] = src.triples.data[idx];
-            let [r, g, b] = src.colours.data[idx];
-            near.colours[k] = [r, g, b, 0.0];
-            moved[k] = offset_triple(self.dims, near.triples[k], d.map(|v| -v), h);
-        }
+        let (near, moved) = gather_near::<BY_WALL>(work, start, inside, p, self.dims, h);
         // The exemplar pixels whose similarity sets each plane scans (the
         // in-plane neighbours' coherent pixels), and the coherent triples,
         // are known from the triples alone: prefetch their tables, so the
@@ -266,15 +284,8 @@ impl<'a> Corrector<'a> {
                 }
             }
         }
-        let mut coherent = [[u32::MAX; 3]; 19];
-        let mut coherent_n = 0;
-        for &d in &DIRECT {
-            let t = moved[near_slot(d)];
-            if coherent[..coherent_n].contains(&t) {
-                continue;
-            }
-            coherent[coherent_n] = t;
-            coherent_n += 1;
+        let (coherent, coherent_n) = coherent_triples(&moved);
+        for t in &coherent[..coherent_n] {
             for (p, &c) in t.iter().enumerate() {
                 prefetch(self.level.joint_share(p, c));
             }
@@ -337,7 +348,11 @@ impl<'a> Corrector<'a> {
                 dist += (e * e) as u32;
             }
             // Saturating: a large `consistency` can push the penalty to u32::MAX.
-            let dist = (dist * COHERENT_WEIGHT / 256).saturating_add(self.disagreement(t));
+            let dist = (dist * COHERENT_WEIGHT / 256).saturating_add(disagreement(
+                &self.plane_colours,
+                self.consistency,
+                t,
+            ));
             if dist < best.0 || (dist == best.0 && t < best.1) {
                 best = (dist, t);
             }
@@ -356,21 +371,6 @@ impl<'a> Corrector<'a> {
             }
         }
         best.1
-    }
-
-    /// How much a triple's three exemplar colours disagree (squared
-    /// differences of each pair), weighted.
-    #[inline]
-    fn disagreement(&self, t: [u32; 3]) -> u32 {
-        if self.consistency == 0.0 {
-            return 0;
-        }
-        let [a, b, c] = [0, 1, 2].map(|p| self.plane_colours[p][t[p] as usize]);
-        let mut d = 0f32;
-        for ch in 0..3 {
-            d += (a[ch] - b[ch]).powi(2) + (b[ch] - c[ch]).powi(2) + (c[ch] - a[ch]).powi(2);
-        }
-        (d * self.consistency) as u32
     }
 
     /// Plane `plane`'s query from the voxel's full N×N colour slice, v
@@ -478,6 +478,90 @@ const DIRECT: [[i64; 3]; 19] = {
     out
 };
 
+/// The direct neighbours of `p`, each in the version its history window
+/// gives (`work` for offsets within `inside`, `start` beyond), and the
+/// coherent triples: each neighbour's triple moved back by its offset, in
+/// all three planes at once. Both by [`near_slot`].
+#[inline(always)]
+fn gather_near<const BY_WALL: bool>(
+    work: &Work,
+    start: &Work,
+    inside: [(i64, i64); 3],
+    p: [i64; 3],
+    dims: Dims,
+    h: i64,
+) -> (Near, [[u32; 3]; 27]) {
+    let strides = work.triples.strides();
+    let centre = work.triples.index(p) as i64;
+    let inside3 =
+        |d: [i64; 3]| !BY_WALL || (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
+    let mut near = Near::default();
+    let mut moved = [[u32::MAX; 3]; 27];
+    for &d in &DIRECT {
+        let k = near_slot(d);
+        let idx = (centre + d[0] * strides[0] + d[1] * strides[1] + d[2] * strides[2]) as usize;
+        let src = if inside3(d) { work } else { start };
+        near.triples[k] = src.triples.data[idx];
+        let [r, g, b] = src.colours.data[idx];
+        near.colours[k] = [r, g, b, 0.0];
+        moved[k] = offset_triple(dims, near.triples[k], d.map(|v| -v), h);
+    }
+    (near, moved)
+}
+
+/// The distinct coherent triples among `moved` (see [`gather_near`]), in
+/// [`DIRECT`] order, and their count.
+#[inline(always)]
+fn coherent_triples(moved: &[[u32; 3]; 27]) -> ([[u32; 3]; 19], usize) {
+    let mut coherent = [[u32::MAX; 3]; 19];
+    let mut n = 0;
+    for &d in &DIRECT {
+        let t = moved[near_slot(d)];
+        if !coherent[..n].contains(&t) {
+            coherent[n] = t;
+            n += 1;
+        }
+    }
+    (coherent, n)
+}
+
+/// Offsets along each axis that stay inside the barrier cell of `p`
+/// (every offset without one), and the version read beyond them.
+fn history_window<'w>(
+    work: &'w Work,
+    barrier: Option<(&'w Work, &Box3)>,
+    p: [i64; 3],
+) -> (&'w Work, [(i64, i64); 3]) {
+    match barrier {
+        Some((start, cell)) => (
+            start,
+            [0, 1, 2].map(|a| (cell.lo[a] - p[a], cell.hi[a] - 1 - p[a])),
+        ),
+        None => (work, [(i64::MIN, i64::MAX); 3]),
+    }
+}
+
+/// True when every read of a correction at reach `r` stays inside.
+#[inline]
+fn all_inside(inside: &[(i64, i64); 3], r: i64) -> bool {
+    inside.iter().all(|&(lo, hi)| lo <= -r && hi >= r)
+}
+
+/// How much a triple's three exemplar colours disagree (squared
+/// differences of each pair), times `weight`.
+#[inline]
+fn disagreement(plane_colours: &[&[[f32; 3]]; 3], weight: f32, t: [u32; 3]) -> u32 {
+    if weight == 0.0 {
+        return 0;
+    }
+    let [a, b, c] = [0, 1, 2].map(|p| plane_colours[p][t[p] as usize]);
+    let mut d = 0f32;
+    for ch in 0..3 {
+        d += (a[ch] - b[ch]).powi(2) + (b[ch] - c[ch]).powi(2) + (c[ch] - a[ch]).powi(2);
+    }
+    (d * weight) as u32
+}
+
 /// Slot of offset `d` (in {-1, 0, 1}³) in a [`Near`] table.
 #[inline(always)]
 fn near_slot(d: [i64; 3]) -> usize {
@@ -537,12 +621,13 @@ fn sparse_pixels(plane: usize, neighbourhood: u32) -> Vec<SparsePixel> {
 }
 
 /// How far a correction reads, in voxels of its level along each axis:
-/// its direct neighbours with sparse slices, half the neighbourhood with
-/// full ones. The dependency planner and the barrier test share it.
-pub fn reach(slices: Slices, neighbourhood: u32) -> i64 {
-    match slices {
-        Slices::Full => (neighbourhood as i64 / 2).max(1),
-        Slices::Sparse => 1,
+/// its direct neighbours in appearance space or with sparse slices, half
+/// the neighbourhood with full ones. The dependency planner and the
+/// barrier test share it.
+pub fn reach(params: &SynthParams, neighbourhood: u32) -> i64 {
+    match (params.correction, params.slices) {
+        (Correction::Colour, Slices::Full) => (neighbourhood as i64 / 2).max(1),
+        _ => 1,
     }
 }
 

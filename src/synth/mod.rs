@@ -165,7 +165,7 @@ impl Engine {
         let finest_steps = steps_for(&params, params.finest_passes);
         Engine {
             init_level: cands.level_count() - 1,
-            radius: correction::reach(params.slices, cands.params().neighbourhood),
+            radius: correction::reach(&params, cands.params().neighbourhood),
             cell: params.grid as i64,
             cands,
             params,

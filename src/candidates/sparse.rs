@@ -1,0 +1,256 @@
+//! Sparse appearance-space neighbourhoods (Lin 2009 §3.4.3 and Fig. 3.5,
+//! after Lefebvre and Hoppe 2006): a voxel is described in each of its
+//! three planes by the appearance vectors at the 4 diagonal locations
+//! h·(±1, ±1) around it, 12 locations in all. Each appearance vector
+//! already summarises an N×N exemplar neighbourhood, so the 12 locations
+//! cover (N + 2)² pixels per plane while the correction reads only its
+//! direct neighbours.
+//!
+//! The candidate side of the match: every precomputed 3D candidate's
+//! 12-location vector, PCA-reduced to [`SPARSE_DIMS`] and quantised to
+//! bytes, and each exemplar pixel's share of that projection per plane, so
+//! that any triple (a coherent one too) is scored without a projection.
+
+use super::PlaneCandidates;
+use super::geometry::Dims;
+use crate::appearance::{AppearanceLevel, Pca, Projector, dot};
+use rayon::prelude::*;
+
+/// Dimensions of a quantised sparse neighbourhood vector: one SSE register.
+pub const SPARSE_DIMS: usize = 16;
+
+/// The four diagonal locations of a plane, as (u, v) steps of the level
+/// spacing.
+pub const DIAGONALS: [(i64, i64); 4] = [(-1, -1), (1, -1), (-1, 1), (1, 1)];
+
+/// A quantised sparse neighbourhood vector.
+pub type SparseVector = [u8; SPARSE_DIMS];
+
+/// The sparse neighbourhood tables of one level.
+#[derive(Clone, Debug)]
+pub struct SparseTables {
+    /// Appearance dimensions per location.
+    dims: usize,
+    /// From the 12 concatenated locations (xy, yz, zx; diagonals in
+    /// [`DIAGONALS`] order) to [`SPARSE_DIMS`] dimensions.
+    projector: Projector,
+    /// Byte = round(v·scale) + 128.
+    scale: f32,
+    /// Each pixel's share of the projection, per plane.
+    shares: [Vec<[f32; SPARSE_DIMS]>; 3],
+    /// The projected mean, which a sum of shares still contains.
+    offsets: [f32; SPARSE_DIMS],
+    /// Each candidate's quantised vector, per plane, in candidate order.
+    vectors: [Vec<SparseVector>; 3],
+}
+
+/// The 4 diagonal appearance vectors of pixel `c` of one plane,
+/// concatenated into `out` (4·dims floats).
+fn diagonals(app: &AppearanceLevel, dims: Dims, h: i64, c: u32, out: &mut [f32]) {
+    let d = app.pca.dims;
+    for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
+        let at = dims.shift(c, i * h, j * h);
+        out[l * d..(l + 1) * d].copy_from_slice(app.vector(at as usize));
+    }
+}
+
+impl SparseTables {
+    /// Builds the tables of a level from its appearance vectors and
+    /// candidates (`h`: the level's spacing).
+    pub fn new(
+        appearance: &[AppearanceLevel; 3],
+        candidates: &[PlaneCandidates; 3],
+        dims: Dims,
+        h: i64,
+    ) -> SparseTables {
+        let d = appearance[0].pca.dims;
+        let input = 12 * d;
+        let concat = |t: [u32; 3], out: &mut [f32]| {
+            for p in 0..3 {
+                diagonals(
+                    &appearance[p],
+                    dims,
+                    h,
+                    t[p],
+                    &mut out[4 * d * p..4 * d * (p + 1)],
+                );
+            }
+        };
+        // The basis is fitted to a fixed, evenly spaced sample of the
+        // candidates: the same triples whatever the thread count.
+        let total: usize = candidates.iter().map(|c| c.triples.len()).sum();
+        let stride = (total / 20000).max(1);
+        let mut sample = Vec::new();
+        let mut buf = vec![0f32; input];
+        for c in candidates {
+            for t in c.triples.iter().step_by(stride) {
+                concat(*t, &mut buf);
+                sample.extend_from_slice(&buf);
+            }
+        }
+        let pca = Pca::fit(&sample, input, SPARSE_DIMS);
+        let projector = Projector::new(&pca);
+        let mut offsets = [0f32; SPARSE_DIMS];
+        for (o, m) in offsets.iter_mut().zip(pca.mean_offsets()) {
+            *o = m;
+        }
+        let pixels = dims.len();
+        let shares = [0, 1, 2].map(|p| {
+            (0..pixels as u32)
+                .into_par_iter()
+                .map_init(
+                    || vec![0f32; 4 * d],
+                    |buf, c| {
+                        diagonals(&appearance[p], dims, h, c, buf);
+                        let mut s = [0f32; SPARSE_DIMS];
+                        for (j, o) in s.iter_mut().enumerate().take(pca.dims) {
+                            let row =
+                                &pca.basis[j * input + 4 * d * p..j * input + 4 * d * (p + 1)];
+                            *o = dot(buf, row);
+                        }
+                        s
+                    },
+                )
+                .collect::<Vec<_>>()
+        });
+        let project = |t: [u32; 3], buf: &mut Vec<f32>| {
+            concat(t, buf);
+            let mut out = [0f32; SPARSE_DIMS];
+            projector.project(buf, &mut out);
+            out
+        };
+        let mut max = 1e-6f32;
+        for c in candidates {
+            for t in c.triples.iter().step_by(stride) {
+                for v in project(*t, &mut buf) {
+                    max = max.max(v.abs());
+                }
+            }
+        }
+        let scale = 127.0 / max;
+        let vectors = [0, 1, 2].map(|p| {
+            candidates[p]
+                .triples
+                .par_iter()
+                .map_init(
+                    || vec![0f32; input],
+                    |buf, t| quantise_vector(&project(*t, buf), scale),
+                )
+                .collect()
+        });
+        SparseTables {
+            dims: d,
+            projector,
+            scale,
+            shares,
+            offsets,
+            vectors,
+        }
+    }
+
+    /// Appearance dimensions per location.
+    #[inline]
+    pub fn location_dims(&self) -> usize {
+        self.dims
+    }
+
+    /// Quantisation scale: vector units per appearance unit.
+    #[inline]
+    pub fn scale(&self) -> f32 {
+        self.scale
+    }
+
+    /// Candidate `ci`'s vector in plane `p`.
+    #[inline]
+    pub fn vector(&self, p: usize, ci: usize) -> &SparseVector {
+        &self.vectors[p][ci]
+    }
+
+    /// Candidate vectors of plane `p` (for prefetching).
+    #[inline]
+    pub fn vectors(&self, p: usize) -> &[SparseVector] {
+        &self.vectors[p]
+    }
+
+    /// Projects and quantises a query (12 locations of
+    /// [`SparseTables::location_dims`] floats).
+    #[inline]
+    pub fn query(&self, locations: &[f32]) -> SparseVector {
+        let mut out = [0f32; SPARSE_DIMS];
+        self.projector.project(locations, &mut out);
+        quantise_vector(&out, self.scale)
+    }
+
+    /// The quantised vector of any triple, from its three shares.
+    #[inline]
+    pub fn triple_vector(&self, t: [u32; 3]) -> SparseVector {
+        let [a, b, c] = [0, 1, 2].map(|p| &self.shares[p][t[p] as usize]);
+        let mut v = [0f32; SPARSE_DIMS];
+        for j in 0..SPARSE_DIMS {
+            v[j] = a[j] + b[j] + c[j] - self.offsets[j];
+        }
+        quantise_vector(&v, self.scale)
+    }
+
+    /// Plane `p`'s share of pixel `c` (for prefetching).
+    #[inline]
+    pub fn share(&self, p: usize, c: u32) -> &[f32; SPARSE_DIMS] {
+        &self.shares[p][c as usize]
+    }
+
+    /// Bytes held.
+    pub fn memory_bytes(&self) -> usize {
+        (0..3)
+            .map(|p| self.shares[p].len() * 4 * SPARSE_DIMS + self.vectors[p].len() * SPARSE_DIMS)
+            .sum()
+    }
+}
+
+fn quantise_vector(v: &[f32; SPARSE_DIMS], scale: f32) -> SparseVector {
+    v.map(|x| super::quantise(x, scale))
+}
+
+/// Squared distance between two quantised vectors.
+#[inline]
+pub fn sparse_distance(a: &SparseVector, b: &SparseVector) -> u32 {
+    let mut sum = 0u32;
+    for j in 0..SPARSE_DIMS {
+        let e = a[j] as i32 - b[j] as i32;
+        sum += (e * e) as u32;
+    }
+    sum
+}
+
+#[cfg(test)]
+mod tests {
+
+    #[test]
+    fn a_candidates_vector_is_its_triples_vector() {
+        use crate::exemplar::{Exemplar, ExemplarSet};
+        let rgb: Vec<u8> = (0..24 * 24 * 3u32)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
+            .collect();
+        let set = ExemplarSet::single(Exemplar::from_rgb(24, 24, &rgb).unwrap());
+        let params = crate::AnalysisParams {
+            levels: 2,
+            ..Default::default()
+        };
+        let c = crate::Candidates::compute(&set, &params, &|_, _| {}).unwrap();
+        for k in 0..2 {
+            let level = c.level(k);
+            let tables = level.sparse_tables(c.dims(), k);
+            let mut far = 0;
+            for p in 0..3 {
+                for (ci, t) in level.candidates(p).triples.iter().enumerate() {
+                    let a = tables.vector(p, ci);
+                    let b = tables.triple_vector(*t);
+                    // Shares sum in another order than the projection:
+                    // at most one quantisation step apart per dimension.
+                    assert!(a.iter().zip(&b).all(|(x, y)| x.abs_diff(*y) <= 1));
+                    far += (a != &b) as usize;
+                }
+            }
+            assert!(far * 10 < 3 * level.candidates(0).triples.len());
+        }
+    }
+}

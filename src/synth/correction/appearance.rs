@@ -1,0 +1,179 @@
+//! Correction in sparse appearance space (Lin 2009 §3.4.3 and Fig. 3.5,
+//! after Lefebvre and Hoppe 2006).
+//!
+//! A voxel's query is, for each plane, the appearance vectors at the 4
+//! diagonal locations h·(±1, ±1) around it. Each location is the average
+//! of what the 3 direct neighbours next to it predict for it: the diagonal
+//! neighbour's own exemplar coordinate for that plane, and the two edge
+//! neighbours' coordinates moved on by the rest of the offset. Lin writes
+//! the three as the voxels beyond the diagonal, which reads two voxels
+//! away; Lefebvre and Hoppe's form, used here, stays within the direct
+//! neighbours, so the dependency radius is 1.
+//!
+//! Averaged predictions of neighbours that do not continue one exemplar
+//! patch, and voxel colours that average three exemplar colours, make
+//! queries flatter than any exemplar neighbourhood; flat queries pick the
+//! exemplar's calm regions and features fade. The query is therefore
+//! stretched by the texture's `contrast` around the appearance-space mean,
+//! as the colour correction stretches its colours (docs/quality.md).
+//!
+//! Candidates come by k-coherence (Lin §3.2): every in-plane neighbour's
+//! exemplar pixel, moved back by its offset, proposes its similarity set;
+//! each proposed pixel is completed to triples by its precomputed 3D
+//! candidates, the best [`FINE_3D_CANDIDATES`] of them at every level
+//! (more at the coarse levels cost time and changed nothing visible,
+//! docs/quality.md). The coherent triples (each direct neighbour's triple moved
+//! back) compete too, with a bonus for continuing an exemplar patch and a
+//! penalty when their three colours disagree. The best by distance of the
+//! quantised 12-location vectors wins.
+
+use super::{
+    COHERENT_WEIGHT, FINE_3D_CANDIDATES, Work, all_inside, coherent_triples, disagreement,
+    gather_near, history_window, in_plane_slot,
+};
+use crate::candidates::geometry::{AXES, Dims};
+use crate::candidates::sparse::{DIAGONALS, SparseTables, sparse_distance};
+use crate::candidates::{Candidates, Level};
+use crate::params::SynthParams;
+use crate::stack::spacing;
+use crate::synth::grid::Box3;
+
+/// Largest appearance dimension count per location (`pca_dims` ≤ 16).
+const MAX_LOCATION_DIMS: usize = 16;
+
+/// Largest 2D similarity set (`similar_coarse`, `similar_fine` ≤ 8).
+const MAX_SIMILAR: usize = 8;
+
+/// Everything the appearance-space correction of one level reads.
+pub struct AppearanceCorrector<'a> {
+    level: &'a Level,
+    tables: &'a SparseTables,
+    dims: Dims,
+    /// The level's spacing.
+    h: i64,
+    /// Appearance dimensions per location.
+    d: usize,
+    /// Each plane's appearance vectors.
+    app: [&'a [f32]; 3],
+    /// Each plane's exemplar colours at this level.
+    plane_colours: [&'a [[f32; 3]]; 3],
+    /// Weight of a coherent triple's colour disagreement, in quantised
+    /// distance units per squared colour difference.
+    consistency: f32,
+    /// The texture's `contrast` over the 3 predictions a location averages.
+    gain: f32,
+}
+
+impl<'a> AppearanceCorrector<'a> {
+    /// The corrector of level `k`.
+    pub fn new(cands: &'a Candidates, k: usize, params: &SynthParams) -> Self {
+        let level = cands.level(k);
+        let tables = level.sparse_tables(cands.dims(), k);
+        let scale = tables.scale();
+        AppearanceCorrector {
+            level,
+            tables,
+            dims: cands.dims(),
+            h: spacing(k) as i64,
+            d: tables.location_dims(),
+            app: [0, 1, 2].map(|p| level.appearance[p].vectors.as_slice()),
+            plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
+            consistency: params.consistency * scale * scale,
+            gain: params.contrast / 3.0,
+        }
+    }
+
+    /// The best candidate triple for the voxel at `p`, reading each
+    /// neighbour in the version its history window gives.
+    pub fn correct(&self, work: &Work, barrier: Option<(&Work, &Box3)>, p: [i64; 3]) -> [u32; 3] {
+        let (start, inside) = history_window(work, barrier, p);
+        if all_inside(&inside, 1) {
+            self.correct_with::<false>(work, start, inside, p)
+        } else {
+            self.correct_with::<true>(work, start, inside, p)
+        }
+    }
+
+    #[inline(always)]
+    fn correct_with<const BY_WALL: bool>(
+        &self,
+        work: &Work,
+        start: &Work,
+        inside: [(i64, i64); 3],
+        p: [i64; 3],
+    ) -> [u32; 3] {
+        let h = self.h;
+        let d = self.d;
+        let (near, moved) = gather_near::<BY_WALL>(work, start, inside, p, self.dims, h);
+        let mut q = [0f32; 12 * MAX_LOCATION_DIMS];
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            let app = self.app[plane];
+            for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
+                let out = &mut q[(4 * plane + l) * d..(4 * plane + l + 1) * d];
+                for (du, dv) in [(i, j), (i, 0), (0, j)] {
+                    let t = near.triples[in_plane_slot(a, du, b, dv)][plane];
+                    let c = self.dims.shift(t, (i - du) * h, (j - dv) * h) as usize;
+                    for (o, v) in out.iter_mut().zip(&app[c * d..(c + 1) * d]) {
+                        *o += v;
+                    }
+                }
+                for o in out.iter_mut() {
+                    *o *= self.gain;
+                }
+            }
+        }
+        let query = self.tables.query(&q[..12 * d]);
+
+        let mut best = (u32::MAX, [u32::MAX; 3]);
+        let mut consider = |dist: u32, t: [u32; 3]| {
+            if dist < best.0 || (dist == best.0 && t < best.1) {
+                best = (dist, t);
+            }
+        };
+        let (coherent, coherent_n) = coherent_triples(&moved);
+        for &t in &coherent[..coherent_n] {
+            let dist =
+                sparse_distance(&self.tables.triple_vector(t), &query) * COHERENT_WEIGHT / 256;
+            // Saturating: a large `consistency` can push the penalty to u32::MAX.
+            consider(
+                dist.saturating_add(disagreement(&self.plane_colours, self.consistency, t)),
+                t,
+            );
+        }
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            let mut pixels = [u32::MAX; 9 * MAX_SIMILAR];
+            let mut n = 0;
+            let mut bases = [u32::MAX; 9];
+            let mut bases_n = 0;
+            for j in -1..=1i64 {
+                for i in -1..=1i64 {
+                    let base = moved[in_plane_slot(a, i, b, j)][plane];
+                    // Coherent neighbours usually point at the same pixel.
+                    if bases[..bases_n].contains(&base) {
+                        continue;
+                    }
+                    bases[bases_n] = base;
+                    bases_n += 1;
+                    for &s in self.level.similar(plane, base) {
+                        if !pixels[..n].contains(&s) {
+                            pixels[n] = s;
+                            n += 1;
+                        }
+                    }
+                }
+            }
+            let cands = self.level.candidates(plane);
+            for &px in &pixels[..n] {
+                let range = cands.range(px);
+                let end = range.end.min(range.start + FINE_3D_CANDIDATES);
+                for ci in range.start..end {
+                    consider(
+                        sparse_distance(self.tables.vector(plane, ci), &query),
+                        cands.triples[ci],
+                    );
+                }
+            }
+        }
+        best.1
+    }
+}
