@@ -136,7 +136,7 @@ pub struct ColourCorrector<'a> {
 /// The correction of one level, as the texture's parameters choose it.
 pub enum Corrector<'a> {
     /// Sparse appearance-space neighbourhoods.
-    Appearance(AppearanceCorrector<'a>),
+    Appearance(Box<AppearanceCorrector<'a>>),
     /// Colour neighbourhoods.
     Colour(Box<ColourCorrector<'a>>),
 }
@@ -146,7 +146,7 @@ impl<'a> Corrector<'a> {
     pub fn new(cands: &'a Candidates, k: usize, params: &SynthParams) -> Self {
         match params.correction {
             Correction::Appearance => {
-                Corrector::Appearance(AppearanceCorrector::new(cands, k, params))
+                Corrector::Appearance(Box::new(AppearanceCorrector::new(cands, k, params)))
             }
             Correction::Colour => {
                 Corrector::Colour(Box::new(ColourCorrector::new(cands, k, params)))

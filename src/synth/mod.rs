@@ -33,7 +33,7 @@ pub mod plan;
 
 use crate::candidates::Candidates;
 use crate::error::Result;
-use crate::params::{Scheme, SynthParams};
+use crate::params::{Correction, Scheme, SynthParams};
 use crate::texture::{CutPlane, Filter, Region, SynthStats};
 use cache::{Claim, Tile, TileCache, TileData, TileKey};
 use correction::{Corrector, Scratch, Work, colour};
@@ -163,6 +163,13 @@ impl Engine {
         let key = fingerprint(&bytes);
         let steps = steps_for(&params, params.passes);
         let finest_steps = steps_for(&params, params.finest_passes);
+        if params.correction == Correction::Appearance {
+            // The appearance tables are built with the texture, not by its
+            // first request.
+            (0..cands.level_count())
+                .into_par_iter()
+                .for_each(|k| _ = cands.level(k).sparse_tables(cands.dims(), k));
+        }
         Engine {
             init_level: cands.level_count() - 1,
             radius: correction::reach(&params, cands.params().neighbourhood),

@@ -10,26 +10,33 @@
 //! away; Lefebvre and Hoppe's form, used here, stays within the direct
 //! neighbours, so the dependency radius is 1.
 //!
-//! Averaged predictions of neighbours that do not continue one exemplar
-//! patch, and voxel colours that average three exemplar colours, make
-//! queries flatter than any exemplar neighbourhood; flat queries pick the
-//! exemplar's calm regions and features fade. The query is therefore
-//! stretched by the texture's `contrast` around the appearance-space mean,
-//! as the colour correction stretches its colours (docs/quality.md).
+//! A plane's own coordinates do not see what the other two planes add to
+//! a voxel's colour (a seam in the yz coordinates along x is invisible to
+//! the yz query), so each prediction also carries its voxel's colour
+//! offset from the plane's own exemplar colour, as a uniform offset of the
+//! whole neighbourhood in appearance space: the planes are coupled as in
+//! the colour correction's blend of voxel and own colours.
+//!
+//! Averages of three predictions and of three exemplar colours are flatter
+//! than any exemplar neighbourhood, and flat queries pick the exemplar's
+//! calm regions. Each location is therefore stretched by the texture's
+//! `contrast` around the flat neighbourhood of its own mean colour: its
+//! local contrast grows, its mean colour stays (stretching around the
+//! appearance-space origin instead darkens dark regions pass after pass
+//! into blotches).
 //!
 //! Candidates come by k-coherence (Lin §3.2): every in-plane neighbour's
 //! exemplar pixel, moved back by its offset, proposes its similarity set;
-//! each proposed pixel is completed to triples by its precomputed 3D
-//! candidates, the best [`FINE_3D_CANDIDATES`] of them at every level
-//! (more at the coarse levels cost time and changed nothing visible,
-//! docs/quality.md). The coherent triples (each direct neighbour's triple moved
-//! back) compete too, with a bonus for continuing an exemplar patch and a
-//! penalty when their three colours disagree. The best by distance of the
-//! quantised 12-location vectors wins.
+//! each proposed pixel is completed to triples by its best
+//! [`FINE_3D_CANDIDATES`] precomputed 3D candidates. The coherent triples
+//! (each direct neighbour's triple moved back) compete on equal terms,
+//! with a penalty when their three exemplar colours disagree; a bonus for
+//! them, as the colour correction gives, left upsampled blocks standing.
+//! The best by distance of the quantised 12-location vectors wins.
 
 use super::{
-    COHERENT_WEIGHT, FINE_3D_CANDIDATES, Work, all_inside, coherent_triples, disagreement,
-    gather_near, history_window, in_plane_slot,
+    FINE_3D_CANDIDATES, Work, all_inside, coherent_triples, disagreement, gather_near,
+    history_window, in_plane_slot,
 };
 use crate::candidates::geometry::{AXES, Dims};
 use crate::candidates::sparse::{DIAGONALS, SparseTables, sparse_distance};
@@ -60,8 +67,52 @@ pub struct AppearanceCorrector<'a> {
     /// Weight of a coherent triple's colour disagreement, in quantised
     /// distance units per squared colour difference.
     consistency: f32,
-    /// The texture's `contrast` over the 3 predictions a location averages.
+    /// The texture's `contrast`.
     gain: f32,
+    /// Per plane, how flat neighbourhoods look in appearance space.
+    flat: [Flat; 3],
+}
+
+/// Flat neighbourhoods in one plane's appearance space: a neighbourhood of
+/// one colour c everywhere has the appearance vector `uniform`·c −
+/// `offsets`, and an appearance vector a has the mean colour
+/// `mean_colour` + `uniform`ᵀ·a / pixels (exactly, for a vector of the
+/// PCA's span).
+struct Flat {
+    uniform: [[f32; 3]; MAX_LOCATION_DIMS],
+    offsets: [f32; MAX_LOCATION_DIMS],
+    mean_colour: [f32; 3],
+    inv_pixels: f32,
+}
+
+impl Flat {
+    fn new(pca: &crate::appearance::Pca) -> Flat {
+        let pixels = pca.input / 3;
+        let mut uniform = [[0f32; 3]; MAX_LOCATION_DIMS];
+        for (d, row) in uniform.iter_mut().enumerate().take(pca.dims) {
+            for rgb in pca.basis[d * pca.input..(d + 1) * pca.input].chunks_exact(3) {
+                for ch in 0..3 {
+                    row[ch] += rgb[ch];
+                }
+            }
+        }
+        let mut offsets = [0f32; MAX_LOCATION_DIMS];
+        for (o, m) in offsets.iter_mut().zip(pca.mean_offsets()) {
+            *o = m;
+        }
+        let mut mean_colour = [0f32; 3];
+        for rgb in pca.mean.chunks_exact(3) {
+            for ch in 0..3 {
+                mean_colour[ch] += rgb[ch] / pixels as f32;
+            }
+        }
+        Flat {
+            uniform,
+            offsets,
+            mean_colour,
+            inv_pixels: 1.0 / pixels as f32,
+        }
+    }
 }
 
 impl<'a> AppearanceCorrector<'a> {
@@ -79,7 +130,8 @@ impl<'a> AppearanceCorrector<'a> {
             app: [0, 1, 2].map(|p| level.appearance[p].vectors.as_slice()),
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
             consistency: params.consistency * scale * scale,
-            gain: params.contrast / 3.0,
+            gain: params.contrast,
+            flat: [0, 1, 2].map(|p| Flat::new(&level.appearance[p].pca)),
         }
     }
 
@@ -110,15 +162,31 @@ impl<'a> AppearanceCorrector<'a> {
             let app = self.app[plane];
             for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
                 let out = &mut q[(4 * plane + l) * d..(4 * plane + l + 1) * d];
+                let mut shift = [0f32; 3];
                 for (du, dv) in [(i, j), (i, 0), (0, j)] {
-                    let t = near.triples[in_plane_slot(a, du, b, dv)][plane];
+                    let slot = in_plane_slot(a, du, b, dv);
+                    let t = near.triples[slot][plane];
                     let c = self.dims.shift(t, (i - du) * h, (j - dv) * h) as usize;
                     for (o, v) in out.iter_mut().zip(&app[c * d..(c + 1) * d]) {
                         *o += v;
                     }
+                    let own = self.plane_colours[plane][t as usize];
+                    for ch in 0..3 {
+                        shift[ch] += near.colours[slot][ch] - own[ch];
+                    }
                 }
-                for o in out.iter_mut() {
-                    *o *= self.gain;
+                let flat = &self.flat[plane];
+                let mut mean = flat.mean_colour;
+                for (o, u) in out.iter_mut().zip(&flat.uniform) {
+                    let offset = u[0] * shift[0] + u[1] * shift[1] + u[2] * shift[2];
+                    *o = (*o + offset) * (1.0 / 3.0);
+                    for ch in 0..3 {
+                        mean[ch] += u[ch] * *o * flat.inv_pixels;
+                    }
+                }
+                for ((o, u), off) in out.iter_mut().zip(&flat.uniform).zip(&flat.offsets) {
+                    let level = u[0] * mean[0] + u[1] * mean[1] + u[2] * mean[2] - off;
+                    *o = self.gain * *o - (self.gain - 1.0) * level;
                 }
             }
         }
@@ -132,8 +200,7 @@ impl<'a> AppearanceCorrector<'a> {
         };
         let (coherent, coherent_n) = coherent_triples(&moved);
         for &t in &coherent[..coherent_n] {
-            let dist =
-                sparse_distance(&self.tables.triple_vector(t), &query) * COHERENT_WEIGHT / 256;
+            let dist = sparse_distance(&self.tables.triple_vector(t), &query);
             // Saturating: a large `consistency` can push the penalty to u32::MAX.
             consider(
                 dist.saturating_add(disagreement(&self.plane_colours, self.consistency, t)),
