@@ -240,10 +240,10 @@ struct SynthArgs {
     /// Subpass block side s (s³ subpasses per pass; 1 disables subpasses).
     #[arg(long, default_value_t = 2)]
     subpass_side: u32,
-    /// Gain on correction neighbourhoods around their mean (1 disables).
+    /// Gain on correction queries around their mean colour (1 disables).
     #[arg(long, default_value_t = solidtex::params::DEFAULT_CONTRAST)]
     contrast: f32,
-    /// Voxels a correction reads: sparse (direct neighbours, the rest of
+    /// Voxels the colour correction reads: sparse (direct neighbours, the rest of
     /// each N×N slice extrapolated) or full (every voxel of the slices).
     #[arg(long, default_value = "sparse")]
     slices: Slices,

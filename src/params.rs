@@ -202,14 +202,18 @@ pub struct SynthParams {
     pub jitter: f32,
     /// Also correct the initialisation level after jitter.
     pub correct_init_level: bool,
-    /// Gain on a correction's neighbourhood colours around their mean
-    /// before matching (1 leaves them as they are). A voxel's colour is the
-    /// mean of three exemplar colours, so synthesized neighbourhoods are
-    /// flatter than the exemplar's and, matched as they are, pick its calm
-    /// regions: rare dark or bright features fade (docs/quality.md).
+    /// Gain on a correction's query around its mean colour before matching
+    /// (1 leaves it as it is): on the colour neighbourhoods, or on each
+    /// appearance-space location around the flat neighbourhood of its mean
+    /// colour. A voxel's colour is the mean of three exemplar colours, so
+    /// synthesized neighbourhoods are flatter than the exemplar's and,
+    /// matched as they are, pick its calm regions: rare dark or bright
+    /// features fade (docs/quality.md).
     #[serde(serialize_with = "shortest_f32")]
     pub contrast: f32,
-    /// Which voxels a correction reads for its slice neighbourhoods.
+    /// Which voxels the colour correction reads for its slice
+    /// neighbourhoods (the appearance correction always reads its direct
+    /// neighbours).
     pub slices: Slices,
     /// Penalty on coherent triples whose three exemplar colours disagree,
     /// per squared colour difference (in units of a quantised

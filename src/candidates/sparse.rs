@@ -26,6 +26,21 @@ pub const DIAGONALS: [(i64, i64); 4] = [(-1, -1), (1, -1), (-1, 1), (1, 1)];
 /// A quantised sparse neighbourhood vector.
 pub type SparseVector = [u8; SPARSE_DIMS];
 
+/// 3D candidates of a pixel that a correction tries (Dong et al.'s number
+/// at the finest level), best crossbar error first.
+pub const BEST_CANDIDATES: usize = 4;
+
+/// The vectors of a pixel's [`BEST_CANDIDATES`] candidates: one cache
+/// line, found from the pixel alone (no offsets table to read first), so
+/// a correction can prefetch it as soon as it knows the pixel. A pixel
+/// with fewer candidates repeats its last one.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct BestVectors(pub [SparseVector; BEST_CANDIDATES]);
+
+/// The triples of [`BestVectors`], in the same order.
+pub type BestTriples = [[u32; 3]; BEST_CANDIDATES];
+
 /// The sparse neighbourhood tables of one level.
 #[derive(Clone, Debug)]
 pub struct SparseTables {
@@ -40,8 +55,10 @@ pub struct SparseTables {
     shares: [Vec<[f32; SPARSE_DIMS]>; 3],
     /// The projected mean, which a sum of shares still contains.
     offsets: [f32; SPARSE_DIMS],
-    /// Each candidate's quantised vector, per plane, in candidate order.
-    vectors: [Vec<SparseVector>; 3],
+    /// Each pixel's best candidates' quantised vectors, per plane.
+    vectors: [Vec<BestVectors>; 3],
+    /// Their triples.
+    triples: [Vec<BestTriples>; 3],
 }
 
 /// The 4 diagonal appearance vectors of pixel `c` of one plane,
@@ -134,11 +151,17 @@ impl SparseTables {
             }
         }
         let scale = 127.0 / max;
+        let best = |p: usize, c: usize| -> BestTriples {
+            let all = &candidates[p].triples[candidates[p].range(c as u32)];
+            debug_assert!(!all.is_empty(), "coherence filtering keeps a candidate");
+            let last = all.len().clamp(1, BEST_CANDIDATES) - 1;
+            std::array::from_fn(|i| all.get(i.min(last)).copied().unwrap_or([0; 3]))
+        };
+        let triples = [0, 1, 2].map(|p| (0..pixels).map(|c| best(p, c)).collect::<Vec<_>>());
         let vectors = [0, 1, 2].map(|p| {
-            candidates[p]
-                .triples
+            triples[p]
                 .par_iter()
-                .map(|t| quantise_vector(&sum(*t), scale))
+                .map(|ts| BestVectors(ts.map(|t| quantise_vector(&sum(t), scale))))
                 .collect()
         });
         SparseTables {
@@ -148,6 +171,7 @@ impl SparseTables {
             shares,
             offsets,
             vectors,
+            triples,
         }
     }
 
@@ -163,16 +187,16 @@ impl SparseTables {
         self.scale
     }
 
-    /// Candidate `ci`'s vector in plane `p`.
+    /// The best candidates of pixel `c` in plane `p`: their vectors.
     #[inline]
-    pub fn vector(&self, p: usize, ci: usize) -> &SparseVector {
-        &self.vectors[p][ci]
+    pub fn best_vectors(&self, p: usize, c: u32) -> &BestVectors {
+        &self.vectors[p][c as usize]
     }
 
-    /// Candidate vectors of plane `p` (for prefetching).
+    /// The best candidates of pixel `c` in plane `p`: their triples.
     #[inline]
-    pub fn vectors(&self, p: usize) -> &[SparseVector] {
-        &self.vectors[p]
+    pub fn best_triples(&self, p: usize, c: u32) -> &BestTriples {
+        &self.triples[p][c as usize]
     }
 
     /// Projects and quantises a query (12 locations of
@@ -206,7 +230,11 @@ impl SparseTables {
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
         (0..3)
-            .map(|p| self.shares[p].len() * 4 * SPARSE_DIMS + self.vectors[p].len() * SPARSE_DIMS)
+            .map(|p| {
+                self.shares[p].len() * 4 * SPARSE_DIMS
+                    + self.vectors[p].len() * std::mem::size_of::<BestVectors>()
+                    + self.triples[p].len() * std::mem::size_of::<BestTriples>()
+            })
             .sum()
     }
 }
@@ -215,19 +243,25 @@ fn quantise_vector(v: &[f32; SPARSE_DIMS], scale: f32) -> SparseVector {
     v.map(|x| super::quantise(x, scale))
 }
 
-/// Squared distance between two quantised vectors.
-#[inline]
+/// Squared distance between two quantised vectors. Differences are taken
+/// in 16-bit lanes and their squares summed in pairs (one `pmaddwd` per
+/// eight lanes).
+#[inline(always)]
 pub fn sparse_distance(a: &SparseVector, b: &SparseVector) -> u32 {
-    let mut sum = 0u32;
+    let mut e = [0i16; SPARSE_DIMS];
     for j in 0..SPARSE_DIMS {
-        let e = a[j] as i32 - b[j] as i32;
-        sum += (e * e) as u32;
+        e[j] = a[j] as i16 - b[j] as i16;
     }
-    sum
+    let mut sum = [0i32; SPARSE_DIMS / 2];
+    for j in 0..SPARSE_DIMS / 2 {
+        sum[j] = e[2 * j] as i32 * e[2 * j] as i32 + e[2 * j + 1] as i32 * e[2 * j + 1] as i32;
+    }
+    sum.iter().sum::<i32>() as u32
 }
 
 #[cfg(test)]
 mod tests {
+    use super::*;
 
     #[test]
     fn a_candidates_vector_is_its_triples_vector_and_fits_a_byte() {
@@ -245,18 +279,26 @@ mod tests {
             let level = c.level(k);
             let tables = level.sparse_tables(c.dims(), k);
             for p in 0..3 {
-                for (ci, t) in level.candidates(p).triples.iter().enumerate() {
-                    assert_eq!(tables.vector(p, ci), &tables.triple_vector(*t));
+                let cands = level.candidates(p);
+                for px in 0..c.dims().len() as u32 {
+                    let all = &cands.triples[cands.range(px)];
+                    let best = tables.best_triples(p, px);
+                    let vectors = tables.best_vectors(p, px);
+                    for i in 0..BEST_CANDIDATES {
+                        // The best first, the last repeated.
+                        assert_eq!(best[i], all[i.min(all.len() - 1)]);
+                        assert_eq!(vectors.0[i], tables.triple_vector(best[i]));
+                    }
                 }
             }
             // The quantised vectors span the byte range without clipping
             // most of them.
             let clipped = (0..3)
-                .flat_map(|p| tables.vectors(p))
-                .flatten()
+                .flat_map(|p| &tables.vectors[p])
+                .flat_map(|b| b.0.iter().flatten())
                 .filter(|&&b| b == 0 || b == 255)
                 .count();
-            assert!(clipped * 100 < level.candidates(0).triples.len() * super::SPARSE_DIMS * 3);
+            assert!(clipped * 100 < c.dims().len() * BEST_CANDIDATES * SPARSE_DIMS * 3);
         }
     }
 }

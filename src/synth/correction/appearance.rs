@@ -28,15 +28,16 @@
 //! Candidates come by k-coherence (Lin §3.2): every in-plane neighbour's
 //! exemplar pixel, moved back by its offset, proposes its similarity set;
 //! each proposed pixel is completed to triples by its best
-//! [`FINE_3D_CANDIDATES`] precomputed 3D candidates. The coherent triples
+//! [`BEST_CANDIDATES`](crate::candidates::sparse::BEST_CANDIDATES)
+//! precomputed 3D candidates. The coherent triples
 //! (each direct neighbour's triple moved back) compete on equal terms,
 //! with a penalty when their three exemplar colours disagree; a bonus for
 //! them, as the colour correction gives, left upsampled blocks standing.
 //! The best by distance of the quantised 12-location vectors wins.
 
 use super::{
-    FINE_3D_CANDIDATES, Work, all_inside, coherent_triples, disagreement, gather_near,
-    history_window, in_plane_slot,
+    Work, all_inside, coherent_triples, disagreement, gather_near, history_window, in_plane_slot,
+    prefetch,
 };
 use crate::candidates::geometry::{AXES, Dims};
 use crate::candidates::sparse::{DIAGONALS, SparseTables, sparse_distance};
@@ -157,6 +158,41 @@ impl<'a> AppearanceCorrector<'a> {
         let h = self.h;
         let d = self.d;
         let (near, moved) = gather_near::<BY_WALL>(work, start, inside, p, self.dims, h);
+        // The proposed pixels and the coherent triples are known from the
+        // triples alone: prefetch what scoring them reads, so the cache
+        // misses overlap the query's arithmetic below.
+        let mut pixels = [[u32::MAX; 9 * MAX_SIMILAR]; 3];
+        let mut pixels_n = [0usize; 3];
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            let (pixels, n) = (&mut pixels[plane], &mut pixels_n[plane]);
+            let mut bases = [u32::MAX; 9];
+            let mut bases_n = 0;
+            for j in -1..=1i64 {
+                for i in -1..=1i64 {
+                    let base = moved[in_plane_slot(a, i, b, j)][plane];
+                    // Coherent neighbours usually point at the same pixel.
+                    if bases[..bases_n].contains(&base) {
+                        continue;
+                    }
+                    bases[bases_n] = base;
+                    bases_n += 1;
+                    for &s in self.level.similar(plane, base) {
+                        if !pixels[..*n].contains(&s) {
+                            pixels[*n] = s;
+                            *n += 1;
+                            prefetch(std::slice::from_ref(self.tables.best_vectors(plane, s)));
+                            prefetch(std::slice::from_ref(self.tables.best_triples(plane, s)));
+                        }
+                    }
+                }
+            }
+        }
+        let (coherent, coherent_n) = coherent_triples(&moved);
+        for t in &coherent[..coherent_n] {
+            for (q, &c) in t.iter().enumerate() {
+                prefetch(std::slice::from_ref(self.tables.share(q, c)));
+            }
+        }
         let mut q = [0f32; 12 * MAX_LOCATION_DIMS];
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             let app = self.app[plane];
@@ -198,7 +234,6 @@ impl<'a> AppearanceCorrector<'a> {
                 best = (dist, t);
             }
         };
-        let (coherent, coherent_n) = coherent_triples(&moved);
         for &t in &coherent[..coherent_n] {
             let dist = sparse_distance(&self.tables.triple_vector(t), &query);
             // Saturating: a large `consistency` can push the penalty to u32::MAX.
@@ -207,37 +242,12 @@ impl<'a> AppearanceCorrector<'a> {
                 t,
             );
         }
-        for (plane, &(a, b)) in AXES.iter().enumerate() {
-            let mut pixels = [u32::MAX; 9 * MAX_SIMILAR];
-            let mut n = 0;
-            let mut bases = [u32::MAX; 9];
-            let mut bases_n = 0;
-            for j in -1..=1i64 {
-                for i in -1..=1i64 {
-                    let base = moved[in_plane_slot(a, i, b, j)][plane];
-                    // Coherent neighbours usually point at the same pixel.
-                    if bases[..bases_n].contains(&base) {
-                        continue;
-                    }
-                    bases[bases_n] = base;
-                    bases_n += 1;
-                    for &s in self.level.similar(plane, base) {
-                        if !pixels[..n].contains(&s) {
-                            pixels[n] = s;
-                            n += 1;
-                        }
-                    }
-                }
-            }
-            let cands = self.level.candidates(plane);
-            for &px in &pixels[..n] {
-                let range = cands.range(px);
-                let end = range.end.min(range.start + FINE_3D_CANDIDATES);
-                for ci in range.start..end {
-                    consider(
-                        sparse_distance(self.tables.vector(plane, ci), &query),
-                        cands.triples[ci],
-                    );
+        for plane in 0..3 {
+            for &px in &pixels[plane][..pixels_n[plane]] {
+                let vectors = self.tables.best_vectors(plane, px);
+                let triples = self.tables.best_triples(plane, px);
+                for (v, &t) in vectors.0.iter().zip(triples) {
+                    consider(sparse_distance(v, &query), t);
                 }
             }
         }
