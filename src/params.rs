@@ -129,7 +129,7 @@ pub enum Correction {
     /// Lefebvre and Hoppe 2006): in each plane the appearance vectors at
     /// the 4 diagonal locations, each averaged over the 3 direct
     /// neighbours that predict it; candidates by k-coherence. Lower
-    /// texture-statistics distance than `Colour` on 9 of the 10 shared
+    /// texture-statistics distance than `Colour` on 8 of the 10 shared
     /// exemplars (docs/quality.md).
     #[default]
     Appearance,
