@@ -27,6 +27,14 @@ pub struct Region {
 }
 
 impl Region {
+    /// Number of voxels, or `None` where the product of the sides does not
+    /// fit a `u64` (three sides of 2^24 would wrap to 0).
+    pub fn voxel_count(&self) -> Option<u64> {
+        self.size
+            .iter()
+            .try_fold(1u64, |n, &side| n.checked_mul(side as u64))
+    }
+
     /// The `width` × `height` slice normal to `axis` at `at`, with its
     /// (u, v) corner at (`u0`, `v0`); (u, v) is (x, y) for z, (y, z) for x
     /// and (z, x) for y.
@@ -352,11 +360,14 @@ fn check_region(r: &Region) -> Result<()> {
             "region size must be ≥ 1 on every axis".into(),
         ));
     }
-    let voxels: u64 = r.size.iter().map(|&s| s as u64).product();
-    if voxels > MAX_REGION_VOXELS {
-        return Err(Error::TooLarge(format!(
-            "{voxels} voxels (limit {MAX_REGION_VOXELS})"
-        )));
+    match r.voxel_count() {
+        Some(voxels) if voxels <= MAX_REGION_VOXELS => {}
+        _ => {
+            let [w, h, d] = r.size;
+            return Err(Error::TooLarge(format!(
+                "{w}x{h}x{d} voxels (limit {MAX_REGION_VOXELS})"
+            )));
+        }
     }
     check_coords(&r.origin)?;
     let far = [

@@ -620,6 +620,17 @@ async fn every_error_class_is_json() {
         (t("/cut.png?w=5000"), 400, "out_of_range"),
         (t("/region.raw?d=0"), 400, "out_of_range"),
         (t("/region.raw?w=512&h=512&d=512"), 400, "too_large"),
+        // Sides whose product wraps a u64 to 0.
+        (
+            t("/region.raw?w=16777216&h=16777216&d=16777216"),
+            400,
+            "too_large",
+        ),
+        (
+            t("/region.raw?w=16777216&h=16777216&d=65537"),
+            400,
+            "too_large",
+        ),
     ];
     for (url, status, code) in cases {
         let (st, h, b) = get(&c, &url).await;

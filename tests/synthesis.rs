@@ -389,6 +389,17 @@ fn levels_of_detail_and_limits() {
         )
         .is_err()
     );
+    // Sides whose product wraps a u64 to 0 are refused, not synthesized.
+    let huge = Region {
+        origin: [0, 0, 0],
+        size: [1 << 24; 3],
+    };
+    assert_eq!(huge.voxel_count(), None);
+    assert!(matches!(
+        t.region(&huge, 0),
+        Err(solidtex::Error::TooLarge(_))
+    ));
+    assert!(t.plan(&huge, 0).is_err());
     assert!(t.slice(Axis::Z, 0, 0, 0, 5000, 1, 0).is_err());
 }
 

@@ -334,18 +334,21 @@ pub async fn region(
         q.int("d", DEFAULT_REGION_SIDE, 1, max_side)?,
     ];
     let lod = lod(&q, &tex)?;
-    let voxels: u64 = size.iter().map(|&v| v as u64).product();
-    if voxels > MAX_REGION_VOXELS {
-        return Err(ApiError::too_large(format!(
-            "{}x{}x{} = {voxels} voxels (limit {MAX_REGION_VOXELS})",
-            size[0], size[1], size[2]
-        )));
-    }
+    let region = Region { origin, size };
+    // Checked: three sides of 2^24 would wrap to 0 and pass.
+    let voxels = match region.voxel_count() {
+        Some(v) if v <= MAX_REGION_VOXELS => v,
+        _ => {
+            return Err(ApiError::too_large(format!(
+                "{}x{}x{} voxels (limit {MAX_REGION_VOXELS})",
+                size[0], size[1], size[2]
+            )));
+        }
+    };
     for (a, name) in ["x", "y", "z"].iter().enumerate() {
         check_extent(name, origin[a], size[a])?;
     }
     check_budget(&s, "region", voxels)?;
-    let region = Region { origin, size };
     region_response(&s, &entry, tex, region, lod, &headers).await
 }
 
