@@ -827,6 +827,44 @@ async fn cors_headers() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_uploads_cannot_all_pass_the_precompute_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.max_precomputes = 1;
+    args.precompute_queue = 2;
+    let s = TestServer::start(args).await;
+    let c = client();
+    // Distinct images, all sent at once: each is a new texture.
+    let mut tasks = Vec::new();
+    for seed in 0..24 {
+        let c = c.clone();
+        let url = s.url("/v1/textures?levels=2");
+        tasks.push(tokio::spawn(async move {
+            let r = c
+                .post(url)
+                .header("content-type", "image/png")
+                .body(exemplar_png(16, 1000 + seed))
+                .send()
+                .await
+                .unwrap();
+            r.status().as_u16()
+        }));
+    }
+    let mut accepted = 0;
+    for t in tasks {
+        match t.await.unwrap() {
+            202 => accepted += 1,
+            503 => {}
+            other => panic!("unexpected {other}"),
+        }
+    }
+    // One precompute running and two waiting at most (the bundled default
+    // may hold one of those places).
+    assert!((1..=3).contains(&accepted), "{accepted} uploads accepted");
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn full_queue_answers_503_with_retry_after() {
     let dir = tempfile::tempdir().unwrap();
     let mut args = test_args(dir.path());

@@ -301,10 +301,14 @@ impl Registry {
                 }
             }
             // Server-chosen ids (the bundled default) are never refused.
+            // The check and the reservation happen under the map's lock, so
+            // concurrent uploads cannot all pass the check before any of
+            // them is counted.
             if !fixed_id && self.pending.load(Ordering::SeqCst) >= self.max_pending {
                 self.metrics.jobs_rejected.inc();
                 return Err(ApiError::overloaded("precompute queue is full"));
             }
+            self.reserve_precompute();
             if let Some(old) = map.get(&id) {
                 old.deleted.store(true, Ordering::SeqCst);
             }
@@ -332,6 +336,7 @@ impl Registry {
                 map.remove(&id);
             }
             drop(map);
+            self.release_precompute();
             self.update_gauges();
             return Err(ApiError::internal(format!(
                 "could not store the texture: {why}"
@@ -369,9 +374,21 @@ impl Registry {
         Ok(())
     }
 
-    fn start_precompute(self: &Arc<Self>, entry: Arc<Entry>) {
+    /// Counts one more precompute as pending.
+    fn reserve_precompute(&self) {
         self.pending.fetch_add(1, Ordering::SeqCst);
         self.metrics.precomputes_pending.inc();
+    }
+
+    /// Counts one pending precompute less.
+    fn release_precompute(&self) {
+        self.pending.fetch_sub(1, Ordering::SeqCst);
+        self.metrics.precomputes_pending.dec();
+    }
+
+    /// Runs the precompute of `entry`, whose place in the queue is
+    /// reserved already ([`Registry::reserve_precompute`]).
+    fn start_precompute(self: &Arc<Self>, entry: Arc<Entry>) {
         let this = self.clone();
         tokio::spawn(async move {
             let permit = this.slots.clone().acquire_owned().await;
@@ -385,8 +402,7 @@ impl Registry {
             if let Err(err) = done {
                 entry.set_status(Status::Failed(format!("precompute aborted: {err}")));
             }
-            this.pending.fetch_sub(1, Ordering::SeqCst);
-            this.metrics.precomputes_pending.dec();
+            this.release_precompute();
             this.update_gauges();
         });
     }
@@ -614,6 +630,7 @@ impl Registry {
     /// Starts the precomputes [`Registry::recover`] found necessary.
     pub fn resume(self: &Arc<Self>, todo: Vec<Arc<Entry>>) {
         for e in todo {
+            self.reserve_precompute();
             self.start_precompute(e);
         }
     }
