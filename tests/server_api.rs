@@ -956,3 +956,125 @@ async fn request_budget_is_enforced() {
     let err = solidtex::server::Server::bind(&args).await.err().unwrap();
     assert!(err.to_string().contains("chunks"), "{err}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_token_guards_uploads_deletions_and_metrics() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.token = Some("s3cret".into());
+    let s = TestServer::start(args).await;
+    let c = client();
+    let post = |auth: Option<&'static str>| {
+        let mut r = c
+            .post(s.url("/v1/textures?levels=2"))
+            .header("content-type", "image/png")
+            .body(exemplar_png(16, 77));
+        if let Some(a) = auth {
+            r = r.header("authorization", a);
+        }
+        r.send()
+    };
+    for auth in [
+        None,
+        Some("Bearer nope"),
+        Some("s3cret"),
+        Some("Basic s3cret"),
+    ] {
+        let r = post(auth).await.unwrap();
+        let (st, h) = (r.status().as_u16(), r.headers().clone());
+        assert_eq!(h["www-authenticate"], "Bearer", "{auth:?}");
+        assert_error(st, &h, &r.bytes().await.unwrap(), 401, "unauthorized");
+    }
+    let r = post(Some("Bearer s3cret")).await.unwrap();
+    assert_eq!(r.status().as_u16(), 202);
+    let id = r.json::<Value>().await.unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    wait_ready(&c, &s, &id).await;
+    // Reading needs no token.
+    let (st, _, _) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=8&h=8")),
+    )
+    .await;
+    assert_eq!(st, 200);
+    // Metrics and deletions do.
+    let (st, h, b) = get(&c, &s.url("/metrics")).await;
+    assert_error(st, &h, &b, 401, "unauthorized");
+    let r = c
+        .get(s.url("/metrics"))
+        .header("authorization", "Bearer s3cret")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+    let url = s.url(&format!("/v1/textures/{id}"));
+    let r = c.delete(&url).send().await.unwrap();
+    assert_eq!(r.status().as_u16(), 401);
+    let r = c
+        .delete(&url)
+        .header("authorization", "Bearer s3cret")
+        .send()
+        .await
+        .unwrap();
+    assert!(r.status().is_success(), "{}", r.status());
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pages_on_other_origins_only_read_unless_their_origin_is_configured() {
+    let preflight = |c: &reqwest::Client, url: String, method: &'static str| {
+        c.request(reqwest::Method::OPTIONS, url)
+            .header("origin", "https://app.example")
+            .header("access-control-request-method", method)
+            .send()
+    };
+    let allowed = |r: &reqwest::Response| {
+        r.headers()
+            .get("access-control-allow-methods")
+            .map(|v| v.to_str().unwrap().to_string())
+            .unwrap_or_default()
+    };
+    for (origins, deletes) in [(vec![], false), (vec!["https://app.example".into()], true)] {
+        let dir = tempfile::tempdir().unwrap();
+        let mut args = test_args(dir.path());
+        args.cors_origins = origins;
+        let s = TestServer::start(args).await;
+        let c = client();
+        let r = preflight(&c, s.url("/v1/textures/default"), "DELETE")
+            .await
+            .unwrap();
+        assert_eq!(allowed(&r).contains("DELETE"), deletes, "{}", allowed(&r));
+        let r = preflight(&c, s.url("/v1/textures/default/slices/z/0.png"), "GET")
+            .await
+            .unwrap();
+        assert!(allowed(&r).contains("GET"), "{}", allowed(&r));
+        s.stop().await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn readyz_reports_a_deleted_default_texture() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.default_texture = true;
+    let s = TestServer::start(args).await;
+    let c = client();
+    wait_ready(&c, &s, "default").await;
+    let (st, _, _) = get(&c, &s.url("/readyz")).await;
+    assert_eq!(st, 200);
+    let r = c
+        .delete(s.url("/v1/textures/default"))
+        .send()
+        .await
+        .unwrap();
+    assert!(r.status().is_success(), "{}", r.status());
+    let (st, _, b) = get(&c, &s.url("/readyz")).await;
+    assert_eq!(st, 503);
+    assert_eq!(
+        serde_json::from_slice::<Value>(&b).unwrap()["status"],
+        "default_missing"
+    );
+    s.stop().await;
+}

@@ -87,6 +87,18 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
     pub default_texture: bool,
 
+    /// Bearer token that uploads, deletions and `/metrics` require
+    /// (`Authorization: Bearer TOKEN`); without one they are open, as
+    /// reading voxels always is.
+    #[arg(long, env = "SOLIDTEX_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+
+    /// Origins (e.g. `https://app.example`) whose pages may upload and
+    /// delete across origins; without any, browsers on other origins may
+    /// only read (GET and HEAD).
+    #[arg(long, env = "SOLIDTEX_CORS_ORIGINS", value_delimiter = ',')]
+    pub cors_origins: Vec<String>,
+
     /// Seconds to wait for in-flight requests after SIGINT/SIGTERM.
     #[arg(long, env = "SOLIDTEX_SHUTDOWN_TIMEOUT", default_value_t = 30)]
     pub shutdown_timeout: u64,
@@ -130,6 +142,8 @@ impl ServeArgs {
             chunk_size: 32,
             max_request_voxels: 16 << 20,
             default_texture: false,
+            token: None,
+            cors_origins: Vec::new(),
             shutdown_timeout: 30,
             log_format: LogFormat::Pretty,
             log: "info".into(),

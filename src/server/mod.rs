@@ -130,6 +130,16 @@ impl Server {
             chunk_size: args.chunk_size,
             max_request_voxels: args.max_request_voxels,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
+            token: args.token.clone().filter(|t| !t.is_empty()),
+            cors_origins: args
+                .cors_origins
+                .iter()
+                .map(|o| {
+                    axum::http::HeaderValue::from_str(o)
+                        .with_context(|| format!("CORS origin `{o}`"))
+                })
+                .collect::<anyhow::Result<_>>()?,
+            default_texture: args.default_texture,
         });
         tracing::info!(
             addr = %listener.local_addr()?,

@@ -26,7 +26,7 @@ use axum::routing::get;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tower_http::catch_panic::CatchPanicLayer;
-use tower_http::cors::{Any, CorsLayer};
+use tower_http::cors::{AllowOrigin, Any, CorsLayer};
 use tower_http::trace::{DefaultOnResponse, TraceLayer};
 
 /// Every route as (method, path in OpenAPI notation). The router below
@@ -69,6 +69,13 @@ pub struct Shared {
     pub max_request_voxels: u64,
     /// Largest accepted upload, bytes.
     pub max_upload_bytes: usize,
+    /// Bearer token that mutating routes and `/metrics` require, if any.
+    pub token: Option<String>,
+    /// Origins allowed to upload and delete across origins.
+    pub cors_origins: Vec<axum::http::HeaderValue>,
+    /// Whether the bundled texture is registered at start (`/readyz`
+    /// waits for it and reports it missing).
+    pub default_texture: bool,
 }
 
 /// Handler state: cheap to clone.
@@ -135,15 +142,27 @@ pub fn router(state: AppState) -> Router {
 
 /// Wraps routes in the middleware stack and the JSON 404 fallback.
 fn with_middleware(routes: Router<AppState>, state: AppState) -> Router {
-    let cors = CorsLayer::new()
-        .allow_origin(Any)
-        .allow_methods([
+    // Any page may read; only configured origins may upload or delete
+    // (otherwise any web page could delete textures from a visitor's
+    // browser).
+    let cors = if state.cors_origins.is_empty() {
+        CorsLayer::new().allow_origin(Any).allow_methods([
             Method::GET,
-            Method::POST,
-            Method::DELETE,
             Method::HEAD,
             Method::OPTIONS,
         ])
+    } else {
+        CorsLayer::new()
+            .allow_origin(AllowOrigin::list(state.cors_origins.clone()))
+            .allow_methods([
+                Method::GET,
+                Method::POST,
+                Method::DELETE,
+                Method::HEAD,
+                Method::OPTIONS,
+            ])
+    };
+    let cors = cors
         .allow_headers(Any)
         .expose_headers(EXPOSED.map(HeaderName::from_static))
         .max_age(Duration::from_secs(86400));
@@ -174,6 +193,7 @@ fn with_middleware(routes: Router<AppState>, state: AppState) -> Router {
         .fallback(no_route)
         .layer(middleware::from_fn(json_errors))
         .layer(CatchPanicLayer::custom(panic_response))
+        .layer(middleware::from_fn_with_state(state.clone(), authorize))
         .layer(middleware::from_fn_with_state(state.clone(), track))
         .layer(trace)
         .layer(cors)
@@ -186,6 +206,44 @@ async fn no_route(req: Request) -> ApiError {
         "no_route",
         format!("no route for {} {}", req.method(), req.uri().path()),
     )
+}
+
+/// With a token configured, uploads, deletions and `/metrics` need
+/// `Authorization: Bearer TOKEN`; anything else is answered 401.
+async fn authorize(State(s): State<AppState>, req: Request, next: Next) -> Response {
+    let Some(token) = &s.token else {
+        return next.run(req).await;
+    };
+    let guarded = !matches!(*req.method(), Method::GET | Method::HEAD | Method::OPTIONS)
+        || req.uri().path() == "/metrics";
+    let given = req
+        .headers()
+        .get(axum::http::header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    if !guarded || given.is_some_and(|g| same_secret(g.as_bytes(), token.as_bytes())) {
+        return next.run(req).await;
+    }
+    let message = if given.is_some() {
+        "wrong bearer token"
+    } else {
+        "this route needs `Authorization: Bearer TOKEN`"
+    };
+    let mut res = axum::response::IntoResponse::into_response(ApiError::new(
+        StatusCode::UNAUTHORIZED,
+        "unauthorized",
+        message,
+    ));
+    res.headers_mut().insert(
+        axum::http::header::WWW_AUTHENTICATE,
+        axum::http::HeaderValue::from_static("Bearer"),
+    );
+    res
+}
+
+/// Compares secrets in time that depends on their lengths only.
+fn same_secret(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |d, (x, y)| d | (x ^ y)) == 0
 }
 
 /// Counts requests and their latency per route template.

@@ -17,13 +17,17 @@ pub async fn healthz() -> Json<serde_json::Value> {
 }
 
 /// `GET /readyz`: 200 once the bundled texture (when registered) is ready
-/// and the synthesis queue has room; 503 otherwise.
+/// and the synthesis queue has room; 503 otherwise, also when the bundled
+/// texture was deleted.
 pub async fn readyz(State(s): State<AppState>) -> Response {
-    let starting = s
-        .registry
-        .get(crate::server::DEFAULT_ID)
+    let default = s.registry.get(crate::server::DEFAULT_ID);
+    let starting = default
+        .as_ref()
         .is_some_and(|e| matches!(e.status(), Status::Pending));
-    let (code, status) = if starting {
+    let (code, status) = if s.default_texture && default.is_none() {
+        // Deleted: it does not come back by itself.
+        (StatusCode::SERVICE_UNAVAILABLE, "default_missing")
+    } else if starting {
         (StatusCode::SERVICE_UNAVAILABLE, "starting")
     } else if s.jobs.is_full() {
         (StatusCode::SERVICE_UNAVAILABLE, "overloaded")
@@ -31,7 +35,7 @@ pub async fn readyz(State(s): State<AppState>) -> Response {
         (StatusCode::OK, "ready")
     };
     let mut res = (code, Json(json!({ "status": status }))).into_response();
-    if code != StatusCode::OK {
+    if code != StatusCode::OK && status != "default_missing" {
         res.headers_mut()
             .insert(header::RETRY_AFTER, header::HeaderValue::from_static("1"));
     }
