@@ -59,7 +59,12 @@ TOML
 
 # Run from the temporary directory: schemathesis keeps a cache where it runs.
 cd "$DATA"
+# /readyz is left out: once a generated DELETE has removed `default` (the
+# id's documented example), its documented answer is 503 `default_missing`,
+# which the server-error check cannot tell from a failure; the Rust tests
+# cover it.
 schemathesis --config-file "$DATA/schemathesis.toml" run "$BASE/openapi.yaml" --url "$BASE" \
+    --exclude-path /readyz \
     --checks not_a_server_error,status_code_conformance,content_type_conformance,response_headers_conformance,response_schema_conformance,negative_data_rejection \
     --phases examples,coverage,fuzzing \
     --max-examples "${SCHEMATHESIS_MAX_EXAMPLES:-25}" \

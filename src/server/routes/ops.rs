@@ -25,7 +25,7 @@ pub async fn readyz(State(s): State<AppState>) -> Response {
         .as_ref()
         .is_some_and(|e| matches!(e.status(), Status::Pending));
     let (code, status) = if s.default_texture && default.is_none() {
-        // Deleted: it does not come back by itself.
+        // Deleted: this server no longer serves what it was started for.
         (StatusCode::SERVICE_UNAVAILABLE, "default_missing")
     } else if starting {
         (StatusCode::SERVICE_UNAVAILABLE, "starting")
@@ -35,7 +35,7 @@ pub async fn readyz(State(s): State<AppState>) -> Response {
         (StatusCode::OK, "ready")
     };
     let mut res = (code, Json(json!({ "status": status }))).into_response();
-    if code != StatusCode::OK && status != "default_missing" {
+    if code != StatusCode::OK {
         res.headers_mut()
             .insert(header::RETRY_AFTER, header::HeaderValue::from_static("1"));
     }
