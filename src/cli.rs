@@ -322,16 +322,22 @@ struct InspectArgs {
 struct RegionArgs {
     #[command(flatten)]
     src: SourceArgs,
+    /// Lowest corner, x.
     #[arg(long, allow_hyphen_values = true)]
     x: i64,
+    /// Lowest corner, y.
     #[arg(long, allow_hyphen_values = true)]
     y: i64,
+    /// Lowest corner, z.
     #[arg(long, allow_hyphen_values = true)]
     z: i64,
+    /// Extent along x, voxels.
     #[arg(long)]
     w: u32,
+    /// Extent along y, voxels.
     #[arg(long)]
     h: u32,
+    /// Extent along z, voxels.
     #[arg(long)]
     d: u32,
     /// Output file.
@@ -349,12 +355,16 @@ struct SliceArgs {
     /// Position along the axis.
     #[arg(long, allow_hyphen_values = true)]
     at: i64,
+    /// Slice corner along its u axis (x for z slices, y for x, z for y).
     #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
     u0: i64,
+    /// Slice corner along its v axis (y for z slices, z for x, x for y).
     #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
     v0: i64,
+    /// Width in pixels (along u).
     #[arg(long, default_value_t = 256)]
     w: u32,
+    /// Height in pixels (along v).
     #[arg(long, default_value_t = 256)]
     h: u32,
     /// Output PNG.
@@ -376,6 +386,20 @@ struct VolumeArgs {
 
 /// The bundled default exemplar.
 pub const DEFAULT_EXEMPLAR: &[u8] = include_bytes!("../assets/default.png");
+
+/// One sentence on what a synthesis command wrote and what it cost.
+fn summary(what: &str, path: &Path, t0: Instant, stats: &solidtex::SynthStats) -> String {
+    let corrections: u64 = stats.corrections_per_level.iter().sum();
+    format!(
+        "wrote {what} to {} in {:.2} s: {corrections} corrections over {} levels, \
+         {} tiles synthesized, {} from the cache",
+        path.display(),
+        t0.elapsed().as_secs_f64(),
+        stats.corrections_per_level.len(),
+        stats.tiles_computed,
+        stats.tiles_from_cache,
+    )
+}
 
 fn progress_bar() -> ProgressBar {
     let bar = ProgressBar::new(1000);
@@ -525,19 +549,26 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             };
             let t0 = Instant::now();
             let (rgb, stats) = tex.region(&region, a.src.lod)?;
-            eprintln!(
-                "{} voxels in {:.3} s; {stats:?}",
-                rgb.len() / 3,
-                t0.elapsed().as_secs_f64()
-            );
             write_atomically(&a.output, &rgb)?;
+            let [w, h, d] = region.size;
+            eprintln!(
+                "{}",
+                summary(
+                    &format!("{w}×{h}×{d} voxels (RGB8, x fastest)"),
+                    &a.output,
+                    t0,
+                    &stats
+                )
+            );
         }
         Command::Slice(a) => {
             let tex = load_source(&a.src)?;
             let t0 = Instant::now();
             let (rgb, stats) = tex.slice(a.axis, a.at, a.u0, a.v0, a.w, a.h, a.src.lod)?;
-            eprintln!("slice in {:.3} s; {stats:?}", t0.elapsed().as_secs_f64());
             write_png(&a.output, a.w, a.h, rgb)?;
+            let axis = format!("{:?}", a.axis).to_lowercase();
+            let what = format!("a {}×{} {axis} slice at {axis} = {}", a.w, a.h, a.at);
+            eprintln!("{}", summary(&what, &a.output, t0, &stats));
         }
         Command::Volume(a) => {
             let tex = load_source(&a.src)?;
@@ -551,11 +582,17 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 },
                 a.src.lod,
             )?;
+            let raw = a.output.join(format!("volume_{s}.raw"));
+            write_atomically(&raw, &rgb)?;
             eprintln!(
-                "{s}³ volume in {:.3} s; {stats:?}",
-                t0.elapsed().as_secs_f64()
+                "{} (and its three middle slices)",
+                summary(
+                    &format!("a {s}³ volume (RGB8, x fastest)"),
+                    &raw,
+                    t0,
+                    &stats
+                )
             );
-            write_atomically(&a.output.join(format!("volume_{s}.raw")), &rgb)?;
             let mid = (s / 2) as i64;
             for axis in [Axis::X, Axis::Y, Axis::Z] {
                 let (img, _) = tex.slice(axis, mid, 0, 0, s, s, a.src.lod)?;
@@ -916,4 +953,32 @@ fn plan(a: &PlanArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// Every option and argument of every command says what it is.
+    #[test]
+    fn every_option_has_help() {
+        fn walk(cmd: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for arg in cmd.get_arguments() {
+                let id = arg.get_id().as_str();
+                if id == "help" || id == "version" {
+                    continue;
+                }
+                if arg.get_help().is_none() && arg.get_long_help().is_none() {
+                    missing.push(format!("{path} {id}"));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let mut missing = Vec::new();
+        walk(&Cli::command(), "solidtex", &mut missing);
+        assert!(missing.is_empty(), "options without help: {missing:?}");
+    }
 }
