@@ -307,6 +307,9 @@ struct PrecomputeArgs {
     /// Pyramid levels analysed.
     #[arg(long, default_value_t = 4)]
     levels: u32,
+    /// Also print each stage's time and each level's candidate statistics.
+    #[arg(long)]
+    verbose: bool,
 }
 
 #[derive(Args)]
@@ -442,16 +445,25 @@ fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
             let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
             Candidates::load(&bytes)?
         }
-        Some(p) => precompute(
-            &ExemplarSet::single(Exemplar::open(p)?),
-            &AnalysisParams::default(),
-            true,
-        )?,
-        None => precompute(
-            &ExemplarSet::single(Exemplar::decode(DEFAULT_EXEMPLAR)?),
-            &AnalysisParams::default(),
-            true,
-        )?,
+        Some(p) => {
+            eprintln!(
+                "precomputing the candidates of {} (save them with `solidtex precompute` to skip this)",
+                p.display()
+            );
+            precompute(
+                &ExemplarSet::single(Exemplar::open(p)?),
+                &AnalysisParams::default(),
+                false,
+            )?
+        }
+        None => {
+            eprintln!("precomputing the candidates of the bundled exemplar");
+            precompute(
+                &ExemplarSet::single(Exemplar::decode(DEFAULT_EXEMPLAR)?),
+                &AnalysisParams::default(),
+                false,
+            )?
+        }
     };
     let params = src.synth.params(src.scheme);
     Ok(Texture::new(
@@ -512,7 +524,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             let total = t0.elapsed().as_secs_f64();
             let bytes = c.to_bytes();
             write_atomically(&a.output, &bytes)?;
-            print_report(&c, total, bytes.len());
+            print_report(&c, &a.output, total, bytes.len(), a.verbose);
         }
         Command::Inspect(a) => inspect(&a)?,
         Command::Plan(a) => plan(&a)?,
@@ -654,9 +666,23 @@ fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_report(c: &Candidates, total: f64, file_bytes: usize) {
+fn print_report(c: &Candidates, path: &Path, total: f64, file_bytes: usize, verbose: bool) {
+    let (compact, total_mem) = c.memory_bytes();
+    let mib = |b: usize| b as f64 / (1 << 20) as f64;
+    println!(
+        "wrote {}: candidates of a {}×{} exemplar over {} levels in {total:.1} s; \
+         {:.1} MiB on disk, {:.0} MiB in memory when loaded",
+        path.display(),
+        c.dims().w,
+        c.dims().h,
+        c.level_count(),
+        mib(file_bytes),
+        mib(total_mem),
+    );
+    if !verbose {
+        return;
+    }
     let r = c.report();
-    println!("precomputed {}x{} in {total:.3} s", c.dims().w, c.dims().h);
     for (name, s) in &r.stage_seconds {
         println!("  {name:<10} {s:.3} s");
     }
@@ -674,10 +700,7 @@ fn print_report(c: &Candidates, total: f64, file_bytes: usize) {
             .collect();
         println!("    candidates per pixel {}", hist.join(" "));
     }
-    let (compact, total_mem) = c.memory_bytes();
-    println!(
-        "  file {file_bytes} bytes; candidates compact {compact} bytes; in memory {total_mem} bytes"
-    );
+    println!("  candidates compact {compact} bytes; in memory {total_mem} bytes");
 }
 
 fn inspect(a: &InspectArgs) -> anyhow::Result<()> {
