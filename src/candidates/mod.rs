@@ -529,7 +529,8 @@ impl Candidates {
 
     /// Bytes held by the candidate triples in their stored form (two
     /// foreign coordinates per triple, a count per pixel), and bytes of
-    /// everything held in memory, derived data included.
+    /// everything held in memory, derived data included (the appearance
+    /// correction's tables once a texture has built them).
     pub fn memory_bytes(&self) -> (usize, usize) {
         let coord_bits = (self.dims.len() as f64).log2().ceil() as usize;
         let mut compact = 0usize;
@@ -546,6 +547,7 @@ impl Candidates {
                 total += l.vectors[p].len() + l.stored.similar[p].len() * 4;
                 total += l.appearance[p].vectors.len() * 4;
             }
+            total += l.sparse.get().map_or(0, |t| t.memory_bytes());
         }
         for s in &self.stacks {
             total += s.len() * self.dims.len() * 12;

@@ -6,10 +6,11 @@
 //! cover (N + 2)² pixels per plane while the correction reads only its
 //! direct neighbours.
 //!
-//! The candidate side of the match: every precomputed 3D candidate's
-//! 12-location vector, PCA-reduced to [`SPARSE_DIMS`] and quantised to
-//! bytes, and each exemplar pixel's share of that projection per plane, so
-//! that any triple (a coherent one too) is scored without a projection.
+//! The candidate side of the match: the 12-location vectors of each
+//! exemplar pixel's best [`BEST_CANDIDATES`] 3D candidates, PCA-reduced to
+//! [`SPARSE_DIMS`] and quantised to bytes, and each pixel's share of that
+//! projection per plane, so that any triple (a coherent one too) is scored
+//! from three shares without a projection.
 
 use super::PlaneCandidates;
 use super::geometry::Dims;
