@@ -1078,3 +1078,23 @@ async fn readyz_reports_a_deleted_default_texture() {
     );
     s.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_request_right_after_an_upload_waits_for_its_precompute() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.pending_wait = 60.0;
+    let s = TestServer::start(args).await;
+    let c = client();
+    let (st, body) = upload(&c, &s, exemplar_png(24, 4242), "levels=2").await;
+    assert_eq!(st, 202, "{body}");
+    let id = body["id"].as_str().unwrap().to_string();
+    // Asked at once, answered once the precompute ends, not 409.
+    let (st, h, b) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=8&h=8")),
+    )
+    .await;
+    assert_eq!(st, 200, "{h:?} {}", String::from_utf8_lossy(&b));
+    s.stop().await;
+}

@@ -87,6 +87,11 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
     pub default_texture: bool,
 
+    /// Seconds a voxel request waits for a texture that is still being
+    /// precomputed before it is answered 409 with Retry-After.
+    #[arg(long, env = "SOLIDTEX_PENDING_WAIT", default_value_t = 15.0, value_parser = parse_pending_wait)]
+    pub pending_wait: f64,
+
     /// Bearer token that uploads, deletions and `/metrics` require
     /// (`Authorization: Bearer TOKEN`); without one they are open, as
     /// reading voxels always is.
@@ -144,6 +149,7 @@ impl ServeArgs {
             default_texture: false,
             token: None,
             cors_origins: Vec::new(),
+            pending_wait: 0.0,
             shutdown_timeout: 30,
             log_format: LogFormat::Pretty,
             log: "info".into(),
@@ -190,6 +196,14 @@ pub fn parse_wait(s: &str) -> Result<f64, String> {
         _ => Err(format!(
             "`{s}` is not a number of seconds from 0.001 to 86400"
         )),
+    }
+}
+
+/// Parses `--pending-wait`: seconds from 0 (answer 409 at once) to 600.
+pub fn parse_pending_wait(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..=600.0).contains(&v) => Ok(v),
+        _ => Err(format!("`{s}` is not a number of seconds from 0 to 600")),
     }
 }
 

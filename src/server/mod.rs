@@ -140,6 +140,7 @@ impl Server {
                 })
                 .collect::<anyhow::Result<_>>()?,
             default_texture: args.default_texture,
+            pending_wait: std::time::Duration::from_secs_f64(args.pending_wait),
         });
         tracing::info!(
             addr = %listener.local_addr()?,

@@ -52,6 +52,8 @@ pub struct Entry {
     stage: Mutex<&'static str>,
     precompute_seconds: Mutex<Option<f64>>,
     deleted: AtomicBool,
+    /// Woken whenever the status changes.
+    settled: tokio::sync::Notify,
 }
 
 impl Entry {
@@ -80,6 +82,7 @@ impl Entry {
             stage: Mutex::new("queued"),
             precompute_seconds: Mutex::new(None),
             deleted: AtomicBool::new(false),
+            settled: tokio::sync::Notify::new(),
         }
     }
 
@@ -105,6 +108,24 @@ impl Entry {
 
     fn set_status(&self, s: Status) {
         *self.status.write().unwrap_or_else(|e| e.into_inner()) = s;
+        self.settled.notify_waiters();
+    }
+
+    /// Waits until the texture is no longer pending, or until `deadline`.
+    pub async fn settle(&self, deadline: tokio::time::Instant) {
+        loop {
+            // Registered before the status is read, so a change between
+            // the two still wakes this waiter.
+            let changed = self.settled.notified();
+            tokio::pin!(changed);
+            changed.as_mut().enable();
+            if !matches!(self.status(), Status::Pending) {
+                return;
+            }
+            if tokio::time::timeout_at(deadline, changed).await.is_err() {
+                return;
+            }
+        }
     }
 
     /// Precompute progress 0..=1 (1 once ready).

@@ -76,6 +76,8 @@ pub struct Shared {
     /// Whether the bundled texture is registered at start (`/readyz`
     /// waits for it and reports it missing).
     pub default_texture: bool,
+    /// How long a voxel request waits for a pending texture before 409.
+    pub pending_wait: std::time::Duration,
 }
 
 /// Handler state: cheap to clone.

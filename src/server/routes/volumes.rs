@@ -142,7 +142,7 @@ pub async fn precomputed_info_route(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let doc = precomputed_info(tex.max_lod(), s.chunk_size);
     let key = format!("precomputed/info/{}", s.chunk_size);
     Ok(metadata_response(&entry, &key, &headers, &doc))
@@ -202,7 +202,7 @@ pub async fn precomputed_chunk(
     Path((id, scale, name)): Path<(String, String, String)>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let lod = path_lod(&scale, tex.max_lod())?;
     let origin = precomputed_chunk_origin(&name, lod, s.chunk_size)?;
     let [x, y, z] = origin;
@@ -290,7 +290,7 @@ pub async fn zarr_group_route(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let doc = zarr_group(tex.max_lod(), s.chunk_size);
     let key = format!("zarr/group/{}", s.chunk_size);
     Ok(metadata_response(&entry, &key, &headers, &doc))
@@ -302,7 +302,7 @@ pub async fn zarr_array_route(
     Path((id, lod)): Path<(String, String)>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let lod = path_lod(&lod, tex.max_lod())?;
     let doc = zarr_array(lod, s.chunk_size);
     let key = format!("zarr/array/{lod}/{}", s.chunk_size);
@@ -325,7 +325,7 @@ pub async fn zarr_chunk(
     Path((id, lod, cz, cy, cx, cc)): Path<(String, String, String, String, String, String)>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let lod = path_lod(&lod, tex.max_lod())?;
     let (side, offset) = window(lod);
     let edge = i64::from(s.chunk_size);

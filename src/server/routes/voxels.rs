@@ -27,11 +27,20 @@ const DEFAULT_SIDE: u32 = 256;
 const DEFAULT_REGION_SIDE: u32 = 64;
 
 /// The texture of a voxel request, ready; the span records its id.
-pub(super) fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
+/// The texture `id` ready to synthesize. One still being precomputed is
+/// waited for up to the server's `--pending-wait` before the request is
+/// answered 409, so that a first request right after an upload (or after
+/// start, for the bundled texture) gets its voxels.
+pub(super) async fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
     if !valid_id(id) {
         return Err(ApiError::unknown_texture(id));
     }
     tracing::Span::current().record("texture", id);
+    if !s.pending_wait.is_zero()
+        && let Some(e) = s.registry.get(id)
+    {
+        e.settle(tokio::time::Instant::now() + s.pending_wait).await;
+    }
     s.registry.ready(id)
 }
 
@@ -182,7 +191,7 @@ pub async fn slice(
             "slices are served as `{at}.png`",
         ));
     };
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let axis = parse_axis(&axis)?;
     let at = parse_int("at", at, -COORD_LIMIT, COORD_LIMIT)?;
     let q = Query::parse(raw.as_deref())?;
@@ -217,7 +226,7 @@ pub async fn cut(
     RawQuery(raw): RawQuery,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let q = Query::parse(raw.as_deref())?;
     let origin = q.vec3("origin", [0.0; 3])?;
     let u = q.vec3("u", [1.0, 0.0, 0.0])?;
@@ -324,7 +333,7 @@ pub async fn region(
     RawQuery(raw): RawQuery,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let q = Query::parse(raw.as_deref())?;
     let origin = [coord(&q, "x")?, coord(&q, "y")?, coord(&q, "z")?];
     let max_side = MAX_REGION_VOXELS as u32;
@@ -365,7 +374,7 @@ pub async fn brick(
             "bricks are served as `{bx}_{by}_{bz}.raw`",
         ));
     };
-    let (entry, tex) = texture(&s, &id)?;
+    let (entry, tex) = texture(&s, &id).await?;
     let lod = parse_int("lod", &lod, 0u32, tex.max_lod())?;
     let e = s.brick_size as i64;
     let parts: Vec<&str> = stem.split('_').collect();
