@@ -128,9 +128,9 @@ pub enum Correction {
     /// Sparse appearance-space neighbourhoods (Lin 2009 §3.4.3, after
     /// Lefebvre and Hoppe 2006): in each plane the appearance vectors at
     /// the 4 diagonal locations, each averaged over the 3 direct
-    /// neighbours that predict it; candidates by k-coherence. Lower
-    /// texture-statistics distance than `Colour` on 8 of the 10 shared
-    /// exemplars (docs/quality.md).
+    /// neighbours that predict it; candidates by k-coherence. It keeps
+    /// thin features (veins, cracks, mortar) that `Colour` blurs
+    /// (docs/quality.md).
     #[default]
     Appearance,
     /// N×N colour neighbourhoods projected per query (Dong et al.), with
