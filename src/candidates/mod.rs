@@ -269,6 +269,18 @@ fn quantise_wide_vector(v: &[f32], scale: f32) -> [i16; SIMILAR_DIMS] {
     q
 }
 
+/// Sum of the squares of 16-bit differences, taken in pairs so that eight
+/// lanes are one `pmaddwd` (`N` even). Quantised distances of both
+/// corrections end here.
+#[inline(always)]
+pub fn sum_of_squares<const N: usize>(e: &[i16; N]) -> u32 {
+    let (pairs, _) = e.as_chunks::<2>();
+    pairs
+        .iter()
+        .map(|p| p[0] as i32 * p[0] as i32 + p[1] as i32 * p[1] as i32)
+        .sum::<i32>() as u32
+}
+
 /// Quantises an appearance coordinate to a 13-bit signed integer.
 #[inline]
 pub fn quantise_wide(v: f32, scale: f32) -> i16 {

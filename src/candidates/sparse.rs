@@ -244,20 +244,11 @@ fn quantise_vector(v: &[f32; SPARSE_DIMS], scale: f32) -> SparseVector {
     v.map(|x| super::quantise(x, scale))
 }
 
-/// Squared distance between two quantised vectors. Differences are taken
-/// in 16-bit lanes and their squares summed in pairs (one `pmaddwd` per
-/// eight lanes).
+/// Squared distance between two quantised vectors.
 #[inline(always)]
 pub fn sparse_distance(a: &SparseVector, b: &SparseVector) -> u32 {
-    let mut e = [0i16; SPARSE_DIMS];
-    for j in 0..SPARSE_DIMS {
-        e[j] = a[j] as i16 - b[j] as i16;
-    }
-    let mut sum = [0i32; SPARSE_DIMS / 2];
-    for j in 0..SPARSE_DIMS / 2 {
-        sum[j] = e[2 * j] as i32 * e[2 * j] as i32 + e[2 * j + 1] as i32 * e[2 * j + 1] as i32;
-    }
-    sum.iter().sum::<i32>() as u32
+    let e: [i16; SPARSE_DIMS] = std::array::from_fn(|j| a[j] as i16 - b[j] as i16);
+    super::sum_of_squares(&e)
 }
 
 #[cfg(test)]

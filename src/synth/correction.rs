@@ -42,7 +42,7 @@ mod appearance;
 use super::grid::{Box3, Grid};
 use crate::appearance::Projector;
 use crate::candidates::geometry::{AXES, Dims, offset_triple};
-use crate::candidates::{Candidates, Level, SIMILAR_DIMS, quantise};
+use crate::candidates::{Candidates, Level, SIMILAR_DIMS, quantise, sum_of_squares};
 use crate::params::{Correction, Slices, SynthParams};
 use crate::stack::spacing;
 use appearance::AppearanceCorrector;
@@ -154,8 +154,10 @@ impl<'a> Corrector<'a> {
         }
     }
 
-    /// The best candidate triple for the voxel at `p` (see
-    /// [`ColourCorrector::correct`] for the history window).
+    /// The best candidate triple for the voxel at `p`. Its history window
+    /// decides which version of each neighbour it reads: the latest (`work`)
+    /// inside `barrier`'s cell, the step's starting version (`barrier`'s
+    /// work) outside it; without a barrier, always the latest.
     #[inline]
     pub fn correct(
         &self,
@@ -164,9 +166,43 @@ impl<'a> Corrector<'a> {
         p: [i64; 3],
         s: &mut Scratch,
     ) -> [u32; 3] {
+        // Offsets along each axis that stay inside the barrier cell (every
+        // offset when there is none); `start` has the same layout as `work`.
+        let (start, inside) = match barrier {
+            Some((start, cell)) => (
+                start,
+                [0, 1, 2].map(|a| (cell.lo[a] - p[a], cell.hi[a] - 1 - p[a])),
+            ),
+            None => (work, [(i64::MIN, i64::MAX); 3]),
+        };
+        // Most voxels read no neighbour across the cell wall: their copy of
+        // the correction has no version choices to make.
+        let r = match self {
+            Corrector::Appearance(_) => 1,
+            Corrector::Colour(c) => c.reach,
+        };
+        if inside.iter().all(|&(lo, hi)| lo <= -r && hi >= r) {
+            self.correct_with::<false>(work, start, inside, p, s)
+        } else {
+            self.correct_with::<true>(work, start, inside, p, s)
+        }
+    }
+
+    /// [`Corrector::correct`] with the history window resolved:
+    /// `BY_WALL` says whether some neighbours lie outside the barrier cell
+    /// (`inside` bounds the offsets that do not).
+    #[inline(always)]
+    fn correct_with<const BY_WALL: bool>(
+        &self,
+        work: &Work,
+        start: &Work,
+        inside: [(i64, i64); 3],
+        p: [i64; 3],
+        s: &mut Scratch,
+    ) -> [u32; 3] {
         match self {
-            Corrector::Appearance(c) => c.correct(work, barrier, p),
-            Corrector::Colour(c) => c.correct(work, barrier, p, s),
+            Corrector::Appearance(c) => c.correct_with::<BY_WALL>(work, start, inside, p),
+            Corrector::Colour(c) => c.correct_with::<BY_WALL>(work, start, inside, p, s),
         }
     }
 }
@@ -212,30 +248,7 @@ impl<'a> ColourCorrector<'a> {
         }
     }
 
-    /// The best candidate triple for the voxel at `p`. Its history window
-    /// decides which version of each neighbour it reads: the latest (`work`)
-    /// inside `barrier`'s cell, the step's starting version (`barrier`'s
-    /// work) outside it; without a barrier, always the latest.
-    pub fn correct(
-        &self,
-        work: &Work,
-        barrier: Option<(&Work, &Box3)>,
-        p: [i64; 3],
-        s: &mut Scratch,
-    ) -> [u32; 3] {
-        let (start, inside) = history_window(work, barrier, p);
-        // Most voxels read no neighbour across the cell wall: their copy of
-        // the correction has no version choices to make.
-        if all_inside(&inside, self.reach) {
-            self.correct_with::<false>(work, start, inside, p, s)
-        } else {
-            self.correct_with::<true>(work, start, inside, p, s)
-        }
-    }
-
-    /// [`ColourCorrector::correct`] with the history window resolved:
-    /// `BY_WALL` says whether some neighbours lie outside the barrier cell
-    /// (`inside` bounds the offsets that do not).
+    /// See [`Corrector::correct_with`].
     #[inline(always)]
     fn correct_with<const BY_WALL: bool>(
         &self,
@@ -525,28 +538,6 @@ fn coherent_triples(moved: &[[u32; 3]; 27]) -> ([[u32; 3]; 19], usize) {
     (coherent, n)
 }
 
-/// Offsets along each axis that stay inside the barrier cell of `p`
-/// (every offset without one), and the version read beyond them.
-fn history_window<'w>(
-    work: &'w Work,
-    barrier: Option<(&'w Work, &Box3)>,
-    p: [i64; 3],
-) -> (&'w Work, [(i64, i64); 3]) {
-    match barrier {
-        Some((start, cell)) => (
-            start,
-            [0, 1, 2].map(|a| (cell.lo[a] - p[a], cell.hi[a] - 1 - p[a])),
-        ),
-        None => (work, [(i64::MIN, i64::MAX); 3]),
-    }
-}
-
-/// True when every read of a correction at reach `r` stays inside.
-#[inline]
-fn all_inside(inside: &[(i64, i64); 3], r: i64) -> bool {
-    inside.iter().all(|&(lo, hi)| lo <= -r && hi >= r)
-}
-
 /// How much a triple's three exemplar colours disagree (squared
 /// differences of each pair), times `weight`.
 #[inline]
@@ -716,19 +707,11 @@ fn sq_dist_u8(a: &[u8], b: &[u8]) -> u32 {
 }
 
 /// Squared L2 distance between wide-quantised appearance vectors. Values
-/// lie within ±4095, so differences fit an `i16` and the products sum in
-/// pairs (one `pmaddwd` per vector).
+/// lie within ±4095, so differences fit an `i16`.
 #[inline]
 fn sq_dist_i16(a: &[i16; SIMILAR_DIMS], b: &[i16; SIMILAR_DIMS]) -> u32 {
-    let mut e = [0i16; SIMILAR_DIMS];
-    for l in 0..SIMILAR_DIMS {
-        e[l] = a[l].wrapping_sub(b[l]);
-    }
-    let mut sum = [0i32; SIMILAR_DIMS / 2];
-    for l in 0..SIMILAR_DIMS / 2 {
-        sum[l] = e[2 * l] as i32 * e[2 * l] as i32 + e[2 * l + 1] as i32 * e[2 * l + 1] as i32;
-    }
-    sum.iter().sum::<i32>() as u32
+    let e: [i16; SIMILAR_DIMS] = std::array::from_fn(|l| a[l].wrapping_sub(b[l]));
+    sum_of_squares(&e)
 }
 
 #[cfg(test)]

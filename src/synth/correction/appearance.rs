@@ -35,16 +35,12 @@
 //! them, as the colour correction gives, left upsampled blocks standing.
 //! The best by distance of the quantised 12-location vectors wins.
 
-use super::{
-    Work, all_inside, coherent_triples, disagreement, gather_near, history_window, in_plane_slot,
-    prefetch,
-};
+use super::{Work, coherent_triples, disagreement, gather_near, in_plane_slot, prefetch};
 use crate::candidates::geometry::{AXES, Dims};
 use crate::candidates::sparse::{DIAGONALS, SparseTables, sparse_distance};
 use crate::candidates::{Candidates, Level};
 use crate::params::SynthParams;
 use crate::stack::spacing;
-use crate::synth::grid::Box3;
 
 /// Largest appearance dimension count per location (`pca_dims` ≤ 16).
 const MAX_LOCATION_DIMS: usize = 16;
@@ -136,19 +132,9 @@ impl<'a> AppearanceCorrector<'a> {
         }
     }
 
-    /// The best candidate triple for the voxel at `p`, reading each
-    /// neighbour in the version its history window gives.
-    pub fn correct(&self, work: &Work, barrier: Option<(&Work, &Box3)>, p: [i64; 3]) -> [u32; 3] {
-        let (start, inside) = history_window(work, barrier, p);
-        if all_inside(&inside, 1) {
-            self.correct_with::<false>(work, start, inside, p)
-        } else {
-            self.correct_with::<true>(work, start, inside, p)
-        }
-    }
-
+    /// See [`super::Corrector::correct_with`].
     #[inline(always)]
-    fn correct_with<const BY_WALL: bool>(
+    pub(super) fn correct_with<const BY_WALL: bool>(
         &self,
         work: &Work,
         start: &Work,
