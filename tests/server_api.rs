@@ -1098,3 +1098,15 @@ async fn a_request_right_after_an_upload_waits_for_its_precompute() {
     assert_eq!(st, 200, "{h:?} {}", String::from_utf8_lossy(&b));
     s.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_cors_origin_that_is_no_header_value_is_refused_at_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.cors_origins = vec!["https://a.example\nx".into()];
+    let err = solidtex::server::Server::bind(&args)
+        .await
+        .err()
+        .expect("refused");
+    assert!(format!("{err:#}").contains("CORS origin"), "{err:#}");
+}

@@ -273,6 +273,31 @@ mod tests {
     }
 
     #[test]
+    fn pending_wait_limits() {
+        assert_eq!(parse_pending_wait("0"), Ok(0.0));
+        assert_eq!(parse_pending_wait("600"), Ok(600.0));
+        assert!(parse_pending_wait("600.5").is_err());
+        assert!(parse_pending_wait("-0.1").is_err());
+        assert!(parse_pending_wait("NaN").is_err());
+        assert!(parse_pending_wait("later").is_err());
+        let c = Cli::try_parse_from(["x"]).unwrap().serve;
+        assert_eq!(c.pending_wait, 15.0);
+        assert_eq!(c.token, None);
+        assert!(c.cors_origins.is_empty());
+        let c = Cli::try_parse_from([
+            "x",
+            "--token",
+            "t",
+            "--cors-origins",
+            "https://a.example,https://b.example",
+        ])
+        .unwrap()
+        .serve;
+        assert_eq!(c.token.as_deref(), Some("t"));
+        assert_eq!(c.cors_origins, ["https://a.example", "https://b.example"]);
+    }
+
+    #[test]
     fn chunk_sizes() {
         assert_eq!(parse_chunk_size("32"), Ok(32));
         assert_eq!(parse_chunk_size("256"), Ok(256));
