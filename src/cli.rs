@@ -31,6 +31,8 @@ enum Command {
     Region(RegionArgs),
     /// Synthesize an axis-aligned slice as a PNG.
     Slice(SliceArgs),
+    /// Synthesize an oblique cut (any plane) as a PNG.
+    Cut(CutArgs),
     /// Synthesize a full cube plus three orthogonal middle slices.
     Volume(VolumeArgs),
     /// Count voxels and corrections per level for a slice or region, for
@@ -335,13 +337,13 @@ struct RegionArgs {
     #[arg(long, allow_hyphen_values = true)]
     z: i64,
     /// Extent along x, voxels.
-    #[arg(long)]
+    #[arg(long = "width", alias = "w")]
     w: u32,
     /// Extent along y, voxels.
-    #[arg(long)]
+    #[arg(long = "height", alias = "h")]
     h: u32,
     /// Extent along z, voxels.
-    #[arg(long)]
+    #[arg(long = "depth", alias = "d")]
     d: u32,
     /// Output file.
     #[arg(short, long)]
@@ -365,14 +367,63 @@ struct SliceArgs {
     #[arg(long, default_value_t = 0, allow_hyphen_values = true)]
     v0: i64,
     /// Width in pixels (along u).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long = "width", alias = "w", default_value_t = 256)]
     w: u32,
     /// Height in pixels (along v).
-    #[arg(long, default_value_t = 256)]
+    #[arg(long = "height", alias = "h", default_value_t = 256)]
     h: u32,
     /// Output PNG.
     #[arg(short, long)]
     output: PathBuf,
+}
+
+#[derive(Args)]
+struct CutArgs {
+    #[command(flatten)]
+    src: SourceArgs,
+    /// Position of pixel (0, 0), `x,y,z` in voxels of the level served.
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
+    origin: [f64; 3],
+    /// Step per pixel to the right, `x,y,z`.
+    #[arg(long, value_parser = parse_vec3, default_value = "0.7071,0.7071,0", allow_hyphen_values = true)]
+    u: [f64; 3],
+    /// Step per pixel downwards, `x,y,z`.
+    #[arg(long, value_parser = parse_vec3, default_value = "-0.4082,0.4082,0.8165", allow_hyphen_values = true)]
+    v: [f64; 3],
+    /// Width in pixels.
+    #[arg(long, default_value_t = 256)]
+    width: u32,
+    /// Height in pixels.
+    #[arg(long, default_value_t = 256)]
+    height: u32,
+    /// Sampling between voxel centres: nearest or trilinear.
+    #[arg(long, default_value = "nearest")]
+    filter: CutFilter,
+    /// Output PNG.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+/// How `cut` samples between voxel centres.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CutFilter {
+    /// The nearest voxel.
+    Nearest,
+    /// A trilinear blend of the eight nearest voxels.
+    Trilinear,
+}
+
+/// Parses `x,y,z` into three finite numbers.
+fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [x, y, z] = parts[..] else {
+        return Err(format!("`{s}` is not three numbers `x,y,z`"));
+    };
+    let num = |t: &str| match t.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        _ => Err(format!("`{t}` is not a finite number")),
+    };
+    Ok([num(x)?, num(y)?, num(z)?])
 }
 
 #[derive(Args)]
@@ -386,9 +437,6 @@ struct VolumeArgs {
     #[arg(short, long)]
     output: PathBuf,
 }
-
-/// The bundled default exemplar.
-pub const DEFAULT_EXEMPLAR: &[u8] = include_bytes!("../assets/default.png");
 
 /// One sentence on what a synthesis command wrote and what it cost.
 fn summary(what: &str, path: &Path, t0: Instant, stats: &solidtex::SynthStats) -> String {
@@ -451,18 +499,17 @@ fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
                 p.display()
             );
             precompute(
-                &ExemplarSet::single(Exemplar::open(p)?),
+                &ExemplarSet::single(open_exemplar(p)?),
                 &AnalysisParams::default(),
                 false,
             )?
         }
         None => {
-            eprintln!("precomputing the candidates of the bundled exemplar");
-            precompute(
-                &ExemplarSet::single(Exemplar::decode(DEFAULT_EXEMPLAR)?),
-                &AnalysisParams::default(),
-                false,
-            )?
+            let set = ExemplarSet::single(solidtex::bundled::exemplar());
+            match solidtex::bundled::candidates_for(&set, &AnalysisParams::default()) {
+                Some(c) => c,
+                None => precompute(&set, &AnalysisParams::default(), false)?,
+            }
         }
     };
     let params = src.synth.params(src.scheme);
@@ -471,6 +518,23 @@ fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
         params,
         Arc::new(TileCache::new(1 << 30)),
     )?)
+}
+
+/// Opens a PNG or JPEG exemplar; a photo larger than the exemplar limit is
+/// downscaled, and the user told so.
+fn open_exemplar(path: &Path) -> anyhow::Result<Exemplar> {
+    let (e, original) =
+        Exemplar::open_fitting(path).with_context(|| format!("reading {}", path.display()))?;
+    if let Some((w, h)) = original {
+        eprintln!(
+            "{}: downscaled from {w}x{h} to {}x{} (exemplars are at most {} pixels per side)",
+            path.display(),
+            e.width(),
+            e.height(),
+            solidtex::exemplar::MAX_SIDE
+        );
+    }
+    Ok(e)
 }
 
 fn write_png(path: &Path, w: u32, h: u32, rgb: Vec<u8>) -> anyhow::Result<()> {
@@ -507,11 +571,11 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             }
         }
         Command::Precompute(a) => {
-            let xy = Exemplar::open(&a.exemplar)?;
+            let xy = open_exemplar(&a.exemplar)?;
             let set = match (&a.yz, &a.zx) {
                 (None, None) => ExemplarSet::single(xy),
                 (Some(yz), Some(zx)) => {
-                    ExemplarSet::triple(xy, Exemplar::open(yz)?, Exemplar::open(zx)?)?
+                    ExemplarSet::triple(xy, open_exemplar(yz)?, open_exemplar(zx)?)?
                 }
                 _ => bail!("give both --yz and --zx, or neither"),
             };
@@ -535,7 +599,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                     .file_name()
                     .map(|n| n.to_string_lossy().into_owned())
                     .unwrap_or_default();
-                let e = Exemplar::open(path)?;
+                let e = open_exemplar(path)?;
                 let scores = crate::evalcmd::evaluate(
                     &name,
                     &e,
@@ -580,6 +644,28 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             write_png(&a.output, a.w, a.h, rgb)?;
             let axis = format!("{:?}", a.axis).to_lowercase();
             let what = format!("a {}×{} {axis} slice at {axis} = {}", a.w, a.h, a.at);
+            eprintln!("{}", summary(&what, &a.output, t0, &stats));
+        }
+        Command::Cut(a) => {
+            let tex = load_source(&a.src)?;
+            let plane = solidtex::CutPlane {
+                origin: a.origin,
+                u: a.u,
+                v: a.v,
+                width: a.width,
+                height: a.height,
+            };
+            let filter = match a.filter {
+                CutFilter::Nearest => solidtex::Filter::Nearest,
+                CutFilter::Trilinear => solidtex::Filter::Trilinear,
+            };
+            let t0 = Instant::now();
+            let (rgb, stats) = tex.cut(&plane, a.src.lod, filter)?;
+            write_png(&a.output, a.width, a.height, rgb)?;
+            let what = format!(
+                "a {}×{} oblique cut from ({}, {}, {})",
+                a.width, a.height, a.origin[0], a.origin[1], a.origin[2]
+            );
             eprintln!("{}", summary(&what, &a.output, t0, &stats));
         }
         Command::Volume(a) => {

@@ -146,17 +146,54 @@ pub fn evaluate(
 
 /// Prints scores as a table.
 pub fn print(scores: &[Score]) {
+    println!("Every score is a distance: lower is better. `worse than slab` marks a corrected");
+    println!("slice that scores worse than the uncorrected slab initialisation it started from.");
     println!(
-        "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10} {:>10}",
+        "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10} {:>10}  note",
         "exemplar", "plane", "method", "coherence", "completeness", "histogram", "anisotropy"
     );
     for s in scores {
         let aniso = s.anisotropy.map_or("-".to_string(), |a| format!("{a:.3}"));
+        let losses = losses_to_slab(scores, s);
+        let note = if losses.is_empty() {
+            String::new()
+        } else {
+            format!("worse than slab: {}", losses.join(", "))
+        };
         println!(
-            "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4} {:>10}",
+            "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4} {:>10}  {note}",
             s.exemplar, s.orientation, s.method, s.coherence, s.completeness, s.histogram, aniso
         );
     }
+}
+
+/// The scores in which a corrected row (`dual-grid`, `standard`) is worse
+/// than the slab-only row of the same exemplar and plane.
+fn losses_to_slab(scores: &[Score], s: &Score) -> Vec<&'static str> {
+    if !matches!(s.method.as_str(), "dual-grid" | "standard") {
+        return Vec::new();
+    }
+    let Some(slab) = scores.iter().find(|r| {
+        r.method == "slab-only" && r.exemplar == s.exemplar && r.orientation == s.orientation
+    }) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    if s.coherence > slab.coherence {
+        out.push("coherence");
+    }
+    if s.completeness > slab.completeness {
+        out.push("completeness");
+    }
+    if s.histogram > slab.histogram {
+        out.push("histogram");
+    }
+    if let (Some(a), Some(b)) = (s.anisotropy, slab.anisotropy)
+        && a > b
+    {
+        out.push("anisotropy");
+    }
+    out
 }
 
 #[cfg(test)]
@@ -164,10 +201,31 @@ mod tests {
     use super::*;
 
     #[test]
+    fn corrected_rows_worse_than_the_slab_are_named() {
+        let row = |method: &str, c: f64, h: f64| Score {
+            exemplar: "e".into(),
+            orientation: "xy".into(),
+            method: method.into(),
+            coherence: c,
+            completeness: 1.0,
+            histogram: h,
+            anisotropy: None,
+        };
+        let scores = [
+            row("slab-only", 2.0, 0.1),
+            row("dual-grid", 1.0, 0.2),
+            row("standard", 3.0, 0.05),
+        ];
+        assert_eq!(losses_to_slab(&scores, &scores[0]), Vec::<&str>::new());
+        assert_eq!(losses_to_slab(&scores, &scores[1]), ["histogram"]);
+        assert_eq!(losses_to_slab(&scores, &scores[2]), ["coherence"]);
+    }
+
+    #[test]
     fn synthesis_parameters_reach_the_corrected_slices_only() {
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../shared/exemplars/animal_leather.png"
+            "/tests/fixtures/exemplars/animal_leather.png"
         );
         let e = Exemplar::open(std::path::Path::new(path)).unwrap();
         let score = |params: &SynthParams| evaluate("leather", &e, 24, false, params).unwrap();

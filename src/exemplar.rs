@@ -10,6 +10,9 @@ use std::io::Cursor;
 pub const MIN_SIDE: u32 = 16;
 /// Largest accepted exemplar side in pixels.
 pub const MAX_SIDE: u32 = 512;
+/// Largest photo side that [`Exemplar::decode_fitting`] downscales to
+/// [`MAX_SIDE`] (a 24-megapixel camera image, 6000×4000, fits).
+pub const MAX_PHOTO_SIDE: u32 = 6000;
 
 /// An RGB8 image, row-major, toroidally addressed by the synthesis.
 #[derive(Clone, PartialEq, Eq)]
@@ -44,41 +47,52 @@ impl Exemplar {
         })
     }
 
-    /// Decodes an encoded image (PNG; other formats the `image` crate was
-    /// built with). The header is checked before any pixel is allocated, so a
-    /// decompression bomb is rejected cheaply.
+    /// Decodes a PNG or JPEG image of 16 to 512 pixels per side. The header
+    /// is checked before any pixel is allocated, so a decompression bomb is
+    /// rejected cheaply.
     pub fn decode(bytes: &[u8]) -> Result<Self> {
-        let reader = image::ImageReader::new(Cursor::new(bytes))
-            .with_guessed_format()
-            .map_err(|e| Error::MalformedImage(e.to_string()))?;
-        if reader.format().is_none() {
-            return Err(Error::MalformedImage(
-                "unrecognised image format (expected PNG)".into(),
-            ));
-        }
-        let (w, h) = reader
-            .into_dimensions()
-            .map_err(|e| Error::MalformedImage(e.to_string()))?;
+        let (w, h) = dimensions(bytes)?;
         check_side(w, h)?;
-        let mut reader = image::ImageReader::new(Cursor::new(bytes))
-            .with_guessed_format()
-            .map_err(|e| Error::MalformedImage(e.to_string()))?;
-        let mut limits = image::Limits::default();
-        limits.max_image_width = Some(MAX_SIDE);
-        limits.max_image_height = Some(MAX_SIDE);
-        limits.max_alloc = Some(64 << 20);
-        reader.limits(limits);
-        let img = reader
-            .decode()
-            .map_err(|e| Error::MalformedImage(e.to_string()))?
-            .to_rgb8();
+        let img = decode_rgb(bytes, w, h)?;
         Self::from_rgb(img.width(), img.height(), img.as_raw())
+    }
+
+    /// Like [`Exemplar::decode`], but a photo larger than [`MAX_SIDE`] (up to
+    /// [`MAX_PHOTO_SIDE`] per side) is downscaled to fit, keeping its aspect
+    /// ratio. Returns the original size when it was downscaled, so that the
+    /// caller can say so.
+    pub fn decode_fitting(bytes: &[u8]) -> Result<(Self, Option<(u32, u32)>)> {
+        let (w, h) = dimensions(bytes)?;
+        if w <= MAX_SIDE && h <= MAX_SIDE {
+            return Ok((Self::decode(bytes)?, None));
+        }
+        if w > MAX_PHOTO_SIDE || h > MAX_PHOTO_SIDE {
+            return Err(Error::MalformedImage(format!(
+                "image is {w}x{h}; photos up to {MAX_PHOTO_SIDE} pixels per side are downscaled to \
+                 {MAX_SIDE}, larger ones are refused"
+            )));
+        }
+        let img = decode_rgb(bytes, w, h)?;
+        // The longer side becomes MAX_SIDE; rounding keeps the aspect ratio.
+        let long = u64::from(w.max(h));
+        let fit = |s: u32| ((u64::from(s) * u64::from(MAX_SIDE) + long / 2) / long) as u32;
+        let (fw, fh) = (fit(w), fit(h));
+        check_side(fw, fh)?;
+        let small = image::imageops::resize(&img, fw, fh, image::imageops::FilterType::Lanczos3);
+        Ok((Self::from_rgb(fw, fh, small.as_raw())?, Some((w, h))))
     }
 
     /// Reads and decodes an image file.
     pub fn open(path: impl AsRef<std::path::Path>) -> Result<Self> {
         let bytes = std::fs::read(path)?;
         Self::decode(&bytes)
+    }
+
+    /// Reads and decodes an image file, downscaling a large photo
+    /// ([`Exemplar::decode_fitting`]).
+    pub fn open_fitting(path: impl AsRef<std::path::Path>) -> Result<(Self, Option<(u32, u32)>)> {
+        let bytes = std::fs::read(path)?;
+        Self::decode_fitting(&bytes)
     }
 
     /// Width in pixels.
@@ -100,6 +114,39 @@ impl Exemplar {
     pub fn to_rgb_bytes(&self) -> Vec<u8> {
         self.pixels.iter().flatten().copied().collect()
     }
+}
+
+/// The image's size from its header alone.
+fn dimensions(bytes: &[u8]) -> Result<(u32, u32)> {
+    let reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::MalformedImage(e.to_string()))?;
+    if reader.format().is_none() {
+        return Err(Error::MalformedImage(
+            "unrecognised image format (expected PNG or JPEG)".into(),
+        ));
+    }
+    reader
+        .into_dimensions()
+        .map_err(|e| Error::MalformedImage(e.to_string()))
+}
+
+/// Decodes to RGB8 an image whose header said `width`×`height` (already
+/// checked against a side limit); the decoder may allocate no more.
+fn decode_rgb(bytes: &[u8], width: u32, height: u32) -> Result<image::RgbImage> {
+    let mut reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::MalformedImage(e.to_string()))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(width);
+    limits.max_image_height = Some(height);
+    // RGBA8 of that size, with room for the decoder's own buffers.
+    limits.max_alloc = Some(u64::from(width) * u64::from(height) * 4 + (16 << 20));
+    reader.limits(limits);
+    Ok(reader
+        .decode()
+        .map_err(|e| Error::MalformedImage(e.to_string()))?
+        .to_rgb8())
 }
 
 fn check_side(width: u32, height: u32) -> Result<()> {

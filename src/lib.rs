@@ -13,6 +13,7 @@
 #![warn(missing_docs)]
 
 pub mod appearance;
+pub mod bundled;
 pub mod candidates;
 pub mod error;
 pub mod eval;

@@ -20,7 +20,7 @@ fn quick_bench_measures_everything_and_writes_the_page() {
         "--load-clients",
         "4",
         "--exemplars",
-        "../shared/exemplars",
+        "tests/fixtures/exemplars",
         "--markdown",
         page.to_str().unwrap(),
     ]);

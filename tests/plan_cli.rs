@@ -7,7 +7,11 @@ use common::solidtex_json;
 use serde_json::Value;
 
 fn plan(args: &[&str]) -> Value {
-    let leather = ["plan", "../shared/exemplars/animal_leather.png", "--json"];
+    let leather = [
+        "plan",
+        "tests/fixtures/exemplars/animal_leather.png",
+        "--json",
+    ];
     solidtex_json(&[&leather[..], args].concat())
 }
 

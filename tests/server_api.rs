@@ -1110,3 +1110,110 @@ async fn a_cors_origin_that_is_no_header_value_is_refused_at_start() {
         .expect("refused");
     assert!(format!("{err:#}").contains("CORS origin"), "{err:#}");
 }
+
+/// Encodes RGB8 as a JPEG.
+fn encode_jpeg(w: u32, h: u32, rgb: &[u8]) -> Vec<u8> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90)
+        .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn uploads_keep_their_name_take_jpeg_and_downscale_photos() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+
+    // A multipart file name becomes the texture's name, without its path.
+    let png = exemplar_png(32, 7);
+    let part = reqwest::multipart::Part::bytes(png.clone())
+        .file_name("some/dir/leaf.png")
+        .mime_str("image/png")
+        .unwrap();
+    let form = reqwest::multipart::Form::new()
+        .part("image", part)
+        .text("params", r#"{"levels": 3}"#);
+    let r = c
+        .post(s.url("/v1/textures"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 202);
+    let v: Value = r.json().await.unwrap();
+    assert_eq!(v["name"], "leaf.png");
+    assert!(v.get("notes").is_none(), "{v}");
+    let id = v["id"].as_str().unwrap().to_string();
+    let (_, _, list) = get(&c, &s.url("/v1/textures")).await;
+    let list: Value = serde_json::from_slice(&list).unwrap();
+    assert!(
+        list["textures"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t["id"] == id.as_str() && t["name"] == "leaf.png"),
+        "{list}"
+    );
+
+    // The exemplar thumbnail is the uploaded image, revalidated by ETag.
+    let url = s.url(&format!("/v1/textures/{id}/exemplar.png"));
+    let (st, h, b) = get(&c, &url).await;
+    assert_eq!(st, 200);
+    assert_eq!(h["content-type"], "image/png");
+    assert_eq!(decode_png(&b), decode_png(&png));
+    let tag = h["etag"].to_str().unwrap().to_string();
+    let r = c
+        .get(&url)
+        .header("if-none-match", tag)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 304);
+    let (st, _, _) = get(&c, &s.url("/v1/textures/nope/exemplar.png")).await;
+    assert_eq!(st, 404);
+
+    // A raw JPEG body, named by the query string (which is no parameter).
+    let rgb = decode_png(&exemplar_png(40, 3)).2;
+    let r = c
+        .post(s.url("/v1/textures?levels=3&name=photo.jpg"))
+        .header("content-type", "image/jpeg")
+        .body(encode_jpeg(40, 40, &rgb))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 202);
+    let v: Value = r.json().await.unwrap();
+    assert_eq!(v["name"], "photo.jpg");
+    assert_eq!(v["exemplar"]["width"], 40);
+
+    // A photo over the size limit is downscaled, keeping its aspect, and
+    // the answer says so.
+    let (w, h) = (1040u32, 32u32);
+    let wide: Vec<u8> = (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w, i / w);
+            [
+                (x * 7 % 256) as u8,
+                (y * 9 % 256) as u8,
+                ((x ^ y) % 256) as u8,
+            ]
+        })
+        .collect();
+    let r = c
+        .post(s.url("/v1/textures?levels=3"))
+        .header("content-type", "image/jpeg")
+        .body(encode_jpeg(w, h, &wide))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 202);
+    let v: Value = r.json().await.unwrap();
+    assert_eq!(v["exemplar"]["width"], 512);
+    assert_eq!(v["exemplar"]["height"], 16);
+    let notes = v["notes"].to_string();
+    assert!(notes.contains("downscaled from 1040x32 to 512x16"), "{v}");
+    s.stop().await;
+}

@@ -12,8 +12,8 @@
 # answered 400.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-BIN=${1:-${CARGO_TARGET_DIR:-target}/debug/solidtex}
-[ -x "$BIN" ] || cargo build --bin solidtex
+BIN=${1:-${CARGO_TARGET_DIR:-target}/release/solidtex}
+[ -x "$BIN" ] || cargo build --release --bin solidtex
 command -v schemathesis >/dev/null || python3 -m pip install --quiet 'schemathesis==4.*'
 
 DATA=$(mktemp -d)

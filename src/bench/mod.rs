@@ -17,6 +17,7 @@ pub mod markdown;
 pub mod service;
 
 use crate::peak_alloc;
+use anyhow::Context;
 use serde::Serialize;
 use solidtex::{
     AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Region, Scheme,
@@ -249,7 +250,12 @@ pub fn run(opts: &Options) -> anyhow::Result<Results> {
     let mut synthesis = None;
     for name in sizes.precompute {
         let path = opts.exemplars.join(name);
-        let e = Exemplar::open(&path)?;
+        let e = Exemplar::open(&path).with_context(|| {
+            format!(
+                "reading exemplar {} (give the exemplar folder with --exemplars)",
+                path.display()
+            )
+        })?;
         let size = format!("{}×{}", e.width(), e.height());
         let set = ExemplarSet::single(e);
         let params = AnalysisParams {

@@ -34,7 +34,7 @@ pub mod store;
 pub use config::{LogFormat, ServeArgs};
 pub use error::ApiError;
 
-use crate::{Exemplar, TileCache};
+use crate::TileCache;
 use anyhow::Context;
 use registry::Registry;
 use routes::{AppState, Shared};
@@ -46,9 +46,6 @@ use std::time::Duration;
 
 /// Id under which the bundled exemplar is registered.
 pub const DEFAULT_ID: &str = "default";
-
-/// The bundled exemplar.
-pub const DEFAULT_EXEMPLAR: &[u8] = include_bytes!("../../assets/default.png");
 
 /// A bound, loaded server, ready to run.
 pub struct Server {
@@ -103,13 +100,12 @@ impl Server {
         };
         registry.resume(todo);
         if args.default_texture {
-            let e = Exemplar::decode(DEFAULT_EXEMPLAR).context("bundled exemplar")?;
             let spec = TextureSpec {
-                planes: Planes::Single(e),
+                planes: Planes::Single(crate::bundled::exemplar()),
                 params: TextureParams::default(),
             };
             registry
-                .submit(Some(DEFAULT_ID), spec)
+                .submit(Some(DEFAULT_ID), spec, Some(DEFAULT_ID.to_string()))
                 .await
                 .map_err(|e| anyhow::anyhow!("registering the default texture: {e}"))?;
         }
@@ -207,8 +203,10 @@ pub async fn shutdown_signal() {
 fn init_tracing(args: &ServeArgs) {
     use tracing_subscriber::EnvFilter;
     let filter = EnvFilter::try_new(&args.log).unwrap_or_else(|_| EnvFilter::new("info"));
+    // Colour only for a person at a terminal, never into files.
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_writer(std::io::stderr);
     let _ = match args.log_format {
         LogFormat::Pretty => builder.try_init(),

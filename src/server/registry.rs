@@ -36,6 +36,8 @@ pub enum Status {
 pub struct Entry {
     /// Id in URLs.
     pub id: String,
+    /// The uploaded file's name, for people; not part of the id.
+    pub name: Option<String>,
     /// Content hash of exemplars and parameters.
     pub content_hash: String,
     /// Creation time, seconds since the Unix epoch.
@@ -66,6 +68,7 @@ impl Entry {
         let analysis_hash = spec.analysis_hash();
         Entry {
             id,
+            name: None,
             content_hash,
             analysis_hash,
             candidates: Mutex::new(None),
@@ -84,6 +87,17 @@ impl Entry {
             deleted: AtomicBool::new(false),
             settled: tokio::sync::Notify::new(),
         }
+    }
+
+    /// The entry with a display name.
+    fn named(mut self, name: Option<String>) -> Entry {
+        self.name = name;
+        self
+    }
+
+    /// The xy exemplar (the only one of a single-exemplar texture).
+    pub fn exemplar_xy(&self) -> &crate::Exemplar {
+        self.planes.named()[0].1
     }
 
     /// Current status.
@@ -167,6 +181,7 @@ impl Entry {
         StoredMeta {
             version: META_VERSION,
             id: self.id.clone(),
+            name: self.name.clone(),
             content_hash: self.content_hash.clone(),
             created: self.created,
             exemplar: self.exemplar,
@@ -308,6 +323,7 @@ impl Registry {
         self: &Arc<Self>,
         id: Option<&str>,
         spec: TextureSpec,
+        name: Option<String>,
     ) -> Result<Submitted, ApiError> {
         let hash = spec.content_hash();
         let fixed_id = id.is_some();
@@ -333,7 +349,7 @@ impl Registry {
             if let Some(old) = map.get(&id) {
                 old.deleted.store(true, Ordering::SeqCst);
             }
-            let e = Arc::new(Entry::new(id.clone(), hash, now(), spec));
+            let e = Arc::new(Entry::new(id.clone(), hash, now(), spec).named(name));
             map.insert(id.clone(), e.clone());
             e
         };
@@ -466,10 +482,13 @@ impl Registry {
                 let (name, p) = overall_progress(stage, f);
                 entry.set_progress(name, p);
             };
-            let c = self
-                .pool
-                .install(|| Candidates::compute(&set, &entry.params.analysis, &progress))
-                .map_err(|e| e.to_string())?;
+            let c = match crate::bundled::candidates_for(&set, &entry.params.analysis) {
+                Some(c) => c,
+                None => self
+                    .pool
+                    .install(|| Candidates::compute(&set, &entry.params.analysis, &progress))
+                    .map_err(|e| e.to_string())?,
+            };
             let c = Arc::new(c);
             let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
                 .map_err(|e| e.to_string())?;
@@ -560,15 +579,18 @@ impl Registry {
                     // Keep something to report: a 16×16 black placeholder.
                     let blank = crate::Exemplar::from_rgb(16, 16, &[0; 16 * 16 * 3])
                         .expect("valid placeholder");
-                    let entry = Arc::new(Entry::new(
-                        meta.id.clone(),
-                        meta.content_hash.clone(),
-                        meta.created,
-                        TextureSpec {
-                            planes: Planes::Single(blank),
-                            params,
-                        },
-                    ));
+                    let entry = Arc::new(
+                        Entry::new(
+                            meta.id.clone(),
+                            meta.content_hash.clone(),
+                            meta.created,
+                            TextureSpec {
+                                planes: Planes::Single(blank),
+                                params,
+                            },
+                        )
+                        .named(meta.name.clone()),
+                    );
                     let why = format!("stored exemplars unreadable: {e}");
                     entry.set_status(Status::Failed(why));
                     let _ = self.store.write_meta(&StoredMeta {
@@ -580,12 +602,15 @@ impl Registry {
                 }
             };
             let spec = TextureSpec { planes, params };
-            let entry = Arc::new(Entry::new(
-                meta.id.clone(),
-                meta.content_hash.clone(),
-                meta.created,
-                spec,
-            ));
+            let entry = Arc::new(
+                Entry::new(
+                    meta.id.clone(),
+                    meta.content_hash.clone(),
+                    meta.created,
+                    spec,
+                )
+                .named(meta.name.clone()),
+            );
             *entry
                 .precompute_seconds
                 .lock()

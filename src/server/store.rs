@@ -50,6 +50,9 @@ pub struct StoredMeta {
     pub version: u32,
     /// Texture id (the content hash, or `default`).
     pub id: String,
+    /// The uploaded file's name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
     /// Content hash of exemplars and parameters.
     pub content_hash: String,
     /// Creation time, seconds since the Unix epoch.
@@ -293,6 +296,7 @@ mod tests {
         StoredMeta {
             version: META_VERSION,
             id: id.into(),
+            name: Some("marble.png".into()),
             content_hash: id.into(),
             created: 5,
             exemplar: ExemplarInfo {

@@ -4,6 +4,7 @@
 #    neuroglancer_precomputed drivers) and cloud-volume, byte for byte
 #    against region.raw;
 #  - viewer.test.mjs: the browser viewer in headless Chromium;
+#  - viewer_zoom.test.mjs: how soon the viewer shows a cold view sharp;
 #  - neuroglancer.test.mjs: Neuroglancer itself rendering the texture.
 #
 #   tests/clients/run.sh [path/to/solidtex]
@@ -43,10 +44,11 @@ fi
 
 [ "${1:-}" = --install ] && exit 0
 
-export SOLIDTEX_BIN=${1:-${SOLIDTEX_BIN:-${CARGO_TARGET_DIR:-target}/debug/solidtex}}
-[ -x "$SOLIDTEX_BIN" ] || cargo build --bin solidtex
+export SOLIDTEX_BIN=${1:-${SOLIDTEX_BIN:-${CARGO_TARGET_DIR:-target}/release/solidtex}}
+[ -x "$SOLIDTEX_BIN" ] || cargo build --release --bin solidtex
 SOLIDTEX_BIN=$(realpath "$SOLIDTEX_BIN")
 export CLIENTS_NODE_DIR=$C/node CLIENTS_ARTEFACTS=$C/artefacts
 (cd tests/clients && "$C/venv/bin/python" -m pytest -q -p no:cacheprovider test_formats.py)
 node tests/clients/viewer.test.mjs
+node tests/clients/viewer_zoom.test.mjs
 PYTHON=$C/venv/bin/python node tests/clients/neuroglancer.test.mjs

@@ -1,5 +1,5 @@
-//! Shared fixtures: real exemplars from `../shared/exemplars`, precomputed
-//! once per test binary.
+//! Shared fixtures: real exemplars from `tests/fixtures/exemplars`,
+//! precomputed once per test binary.
 #![allow(dead_code)]
 
 use solidtex::{
@@ -10,14 +10,14 @@ use std::sync::{Arc, OnceLock};
 
 pub fn exemplar_path(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join("shared")
+        .join("tests")
+        .join("fixtures")
         .join("exemplars")
         .join(name)
 }
 
 pub fn exemplar(name: &str) -> Exemplar {
-    Exemplar::open(exemplar_path(name)).expect("shared exemplar readable")
+    Exemplar::open(exemplar_path(name)).expect("test exemplar readable")
 }
 
 /// A 32×32 crop of a real exemplar: small enough for fast tests, real

@@ -27,7 +27,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::cors::{AllowOrigin, Any, CorsLayer};
-use tower_http::trace::{DefaultOnResponse, TraceLayer};
+use tower_http::trace::TraceLayer;
 
 /// Every route as (method, path in OpenAPI notation). The router below
 /// serves exactly these; a test checks them against `openapi.yaml`.
@@ -113,6 +113,7 @@ pub fn router(state: AppState) -> Router {
             "/v1/textures/{id}",
             get(textures::show).delete(textures::remove),
         )
+        .route("/v1/textures/{id}/exemplar.png", get(textures::exemplar))
         .route("/v1/textures/{id}/slices/{axis}/{at}", get(voxels::slice))
         .route("/v1/textures/{id}/cut.png", get(voxels::cut))
         .route("/v1/textures/{id}/region.raw", get(voxels::region))
@@ -186,11 +187,9 @@ fn with_middleware(routes: Router<AppState>, state: AppState) -> Router {
                 tiles_cached = tracing::field::Empty,
             )
         })
-        .on_response(
-            DefaultOnResponse::new()
-                .level(tracing::Level::INFO)
-                .latency_unit(tower_http::LatencyUnit::Micros),
-        );
+        .on_response(log_response)
+        // Server errors are logged by `log_response`, at their own level.
+        .on_failure(());
     routes
         .fallback(no_route)
         .layer(middleware::from_fn(json_errors))
@@ -200,6 +199,20 @@ fn with_middleware(routes: Router<AppState>, state: AppState) -> Router {
         .layer(trace)
         .layer(cors)
         .with_state(state)
+}
+
+/// One line per answered request, at a level that keeps the default log
+/// quiet: successes and client errors (a viewer polls every second) are
+/// DEBUG; overload (503, which `/readyz` also answers while the default
+/// texture is loading) is INFO; other server errors are ERROR.
+fn log_response(res: &Response, latency: Duration, _span: &tracing::Span) {
+    let status = res.status().as_u16();
+    let micros = latency.as_micros() as u64;
+    match status {
+        503 => tracing::info!(status, latency_us = micros, "answered"),
+        500.. => tracing::error!(status, latency_us = micros, "answered"),
+        _ => tracing::debug!(status, latency_us = micros, "answered"),
+    }
 }
 
 async fn no_route(req: Request) -> ApiError {

@@ -1,6 +1,7 @@
 //! `/v1/textures`: upload exemplars, list, inspect and delete textures.
 
 use super::AppState;
+use super::voxels::{body_response, etag, not_modified, not_modified_response};
 use crate::Exemplar;
 use crate::server::error::ApiError;
 use crate::server::query::Query;
@@ -9,7 +10,7 @@ use crate::server::spec::{Planes, TextureParams, TextureSpec, valid_id};
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Request, State};
-use axum::http::{HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde_json::{Map, Value, json};
 use std::sync::Arc;
@@ -18,6 +19,7 @@ use std::sync::Arc;
 pub fn view(e: &Entry, brick_size: u32) -> Value {
     let mut v = json!({
         "id": e.id,
+        "name": e.name,
         "status": "pending",
         "progress": e.progress(),
         "stage": e.stage(),
@@ -93,12 +95,31 @@ enum RawPlanes {
     Triple([Bytes; 3]),
 }
 
+/// Longest texture name kept, in characters.
+const MAX_NAME_CHARS: usize = 120;
+
+/// A display name from an uploaded file's name: its last path component,
+/// without control characters, at most [`MAX_NAME_CHARS`] long; none when
+/// nothing printable is left.
+fn display_name(raw: &str) -> Option<String> {
+    let base = raw.rsplit(['/', '\\']).next().unwrap_or("");
+    let clean: String = base
+        .chars()
+        .filter(|c| !c.is_control())
+        .take(MAX_NAME_CHARS)
+        .collect();
+    let clean = clean.trim();
+    (!clean.is_empty()).then(|| clean.to_string())
+}
+
 /// `POST /v1/textures`: a PNG body, or multipart `xy`/`yz`/`zx` (or one
 /// `image`) with optional JSON `params`; parameters may also be given in
 /// the query string.
 pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response, ApiError> {
     let query = Query::parse(req.uri().query())?;
-    let mut flat = TextureParams::flat_from_pairs(query.pairs());
+    // `name` labels the texture; it is not a parameter and not in the id.
+    let mut name = query.raw("name").and_then(display_name);
+    let mut flat = TextureParams::flat_from_pairs(query.pairs().filter(|(k, _)| *k != "name"));
     let content_type = req
         .headers()
         .get(header::CONTENT_TYPE)
@@ -113,34 +134,43 @@ pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response,
         .to_ascii_lowercase();
     let limit = s.max_upload_bytes;
     let raw = match essence.as_str() {
-        "image/png" => RawPlanes::Single(read_body(req, limit).await?),
-        "multipart/form-data" => read_multipart(req, &mut flat).await?,
+        "image/png" | "image/jpeg" => RawPlanes::Single(read_body(req, limit).await?),
+        "multipart/form-data" => read_multipart(req, &mut flat, &mut name).await?,
         "" => {
             return Err(unsupported(
-                "missing Content-Type (send image/png or multipart/form-data)",
+                "missing Content-Type (send image/png, image/jpeg or multipart/form-data)",
             ));
         }
         other => {
             return Err(unsupported(&format!(
-                "unsupported Content-Type `{other}` (send image/png or multipart/form-data)"
+                "unsupported Content-Type `{other}` (send image/png, image/jpeg or multipart/form-data)"
             )));
         }
     };
     let params = TextureParams::from_flat(&flat)?;
-    let spec = tokio::task::spawn_blocking(move || decode(raw, params))
+    let (spec, notes) = tokio::task::spawn_blocking(move || decode(raw, params))
         .await
         .map_err(|e| ApiError::internal(e.to_string()))??;
-    let submitted = s.registry.submit(None, spec).await?;
+    let submitted = s.registry.submit(None, spec, name).await?;
     let (entry, status) = match submitted {
         Submitted::Known(e) => (e, StatusCode::CREATED),
         Submitted::Pending(e) => (e, StatusCode::ACCEPTED),
     };
     tracing::Span::current().record("texture", entry.id.as_str());
-    Ok(created_response(&entry, status, s.brick_size))
+    Ok(created_response(&entry, status, s.brick_size, &notes))
 }
 
-fn created_response(entry: &Arc<Entry>, status: StatusCode, brick_size: u32) -> Response {
-    let mut res = (status, Json(view(entry, brick_size))).into_response();
+fn created_response(
+    entry: &Arc<Entry>,
+    status: StatusCode,
+    brick_size: u32,
+    notes: &[String],
+) -> Response {
+    let mut body = view(entry, brick_size);
+    if !notes.is_empty() {
+        body["notes"] = json!(notes);
+    }
+    let mut res = (status, Json(body)).into_response();
     if let Ok(loc) = HeaderValue::from_str(&format!("/v1/textures/{}", entry.id)) {
         res.headers_mut().insert(header::LOCATION, loc);
     }
@@ -193,6 +223,7 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
 async fn read_multipart(
     req: Request,
     flat: &mut Map<String, Value>,
+    label: &mut Option<String>,
 ) -> Result<RawPlanes, ApiError> {
     let mut mp = Multipart::from_request(req, &()).await.map_err(|e| {
         ApiError::new(
@@ -204,6 +235,9 @@ async fn read_multipart(
     let (mut single, mut xy, mut yz, mut zx) = (None, None, None, None);
     while let Some(field) = mp.next_field().await.map_err(multipart_error)? {
         let name = field.name().unwrap_or("").to_string();
+        if matches!(name.as_str(), "image" | "exemplar" | "xy") && label.is_none() {
+            *label = field.file_name().and_then(display_name);
+        }
         let data = field.bytes().await.map_err(multipart_error)?;
         let slot = match name.as_str() {
             "image" | "exemplar" => &mut single,
@@ -264,7 +298,9 @@ async fn read_multipart(
     }
 }
 
-fn decode_one(name: &str, bytes: &[u8]) -> Result<Exemplar, ApiError> {
+/// Decodes one uploaded image; a photo larger than the exemplar limit is
+/// downscaled, and a note says so.
+fn decode_one(name: &str, bytes: &[u8], notes: &mut Vec<String>) -> Result<Exemplar, ApiError> {
     if bytes.is_empty() {
         return Err(ApiError::new(
             StatusCode::BAD_REQUEST,
@@ -272,26 +308,63 @@ fn decode_one(name: &str, bytes: &[u8]) -> Result<Exemplar, ApiError> {
             format!("{name}: empty image"),
         ));
     }
-    Exemplar::decode(bytes).map_err(|e| {
+    let (e, original) = Exemplar::decode_fitting(bytes).map_err(|e| {
         let mut a = ApiError::from(e);
         a.message = format!("{name}: {}", a.message);
         a
-    })
+    })?;
+    if let Some((w, h)) = original {
+        notes.push(format!(
+            "{name}: downscaled from {w}x{h} to {}x{} (exemplars are at most {} pixels per side)",
+            e.width(),
+            e.height(),
+            crate::exemplar::MAX_SIDE
+        ));
+    }
+    Ok(e)
 }
 
-fn decode(raw: RawPlanes, params: TextureParams) -> Result<TextureSpec, ApiError> {
+fn decode(raw: RawPlanes, params: TextureParams) -> Result<(TextureSpec, Vec<String>), ApiError> {
+    let mut notes = Vec::new();
     let planes = match raw {
-        RawPlanes::Single(b) => Planes::Single(decode_one("image", &b)?),
+        RawPlanes::Single(b) => Planes::Single(decode_one("image", &b, &mut notes)?),
         RawPlanes::Triple([a, b, c]) => {
             let t = [
-                decode_one("xy", &a)?,
-                decode_one("yz", &b)?,
-                decode_one("zx", &c)?,
+                decode_one("xy", &a, &mut notes)?,
+                decode_one("yz", &b, &mut notes)?,
+                decode_one("zx", &c, &mut notes)?,
             ];
             let p = Planes::Triple(Box::new(t));
             p.to_set()?;
             p
         }
     };
-    Ok(TextureSpec { planes, params })
+    Ok((TextureSpec { planes, params }, notes))
+}
+
+/// `GET /v1/textures/{id}/exemplar.png`: the texture's xy exemplar, for a
+/// thumbnail beside its slices.
+pub async fn exemplar(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    checked_id(&id)?;
+    tracing::Span::current().record("texture", id.as_str());
+    let e = s
+        .registry
+        .get(&id)
+        .ok_or_else(|| ApiError::unknown_texture(&id))?;
+    let tag = etag(&e, "exemplar.png");
+    if not_modified(&headers, &tag) {
+        return Ok(not_modified_response(&tag));
+    }
+    let xy = e.exemplar_xy().clone();
+    let png = tokio::task::spawn_blocking(move || {
+        crate::server::png::encode(xy.width(), xy.height(), &xy.to_rgb_bytes())
+    })
+    .await
+    .map_err(|e| ApiError::internal(e.to_string()))?
+    .map_err(|e| ApiError::internal(e.to_string()))?;
+    Ok(body_response(png, "image/png", &tag))
 }

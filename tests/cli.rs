@@ -1,0 +1,96 @@
+//! The synthesis commands end to end on the bundled exemplar (its
+//! candidates ship with the binary, so nothing is precomputed here).
+
+use std::path::Path;
+use std::process::Command;
+
+fn solidtex(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_solidtex"))
+        .args(args)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{args:?}: {stderr}");
+    stderr
+}
+
+fn rgb(path: &Path) -> (u32, u32, Vec<u8>) {
+    let img = image::open(path).unwrap().to_rgb8();
+    (img.width(), img.height(), img.into_raw())
+}
+
+#[test]
+fn a_cut_along_the_axes_is_the_axis_slice() {
+    let dir = tempfile::tempdir().unwrap();
+    let slice = dir.path().join("slice.png");
+    let cut = dir.path().join("cut.png");
+    let said = solidtex(&[
+        "slice",
+        "--axis",
+        "z",
+        "--at",
+        "7",
+        "--u0",
+        "-5",
+        "--v0",
+        "3",
+        "--width",
+        "40",
+        "--height",
+        "24",
+        "-o",
+        slice.to_str().unwrap(),
+    ]);
+    assert!(said.starts_with("wrote a 40×24 z slice at z = 7"), "{said}");
+    assert!(!said.contains("precomputing"), "{said}");
+    let said = solidtex(&[
+        "cut",
+        "--origin",
+        "-5,3,7",
+        "--u",
+        "1,0,0",
+        "--v",
+        "0,1,0",
+        "--width",
+        "40",
+        "--height",
+        "24",
+        "-o",
+        cut.to_str().unwrap(),
+    ]);
+    assert!(said.starts_with("wrote a 40×24 oblique cut"), "{said}");
+    let (w, h, a) = rgb(&slice);
+    assert_eq!((w, h), (40, 24));
+    assert_eq!(rgb(&cut), (w, h, a));
+}
+
+#[test]
+fn short_size_options_are_aliases_of_the_long_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let long = dir.path().join("long.raw");
+    let short = dir.path().join("short.raw");
+    let corner = ["--x", "3", "--y", "-2", "--z", "9"];
+    let run = |sizes: [&str; 6], out: &Path| {
+        let mut args = vec!["region"];
+        args.extend(corner);
+        args.extend(sizes);
+        args.extend(["-o", out.to_str().unwrap()]);
+        solidtex(&args)
+    };
+    run(["--width", "6", "--height", "5", "--depth", "4"], &long);
+    run(["--w", "6", "--h", "5", "--d", "4"], &short);
+    let bytes = std::fs::read(&long).unwrap();
+    assert_eq!(bytes.len(), 6 * 5 * 4 * 3);
+    assert_eq!(bytes, std::fs::read(&short).unwrap());
+}
+
+#[test]
+fn a_bad_vector_is_refused_with_its_reason() {
+    let out = Command::new(env!("CARGO_BIN_EXE_solidtex"))
+        .args(["cut", "--u", "1,0", "-o", "/nonexistent/cut.png"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("is not three numbers"), "{err}");
+}
