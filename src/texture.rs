@@ -252,6 +252,14 @@ impl Texture {
         self.engine.cut_rgb(plane, lod, filter)
     }
 
+    /// What a cold-cache synthesis of the cut `plane` would compute, per
+    /// level, counted without computing it.
+    pub fn plan_cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> Result<SynthStats> {
+        self.check_lod(lod)?;
+        check_side(plane.width, plane.height)?;
+        Ok(self.engine.plan_cut(plane, lod, filter))
+    }
+
     /// RGB8 colours of arbitrary voxels at level of detail `lod`.
     pub fn points(&self, points: &[[i64; 3]], lod: u32) -> Result<(Vec<[u8; 3]>, SynthStats)> {
         self.check_lod(lod)?;

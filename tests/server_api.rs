@@ -957,6 +957,35 @@ async fn request_budget_is_enforced() {
     assert!(err.to_string().contains("chunks"), "{err}");
 }
 
+/// What a request may synthesize is bounded, whatever its shape: a small
+/// image whose pixels land far apart costs many chains, and is stopped
+/// like a large slice and a large region; cheap requests still pass.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn synthesis_work_per_request_is_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.max_request_work = 60_000;
+    let s = TestServer::start(args).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 11).await;
+    let t = |p: &str| s.url(&format!("/v1/textures/{id}{p}"));
+    let (st, _, small) = get(&c, &t("/slices/z/0.png?w=8&h=8")).await;
+    assert_eq!(st, 200);
+    for path in [
+        "/slices/z/0.png?w=256&h=256",
+        "/cut.png?w=16&h=16&u=1000,0,0&v=0,0,1000",
+        "/region.raw?w=64&h=64&d=64",
+    ] {
+        let (st, h, b) = get(&c, &t(path)).await;
+        assert_error(st, &h, &b, 400, "over_budget");
+    }
+    // Stopped requests leave the cache consistent: the small slice is the
+    // same bytes again.
+    let (st, _, again) = get(&c, &t("/slices/z/0.png?w=8&h=8")).await;
+    assert_eq!((st, again), (200, small));
+    s.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_token_guards_uploads_deletions_and_metrics() {
     let dir = tempfile::tempdir().unwrap();

@@ -792,3 +792,55 @@ fn the_appearance_correction_reads_its_direct_neighbours_and_keeps_its_bytes() {
 }
 
 const GOLDEN_APPEARANCE: [u64; 2] = [1810332970198558430, 16631519074278422502];
+
+/// Admission charges the planned cost, so the plan must count exactly what
+/// a cold synthesis computes: for regions and for cuts of both filters,
+/// including a cut whose pixels land far apart.
+#[test]
+fn plans_count_what_cold_synthesis_computes() {
+    let region = Region {
+        origin: [-7, 3, 11],
+        size: [20, 9, 5],
+    };
+    let cold = texture_with(SynthParams::default(), 256 << 20);
+    let planned = cold.plan(&region, 0).unwrap();
+    let (_, done) = cold.region(&region, 0).unwrap();
+    assert_eq!(planned.voxels_per_level, done.voxels_per_level);
+    assert_eq!(planned.corrections_per_level, done.corrections_per_level);
+
+    let cuts = [
+        (
+            CutPlane {
+                origin: [1.5, -2.0, 4.25],
+                u: [0.8, 0.6, 0.0],
+                v: [0.0, 0.3, 0.95],
+                width: 24,
+                height: 16,
+            },
+            Filter::Trilinear,
+        ),
+        (
+            CutPlane {
+                origin: [0.0, 0.0, 0.0],
+                u: [40.0, 0.0, 0.0],
+                v: [0.0, 0.0, 1.0],
+                width: 8,
+                height: 3,
+            },
+            Filter::Nearest,
+        ),
+    ];
+    for (plane, filter) in cuts {
+        let cold = texture_with(SynthParams::default(), 256 << 20);
+        let planned = cold.plan_cut(&plane, 0, filter).unwrap();
+        let (_, done) = cold.cut(&plane, 0, filter).unwrap();
+        assert_eq!(
+            planned.voxels_per_level, done.voxels_per_level,
+            "{filter:?}"
+        );
+        assert_eq!(
+            planned.corrections_per_level, done.corrections_per_level,
+            "{filter:?}"
+        );
+    }
+}

@@ -83,6 +83,14 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_REQUEST_VOXELS", default_value_t = 16 << 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_request_voxels: u64,
 
+    /// Most voxels one request may synthesize, all pyramid levels together
+    /// (voxels found in the cache are free). A request that needs more is
+    /// stopped and answered 400 `over_budget`. The default keeps any request
+    /// on a 128² exemplar to about ten seconds on two cores (a cold 256²
+    /// slice synthesizes about 0.4 Mi voxels, a 128³ region 3.2 Mi).
+    #[arg(long, env = "SOLIDTEX_MAX_REQUEST_WORK", default_value_t = 4 << 20, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_request_work: u64,
+
     /// Register the bundled exemplar under the id `default` at start.
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
     pub default_texture: bool,
@@ -146,6 +154,7 @@ impl ServeArgs {
             brick_size: 64,
             chunk_size: 32,
             max_request_voxels: 16 << 20,
+            max_request_work: 4 << 20,
             default_texture: false,
             token: None,
             cors_origins: Vec::new(),

@@ -69,6 +69,19 @@ impl ApiError {
         Self::new(StatusCode::BAD_REQUEST, "too_large", message)
     }
 
+    /// 400: the request needed more synthesis than one request may do.
+    pub fn over_budget(voxels: u64) -> Self {
+        Self::new(
+            StatusCode::BAD_REQUEST,
+            "over_budget",
+            format!(
+                "this request needs more than {voxels} voxels synthesized, the server's \
+                 budget per request (--max-request-work); ask for a smaller area or a \
+                 coarser lod"
+            ),
+        )
+    }
+
     /// 404: no texture has this id.
     pub fn unknown_texture(id: &str) -> Self {
         Self::new(

@@ -38,6 +38,8 @@ pub struct Jobs {
     /// Exponential moving average of job run time, seconds (`f64` bits).
     mean_run: Arc<AtomicU64>,
     metrics: Arc<Metrics>,
+    /// Voxels one job may synthesize (`None`: unbounded).
+    work_budget: Option<u64>,
 }
 
 /// Weight of the newest job in the moving average of run times.
@@ -55,7 +57,16 @@ impl Jobs {
             max_wait,
             mean_run: Arc::new(AtomicU64::new(0f64.to_bits())),
             metrics,
+            work_budget: None,
         }
+    }
+
+    /// The same queue, stopping any job that would synthesize more than
+    /// `voxels` voxels (all levels; cached ones are free) with 400
+    /// `over_budget`, so that no admitted request runs for long.
+    pub fn with_work_budget(mut self, voxels: u64) -> Jobs {
+        self.work_budget = Some(voxels);
+        self
     }
 
     /// Recent mean run time of a job, seconds (0 before the first).
@@ -132,7 +143,10 @@ impl Jobs {
         let metrics = self.metrics.clone();
         let this = self.clone();
         // Dropping this future (the client hung up) stops the synthesis.
-        let flag = CancelFlag::new();
+        let flag = self
+            .work_budget
+            .map_or_else(CancelFlag::new, CancelFlag::with_budget);
+        let budget_flag = flag.clone();
         let _cancel_on_drop = CancelOnDrop(flag.clone());
         let handle = tokio::task::spawn_blocking(move || {
             let _slots = (admitted, running_slot);
@@ -149,6 +163,9 @@ impl Jobs {
         });
         match handle.await {
             Ok(Ok(v)) => Ok(v),
+            Ok(Err(Cancelled)) if budget_flag.is_over_budget() => {
+                Err(ApiError::over_budget(self.work_budget.unwrap_or_default()))
+            }
             Ok(Err(Cancelled)) => Err(ApiError::internal("job cancelled")),
             Err(e) if e.is_panic() => {
                 let p = e.into_panic();

@@ -114,7 +114,8 @@ impl Server {
             args.queue,
             std::time::Duration::from_secs_f64(args.max_queue_wait),
             metrics.clone(),
-        );
+        )
+        .with_work_budget(args.max_request_work);
         let listener = tokio::net::TcpListener::bind(args.addr)
             .await
             .with_context(|| format!("binding {}", args.addr))?;

@@ -10,26 +10,68 @@
 use std::cell::RefCell;
 use std::panic::{AssertUnwindSafe, catch_unwind, resume_unwind};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-/// A flag that asks the syntheses run under it to stop.
+/// A flag that asks the syntheses run under it to stop, and optionally a
+/// budget of voxels they may synthesize before they are stopped.
 #[derive(Clone, Debug, Default)]
-pub struct CancelFlag(Arc<AtomicBool>);
+pub struct CancelFlag(Arc<State>);
+
+#[derive(Debug, Default)]
+struct State {
+    cancelled: AtomicBool,
+    /// Voxels still allowed; `None`: no budget.
+    budget: Option<AtomicU64>,
+    over_budget: AtomicBool,
+}
 
 impl CancelFlag {
-    /// A flag not yet set.
+    /// A flag not yet set, without a budget.
     pub fn new() -> CancelFlag {
         CancelFlag::default()
     }
 
-    /// Asks the syntheses under this flag to stop at their next check.
-    pub fn cancel(&self) {
-        self.0.store(true, Ordering::Relaxed);
+    /// A flag that also stops the syntheses under it once they have
+    /// synthesized more than `voxels` voxels (all levels together; voxels
+    /// found in the cache are free).
+    pub fn with_budget(voxels: u64) -> CancelFlag {
+        CancelFlag(Arc::new(State {
+            budget: Some(AtomicU64::new(voxels)),
+            ..State::default()
+        }))
     }
 
-    /// Whether [`CancelFlag::cancel`] was called.
+    /// Asks the syntheses under this flag to stop at their next check.
+    pub fn cancel(&self) {
+        self.0.cancelled.store(true, Ordering::Relaxed);
+    }
+
+    /// Whether [`CancelFlag::cancel`] was called, or the budget ran out.
     pub fn is_cancelled(&self) -> bool {
-        self.0.load(Ordering::Relaxed)
+        self.0.cancelled.load(Ordering::Relaxed)
+    }
+
+    /// Whether the syntheses were stopped because they went over budget.
+    pub fn is_over_budget(&self) -> bool {
+        self.0.over_budget.load(Ordering::Relaxed)
+    }
+
+    /// Takes `voxels` from the budget; false (and the flag set) when that
+    /// is more than is left.
+    fn charge(&self, voxels: u64) -> bool {
+        let Some(left) = &self.0.budget else {
+            return true;
+        };
+        let ok = left
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |l| {
+                l.checked_sub(voxels)
+            })
+            .is_ok();
+        if !ok {
+            self.0.over_budget.store(true, Ordering::Relaxed);
+            self.cancel();
+        }
+        ok
     }
 }
 
@@ -74,9 +116,40 @@ pub(crate) fn check(flag: &Option<CancelFlag>) {
     }
 }
 
+/// Charges `voxels` about to be synthesized to the flag's budget, and
+/// unwinds out of the synthesis when they do not fit.
+pub(crate) fn charge(flag: &Option<CancelFlag>, voxels: u64) {
+    if let Some(f) = flag
+        && !f.charge(voxels)
+    {
+        resume_unwind(Box::new(Cancelled));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_budget_stops_what_goes_over_it() {
+        let flag = CancelFlag::with_budget(100);
+        let r = run_cancellable(&flag, || {
+            charge(&current(), 60);
+            charge(&current(), 40);
+            assert!(!flag.is_cancelled());
+            charge(&current(), 1);
+            unreachable!("over budget");
+        });
+        assert_eq!(r, Err(Cancelled));
+        assert!(flag.is_over_budget() && flag.is_cancelled());
+        // Without a budget, charges are free.
+        let free = CancelFlag::new();
+        assert_eq!(
+            run_cancellable(&free, || charge(&current(), u64::MAX)),
+            Ok(())
+        );
+        assert!(!free.is_over_budget());
+    }
 
     #[test]
     fn a_set_flag_stops_at_the_next_check() {

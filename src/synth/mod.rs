@@ -429,6 +429,9 @@ impl Engine {
         );
         drop(peeked);
         cancel::check(&acc.cancel);
+        if !acc.dry {
+            cancel::charge(&acc.cancel, chain.need.count());
+        }
         acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
         acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
         let known_box = ends
@@ -638,7 +641,26 @@ impl Engine {
     /// Counts what synthesizing `r` from a cold cache would compute, per
     /// level, without computing it.
     pub(crate) fn plan_region(&self, r: &Region, lod: u32) -> SynthStats {
-        let dry = Engine {
+        let acc = Acc::new(self.init_level + 1, true);
+        let b = Box3::new(r.origin, r.size.map(|s| s as i64));
+        self.dry().level_box(lod as usize, &b, &acc);
+        acc.stats()
+    }
+
+    /// Counts what the cut `plane` would compute from a cold cache.
+    pub(crate) fn plan_cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> SynthStats {
+        let acc = Acc::new(self.init_level + 1, true);
+        let mut wanted = Wanted::new();
+        for p in cut_points(plane, filter).0 {
+            *wanted.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
+        }
+        self.dry().tiles(lod as usize, wanted, &acc);
+        acc.stats()
+    }
+
+    /// The same engine over a private, unbounded cache, for counting.
+    fn dry(&self) -> Engine {
+        Engine {
             cands: self.cands.clone(),
             params: self.params.clone(),
             cache: Arc::new(TileCache::new(usize::MAX)),
@@ -648,11 +670,7 @@ impl Engine {
             cell: self.cell,
             steps: self.steps.clone(),
             finest_steps: self.finest_steps.clone(),
-        };
-        let acc = Acc::new(self.init_level + 1, true);
-        let b = Box3::new(r.origin, r.size.map(|s| s as i64));
-        dry.level_box(lod as usize, &b, &acc);
-        acc.stats()
+        }
     }
 
     /// Exact voxel-level dependency chain of a few voxels (see
@@ -752,11 +770,9 @@ impl Engine {
                 });
             }
         }
+        let (pts, weights) = cut_points(plane, filter);
         let rgb = match filter {
             Filter::Nearest => {
-                let pts: Vec<[i64; 3]> = (0..w * h)
-                    .map(|i| at(i % w, i / w).map(|v| v.round() as i64))
-                    .collect();
                 let t = self.triples_at(k, &pts, &acc);
                 t.par_iter()
                     .flat_map_iter(|t| {
@@ -765,21 +781,6 @@ impl Engine {
                     .collect()
             }
             Filter::Trilinear => {
-                let mut pts = Vec::with_capacity(w * h * 8);
-                let mut weights = Vec::with_capacity(w * h * 8);
-                for i in 0..w * h {
-                    let q = at(i % w, i / w);
-                    let base = q.map(|v| v.floor());
-                    let f = [0, 1, 2].map(|a| q[a] - base[a]);
-                    for corner in 0..8 {
-                        let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
-                        pts.push([0, 1, 2].map(|a| base[a] as i64 + o[a] as i64));
-                        let wgt: f64 = (0..3)
-                            .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
-                            .product();
-                        weights.push(wgt as f32);
-                    }
-                }
                 let t = self.triples_at(k, &pts, &acc);
                 let mut out = vec![0u8; w * h * 3];
                 out.par_chunks_mut(3).enumerate().for_each(|(i, dst)| {
@@ -855,4 +856,39 @@ fn position(b: &Box3, i: usize) -> [i64; 3] {
         b.lo[1] + ((i / sx) % sy) as i64,
         b.lo[2] + (i / (sx * sy)) as i64,
     ]
+}
+
+/// The voxels a cut samples, pixel by pixel, and for the trilinear filter
+/// the eight corners of each pixel with their weights (nearest: no weights).
+fn cut_points(plane: &CutPlane, filter: Filter) -> (Vec<[i64; 3]>, Vec<f32>) {
+    let (w, h) = (plane.width as usize, plane.height as usize);
+    let at = |i: usize, j: usize| {
+        [0, 1, 2].map(|a| plane.origin[a] + i as f64 * plane.u[a] + j as f64 * plane.v[a])
+    };
+    match filter {
+        Filter::Nearest => {
+            let pts = (0..w * h)
+                .map(|i| at(i % w, i / w).map(|v| v.round() as i64))
+                .collect();
+            (pts, Vec::new())
+        }
+        Filter::Trilinear => {
+            let mut pts = Vec::with_capacity(w * h * 8);
+            let mut weights = Vec::with_capacity(w * h * 8);
+            for i in 0..w * h {
+                let q = at(i % w, i / w);
+                let base = q.map(|v| v.floor());
+                let f = [0, 1, 2].map(|a| q[a] - base[a]);
+                for corner in 0..8 {
+                    let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                    pts.push([0, 1, 2].map(|a| base[a] as i64 + o[a] as i64));
+                    let wgt: f64 = (0..3)
+                        .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
+                        .product();
+                    weights.push(wgt as f32);
+                }
+            }
+            (pts, weights)
+        }
+    }
 }
