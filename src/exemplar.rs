@@ -67,17 +67,26 @@ impl Exemplar {
             return Ok((Self::decode(bytes)?, None));
         }
         if w > MAX_PHOTO_SIDE || h > MAX_PHOTO_SIDE {
-            return Err(Error::MalformedImage(format!(
-                "image is {w}x{h}; photos up to {MAX_PHOTO_SIDE} pixels per side are downscaled to \
-                 {MAX_SIDE}, larger ones are refused"
-            )));
+            // Photos up to MAX_PHOTO_SIDE are downscaled; larger ones are not.
+            return Err(Error::ImageSize {
+                width: w,
+                height: h,
+                min: MIN_SIDE,
+                max: MAX_PHOTO_SIDE,
+            });
         }
         let img = decode_rgb(bytes, w, h)?;
         // The longer side becomes MAX_SIDE; rounding keeps the aspect ratio.
         let long = u64::from(w.max(h));
         let fit = |s: u32| ((u64::from(s) * u64::from(MAX_SIDE) + long / 2) / long) as u32;
         let (fw, fh) = (fit(w), fit(h));
-        check_side(fw, fh)?;
+        // Too thin to keep MIN_SIDE once downscaled: say what was sent.
+        check_side(fw, fh).map_err(|_| Error::ImageSize {
+            width: w,
+            height: h,
+            min: MIN_SIDE,
+            max: MAX_SIDE,
+        })?;
         let small = image::imageops::resize(&img, fw, fh, image::imageops::FilterType::Lanczos3);
         Ok((Self::from_rgb(fw, fh, small.as_raw())?, Some((w, h))))
     }

@@ -40,6 +40,7 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("POST", "/v1/textures"),
     ("GET", "/v1/textures/{id}"),
     ("DELETE", "/v1/textures/{id}"),
+    ("GET", "/v1/textures/{id}/exemplar.png"),
     ("GET", "/v1/textures/{id}/slices/{axis}/{at}.png"),
     ("GET", "/v1/textures/{id}/cut.png"),
     ("GET", "/v1/textures/{id}/region.raw"),
