@@ -5,7 +5,7 @@
 
 import { spawn } from "node:child_process";
 import { mkdtempSync, readFileSync, rmSync, existsSync, statSync } from "node:fs";
-import { createServer } from "node:http";
+import { createServer, request as httpRequest } from "node:http";
 import { tmpdir } from "node:os";
 import { join, dirname, extname, resolve, sep } from "node:path";
 import { fileURLToPath } from "node:url";
@@ -21,26 +21,33 @@ export const ARTEFACTS = process.env.CLIENTS_ARTEFACTS || join(ROOT, "target", "
 
 export function binary() {
   if (process.env.SOLIDTEX_BIN) return process.env.SOLIDTEX_BIN;
-  return join(process.env.CARGO_TARGET_DIR || join(ROOT, "target"), "debug", "solidtex");
+  return join(process.env.CARGO_TARGET_DIR || join(ROOT, "target"), "release", "solidtex");
 }
 
 /// Starts `solidtex serve` on a free loopback port with a fresh data
-/// directory; resolves to { base, stop }.
-export function startServer(extraArgs = []) {
+/// directory; resolves to { base, stop }. The bundled `default` texture is
+/// off unless `options.defaultTexture`. With SOLIDTEX_VIEWER_DIR set, `base`
+/// is a proxy that serves `/` and `/viewer.js` from that directory (the
+/// viewer's sources, without rebuilding the binary) and forwards the rest.
+export function startServer(extraArgs = [], options = {}) {
   const dir = mkdtempSync(join(tmpdir(), "solidtex-browser-"));
   const proc = spawn(binary(), [
     "serve", "--addr", "127.0.0.1:0", "--data-dir", join(dir, "data"),
-    "--default-texture", "false", "--log", "warn", ...extraArgs,
+    "--default-texture", options.defaultTexture ? "true" : "false", "--log", "warn", ...extraArgs,
   ], { stdio: ["ignore", "pipe", "inherit"] });
   return new Promise((ok, fail) => {
-    let out = "";
-    proc.stdout.on("data", (d) => {
+    let out = "", listening = false;
+    proc.stdout.on("data", async (d) => {
       out += d;
       const m = out.match(/solidtex listening on (http:\/\/\S+)/);
-      if (m) {
+      if (m && !listening) {
+        listening = true;
+        const proxy = process.env.SOLIDTEX_VIEWER_DIR ? await viewerProxy(m[1], process.env.SOLIDTEX_VIEWER_DIR) : null;
         ok({
-          base: m[1],
+          base: proxy ? proxy.base : m[1],
+          server: m[1],
           async stop() {
+            if (proxy) await proxy.stop();
             proc.kill("SIGTERM");
             await new Promise((r) => proc.once("exit", r));
             rmSync(dir, { recursive: true, force: true });
@@ -49,6 +56,36 @@ export function startServer(extraArgs = []) {
       }
     });
     proc.once("exit", (code) => fail(new Error(`server exited (${code}) before listening: ${out}`)));
+  });
+}
+
+/// Serves the viewer's `index.html` and `viewer.js` from `dir` and forwards
+/// every other request to `upstream`; resolves to { base, stop }.
+function viewerProxy(upstream, dir) {
+  const up = new URL(upstream);
+  const server = createServer((req, res) => {
+    const path = new URL(req.url, "http://x").pathname;
+    if (req.method === "GET" && (path === "/" || path === "/viewer.js")) {
+      res.writeHead(200, { "Content-Type": path === "/" ? "text/html" : "text/javascript" });
+      res.end(readFileSync(join(dir, path === "/" ? "index.html" : "viewer.js")));
+      return;
+    }
+    const fwd = httpRequest({ host: up.hostname, port: up.port, path: req.url, method: req.method, headers: req.headers }, (r) => {
+      res.writeHead(r.statusCode, r.headers);
+      r.pipe(res);
+    });
+    fwd.on("error", () => res.destroy());
+    // A cancelled request is cancelled upstream too.
+    res.on("close", () => { if (!res.writableFinished) fwd.destroy(); });
+    req.pipe(fwd);
+  });
+  return new Promise((ok) => {
+    server.listen(0, "127.0.0.1", () => {
+      ok({
+        base: `http://127.0.0.1:${server.address().port}`,
+        stop: () => new Promise((r) => { server.closeAllConnections(); server.close(r); }),
+      });
+    });
   });
 }
 

@@ -1,7 +1,10 @@
 // The browser viewer in headless Chromium: an exemplar dropped on the page
-// is uploaded and becomes ready, its slice is drawn and is not blank, the
-// position slider changes it, the oblique cut and the 3D preview draw, and
-// the console stays free of errors. Screenshots go to ARTEFACTS.
+// is uploaded with the API's default parameters under its file name and
+// becomes ready; the list shows its name and thumbnail, and the exemplar is
+// shown beside the view; its slice fills the canvas and is not blank; the
+// position slider and a typed far position change it; the oblique cut and
+// the 3D preview draw; the texture is deleted; and the console stays free
+// of errors. Screenshots go to ARTEFACTS.
 
 import assert from "node:assert/strict";
 import { mkdirSync, readFileSync } from "node:fs";
@@ -34,10 +37,36 @@ try {
   await page.waitForSelector("#textures li[data-status=ready]", { timeout: 120_000 });
   await page.waitForFunction(() => /is ready|known already/.test(document.getElementById("status").textContent));
 
-  // The ready texture is selected and its slice drawn.
-  const drawn = () => page.evaluate(() => Number(document.getElementById("plane").dataset.drawn));
-  const waitDrawn = (above) => page.waitForFunction(
-    (n) => Number(document.getElementById("plane").dataset.drawn) > n, above, { timeout: 120_000 });
+  // The upload kept the API's defaults (so the same image has the same id
+  // from any client) and stored the file's name, which the list shows with
+  // a thumbnail of the exemplar.
+  const { textures } = await (await fetch(`${server.base}/v1/textures`)).json();
+  assert.equal(textures.length, 1);
+  const again = await fetch(`${server.base}/v1/textures?name=exemplar32.png`, {
+    method: "POST", headers: { "Content-Type": "image/png" }, body: readFileSync(join(HERE, "exemplar32.png")),
+  });
+  assert.equal((await again.json()).id, textures[0].id, "the viewer's upload did not keep the API's default parameters");
+  assert.equal(textures[0].name, "exemplar32.png");
+  const item = page.locator("#textures li[data-status=ready]");
+  assert.equal(await item.locator(".name").textContent(), "exemplar32.png");
+  await page.waitForFunction(() => {
+    const img = document.querySelector("#textures li .thumb");
+    return img && img.complete && img.naturalWidth > 0;
+  }, null, { timeout: 10_000 });
+  // The exemplar beside the view, to compare with.
+  await page.waitForFunction(() => {
+    const img = document.querySelector("#inset img");
+    return !document.getElementById("inset").hidden && img.naturalWidth === 32;
+  }, null, { timeout: 10_000 });
+  assert.ok(await page.locator("#info").textContent().then((t) => t.includes(textures[0].id)), "the selected texture's id is shown");
+  assert.equal(await page.locator("#params td").first().textContent(), "seed", "the selected texture's parameters are shown");
+
+  // The ready texture is selected and its slice drawn: every visible tile
+  // of the level of detail that matches the screen.
+  const plane = (key) => page.evaluate((k) => document.getElementById("plane").dataset[k], key);
+  const waitComplete = (hud) => page.waitForFunction(
+    (h) => document.getElementById("plane").dataset.complete === "1" && document.getElementById("hud").textContent.includes(h),
+    hud, { timeout: 120_000 });
   const pixels = () => page.evaluate(() => {
     const c = document.getElementById("plane");
     return Array.from(c.getContext("2d").getImageData(0, 0, c.width, c.height).data);
@@ -48,36 +77,62 @@ try {
     const m = s / n;
     return { mean: m, std: Math.sqrt(q / n - m * m) };
   };
-  await waitDrawn(0);
-  // Wait for the first refinement too, so the screenshot is sharp enough.
-  await waitDrawn(1);
+  const differs = (a, b) => {
+    let changed = 0;
+    for (let i = 0; i < a.length; i += 4) if (a[i] !== b[i] || a[i + 1] !== b[i + 1]) changed++;
+    return changed;
+  };
+  await waitComplete("z = 0");
+  assert.ok(Number(await plane("drawn")) > 0);
   const before = await pixels();
   const st = stats(before);
   assert.ok(st.std > 8, `slice looks blank: ${JSON.stringify(st)}`);
+  // The first image fills the canvas, which fills the stage: no band of
+  // background at the top or the bottom of a plain screenshot.
+  const stage = await page.locator("#stage").boundingBox();
+  const canvasBox = await page.locator("#plane").boundingBox();
+  assert.deepEqual(canvasBox, stage);
+  const shot = await page.screenshot({ clip: stage });
+  for (const y of [0, Math.floor(stage.height) - 6]) {
+    const band = await pngStats(browser.context, shot, { x: 0, y, w: Math.floor(stage.width), h: 6 });
+    assert.ok(band.std > 4, `a band of background at y = ${y}: ${JSON.stringify(band)}`);
+  }
   await page.screenshot({ path: join(ARTEFACTS, "viewer-slice.png") });
 
   // Move the slider: a new slice is drawn and differs.
-  const n0 = await drawn();
   await page.locator("#position").fill("41");
-  await waitDrawn(n0);
-  await page.waitForFunction(() => document.getElementById("hud").textContent.includes("z = 41"));
+  await waitComplete("z = 41");
   const after = await pixels();
-  let changed = 0;
-  for (let i = 0; i < before.length; i += 4) if (before[i] !== after[i] || before[i + 1] !== after[i + 1]) changed++;
-  assert.ok(changed > before.length / 4 / 4, `the slice hardly changed (${changed} pixels)`);
+  assert.ok(differs(before, after) > before.length / 4 / 4, `the slice hardly changed (${differs(before, after)} pixels)`);
+  assert.equal(await page.locator("#at").inputValue(), "41");
   await page.screenshot({ path: join(ARTEFACTS, "viewer-slice-moved.png") });
+
+  // Type a far position: the slice there is drawn, not blank, and new.
+  await page.locator("#at").fill("1000000");
+  await page.locator("#at").press("Enter");
+  await waitComplete("z = 1000000");
+  const far = await pixels();
+  assert.ok(stats(far).std > 8, `the far slice looks blank: ${JSON.stringify(stats(far))}`);
+  assert.ok(differs(after, far) > far.length / 4 / 4, "the far slice hardly differs");
+  assert.equal(Number(await page.locator("#position").inputValue()), 1000000, "the slider follows the typed position");
+  // The address names the view, so that it can be bookmarked.
+  await page.waitForFunction(() => /[#&]p=1000000(&|$)/.test(location.hash) && /[#&]a=z(&|$)/.test(location.hash));
+  await page.screenshot({ path: join(ARTEFACTS, "viewer-slice-far.png") });
 
   // Keyboard: the y axis, then the oblique cut.
   await page.locator("#plane").focus();
-  const n1 = await drawn();
   await page.keyboard.press("y");
-  await waitDrawn(n1);
+  await waitComplete("y = 1000000");
   assert.equal(await page.locator("#axis").inputValue(), "y");
-  const n2 = await drawn();
   await page.keyboard.press("c");
-  await waitDrawn(n2);
+  await waitComplete("yaw 30°");
   assert.ok(stats(await pixels()).std > 8, "cut looks blank");
   await page.screenshot({ path: join(ARTEFACTS, "viewer-cut.png") });
+
+  // The raw brick link points at a 64³ region around the view centre.
+  const raw = await page.locator("#download-raw").getAttribute("href");
+  assert.match(raw, /region\.raw\?x=-?\d+&y=-?\d+&z=-?\d+&w=64&h=64&d=64&lod=\d+$/);
+  assert.match(await page.locator("#download-raw").getAttribute("title"), /x varies fastest/);
 
   // The 3D preview: a carved sphere, then a deeper cut redraws it.
   await page.keyboard.press("v");
@@ -96,6 +151,13 @@ try {
   await page.mouse.move(box.x + box.width / 2 + 120, box.y + box.height / 2 + 40, { steps: 5 });
   await page.mouse.up();
   await page.screenshot({ path: join(ARTEFACTS, "viewer-3d-orbit.png") });
+
+  // Delete the texture (confirming the dialog): the list is empty again.
+  page.once("dialog", (d) => d.accept());
+  await page.locator("#delete").click();
+  await page.waitForFunction(() => document.querySelectorAll("#textures li").length === 0, null, { timeout: 10_000 });
+  await page.waitForFunction(() => /deleted/.test(document.getElementById("status").textContent));
+  assert.equal((await (await fetch(`${server.base}/v1/textures`)).json()).textures.length, 0);
 
   assert.deepEqual(errors, [], "console errors");
   console.log("viewer: ok");

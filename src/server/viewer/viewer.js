@@ -1,11 +1,18 @@
 // The solidtex viewer: plain JavaScript over the public HTTP API.
 //
-// - The texture list polls `/v1/textures`; an exemplar dropped on the page
-//   is uploaded as `image/png` and its precompute progress followed.
-// - Slice and cut views draw PNGs from `slices/{axis}/{at}.png` and
-//   `cut.png` on a 2D canvas. While the view moves they ask for a coarse
-//   level of detail (cheap, mostly cached); once it rests they refine level
-//   by level down to the one that matches the screen.
+// - The texture list polls `/v1/textures` and shows each texture's name
+//   (the uploaded file's) and a thumbnail of its exemplar; an exemplar
+//   dropped on the page is uploaded as a form (the file name labels it)
+//   with the API's default parameters, or the few set under "advanced".
+// - Slice and cut views are tiled: TILE² pixel tiles at the level of detail
+//   that matches the screen's pixel size, addressed by (plane, lod, tile),
+//   kept decoded in an LRU and drawn at once when cached. While the tiles of
+//   that level arrive, coarser cached tiles are drawn scaled up; tiles that
+//   scroll away are cancelled, a few requests run at once, and 503 answers
+//   are retried after `Retry-After`. The canvas says `data-complete="1"`
+//   once every visible tile of the target level (`data-lod`) is drawn.
+// - The address holds the view (texture, mode, axis, position, centre,
+//   zoom, cut angles), so that a place can be bookmarked.
 // - The 3D preview fetches one brick as raw RGB8 into a WebGL2 3D texture
 //   and ray-casts a carved shape (cube or sphere, cut by a plane) through
 //   it, so every face shows the solid texture.
@@ -14,6 +21,15 @@
 const API = "/v1/textures";
 const $ = (id) => document.getElementById(id);
 
+// Coordinates are integers within ±2^31 (openapi `Coordinate`).
+const COORD_MIN = -2147483648;
+const COORD_MAX = 2147483647;
+const TILE = 128; // tile side in pixels of its level of detail
+const MAX_INFLIGHT = 4; // tile requests at once, at most (fewer after a 503)
+const CACHE_TILES = 640; // decoded tiles kept (64 KiB each)
+const MAX_SCALE = 32; // screen pixels per finest voxel, zoomed in
+const LOD_SLACK = 0.15; // see targetLod
+
 const state = {
   textures: [],
   selected: null, // texture view (JSON) of the selected texture
@@ -21,7 +37,7 @@ const state = {
   axis: "z",
   position: 0, // slice position / cut offset, finest voxels
   center: [0, 0], // view centre in plane coordinates, finest voxels
-  scale: 4, // screen pixels per finest voxel
+  scale: 2, // CSS pixels per finest voxel
   yaw: 30,
   pitch: 35,
   shape: "sphere",
@@ -29,7 +45,30 @@ const state = {
   blockLod: null,
   orbit: { yaw: -35, pitch: 25, distance: 3.6 },
   uploading: null, // id of a texture being precomputed after an upload
+  progressive: true, // coarse tiles first while the target level arrives
 };
+
+const clampCoord = (v) => Math.max(COORD_MIN, Math.min(COORD_MAX, v));
+
+/// A texture's label: the uploaded file's name, else a short id.
+function label(t) {
+  if (!t) return "";
+  if (t.name) return t.name;
+  return t.id.length > 12 ? t.id.slice(0, 8) + "…" : t.id;
+}
+
+/// Device pixels per CSS pixel, capped: the level of detail follows the
+/// screen's own pixels.
+function dpr() {
+  return Math.max(1, Math.min(2, window.devicePixelRatio || 1));
+}
+
+/// The smallest zoom: one coarsest-level voxel per device pixel.
+function minScale() {
+  const t = state.selected;
+  const maxLod = t && t.max_lod != null ? t.max_lod : 3;
+  return 2 ** -maxLod / dpr();
+}
 
 // ---------------------------------------------------------------------
 // Status line
@@ -40,17 +79,18 @@ function say(text, isError) {
   s.classList.toggle("error", !!isError);
 }
 
+/// The message of a JSON error answer (`{"error": {code, message}}`).
 async function errorText(res) {
   try {
     const v = await res.json();
-    return v.error ? `${v.error.code}: ${v.error.message}` : res.statusText;
+    return v.error ? `${v.error.message} (${v.error.code})` : `${res.status} ${res.statusText}`;
   } catch (_) {
     return `${res.status} ${res.statusText}`;
   }
 }
 
 // ---------------------------------------------------------------------
-// Texture list and upload
+// Texture list, selected texture and upload
 
 async function refreshList() {
   let res;
@@ -62,84 +102,197 @@ async function refreshList() {
   }
   if (!res.ok) return;
   const v = await res.json();
-  // Re-render only on change, so that keyboard focus in the list stays.
   const changed = JSON.stringify(v.textures) !== JSON.stringify(state.textures);
   state.textures = v.textures;
   if (changed) renderList();
   if (state.selected) {
     const now = state.textures.find((t) => t.id === state.selected.id);
     if (!now) {
-      select(null);
-    } else if (now.status !== state.selected.status) {
+      select(state.textures.find((t) => t.status === "ready") || null);
+    } else if (now.status !== state.selected.status || now.name !== state.selected.name) {
       select(now);
     }
   } else {
-    const first = state.textures.find((t) => t.status === "ready");
+    const linked = linkedView && state.textures.find((t) => t.id === linkedView.t);
+    if (linkedView && !linked) linkedView = null; // a texture that is gone
+    const first = linked || state.textures.find((t) => t.status === "ready");
     if (first) select(first);
   }
   if (state.uploading) {
     const t = state.textures.find((t) => t.id === state.uploading);
     if (t && t.status === "ready") {
-      say(`texture ${t.id.slice(0, 8)} is ready (${(t.precompute_seconds || 0).toFixed(1)} s)`);
+      say(`${label(t)} is ready (${(t.precompute_seconds || 0).toFixed(1)} s)`);
       state.uploading = null;
       select(t);
     } else if (t && t.status === "failed") {
-      say(`precompute failed: ${t.reason}`, true);
+      say(`precompute of ${label(t)} failed: ${t.reason}`, true);
       state.uploading = null;
     } else if (t) {
-      say(`precomputing ${t.id.slice(0, 8)}: ${t.stage} ${(t.progress * 100).toFixed(0)}%`);
+      say(`precomputing ${label(t)}: ${t.stage} ${(t.progress * 100).toFixed(0)}%`);
     }
   }
+}
+
+const listItems = new Map(); // id -> li, reused so that focus and thumbnails stay
+
+function listItem(t) {
+  let li = listItems.get(t.id);
+  if (li) return li;
+  li = document.createElement("li");
+  li.tabIndex = 0;
+  li.dataset.id = t.id;
+  // The thumbnail route and the name arrived together in the API.
+  if ("name" in t) {
+    const img = document.createElement("img");
+    img.className = "thumb";
+    img.alt = "";
+    img.decoding = "async";
+    img.src = `${API}/${encodeURIComponent(t.id)}/exemplar.png`;
+    img.addEventListener("error", () => { img.style.visibility = "hidden"; });
+    li.append(img);
+  } else {
+    const ph = document.createElement("div");
+    ph.className = "thumb";
+    li.append(ph);
+  }
+  const text = document.createElement("div");
+  text.className = "text";
+  const name = document.createElement("div");
+  name.className = "name";
+  const meta = document.createElement("div");
+  meta.className = "meta";
+  const bar = document.createElement("div");
+  bar.className = "bar";
+  bar.append(document.createElement("div"));
+  text.append(name, meta, bar);
+  li.append(text);
+  const pick = () => {
+    const now = state.textures.find((x) => x.id === t.id);
+    if (now) select(now);
+  };
+  li.addEventListener("click", pick);
+  li.addEventListener("keydown", (e) => {
+    if (e.key === "Enter" || e.key === " ") {
+      e.preventDefault();
+      pick();
+    }
+  });
+  listItems.set(t.id, li);
+  return li;
 }
 
 function renderList() {
   const ul = $("textures");
-  ul.textContent = "";
+  const ids = new Set(state.textures.map((t) => t.id));
+  for (const [id, li] of listItems) {
+    if (!ids.has(id)) {
+      li.remove();
+      listItems.delete(id);
+    }
+  }
+  let prev = null;
   for (const t of state.textures) {
-    const li = document.createElement("li");
-    li.tabIndex = 0;
-    li.dataset.id = t.id;
+    const li = listItem(t);
     li.dataset.status = t.status;
-    if (state.selected && state.selected.id === t.id) li.classList.add("selected");
-    const id = document.createElement("div");
-    id.className = "id";
-    id.textContent = t.id.length > 20 ? t.id.slice(0, 16) + "…" : t.id;
-    const meta = document.createElement("div");
-    meta.className = "meta";
+    li.classList.toggle("selected", !!(state.selected && state.selected.id === t.id));
+    const [, text] = li.children;
+    const [name, meta, bar] = text.children;
+    name.textContent = label(t);
     const size = `${t.exemplar.width}×${t.exemplar.height}`;
     meta.textContent =
-      t.status === "ready" ? `${size} · ready · lod 0–${t.max_lod}`
+      t.status === "ready" ? `${size} · seed ${t.params && t.params.seed != null ? t.params.seed : "?"} · ${t.id.slice(0, 8)}`
         : t.status === "failed" ? `${size} · failed`
           : `${size} · ${t.stage} ${(t.progress * 100).toFixed(0)}%`;
-    li.append(id, meta);
-    if (t.status === "pending") {
-      const bar = document.createElement("div");
-      bar.className = "bar";
-      const fill = document.createElement("div");
-      fill.style.width = `${(t.progress * 100).toFixed(1)}%`;
-      bar.append(fill);
-      li.append(bar);
-    }
-    li.title = t.status === "failed" ? t.reason : t.id;
-    li.addEventListener("click", () => select(t));
-    li.addEventListener("keydown", (e) => {
-      if (e.key === "Enter" || e.key === " ") {
-        e.preventDefault();
-        select(t);
-      }
-    });
-    ul.append(li);
+    bar.hidden = t.status !== "pending";
+    bar.firstChild.style.width = `${(t.progress * 100).toFixed(1)}%`;
+    li.title = t.status === "failed" ? `${label(t)}: ${t.reason}` : `${label(t)}\n${t.id}`;
+    const want = prev ? prev.nextSibling : ul.firstChild;
+    if (want !== li) ul.insertBefore(li, want);
+    prev = li;
   }
+}
+
+// The parameters a user is likely to care about come first.
+const PARAM_ORDER = ["seed", "correction", "passes", "finest_passes", "fine_levels", "levels", "neighbourhood", "scheme", "grid", "jitter", "contrast", "consistency", "slices", "slab_thickness"];
+
+function renderInfo() {
+  const box = $("info");
+  const t = state.selected;
+  const wasOpen = !!(box.querySelector("#params") || {}).open;
+  box.hidden = !t;
+  box.textContent = "";
+  if (!t) return;
+  const head = document.createElement("div");
+  head.innerHTML = `<strong></strong><div class="id"></div><div class="what"></div>`;
+  head.querySelector("strong").textContent = label(t);
+  head.querySelector(".id").textContent = t.id;
+  const bits = [`${t.exemplar.width}×${t.exemplar.height} exemplar`, t.exemplar.planes === 3 ? "3 planes" : "1 plane"];
+  if (t.status === "ready") bits.push(`lod 0–${t.max_lod}`, `brick ${t.brick_size}³`);
+  else bits.push(t.status);
+  if (t.precompute_seconds != null) bits.push(`precomputed in ${t.precompute_seconds.toFixed(1)} s`);
+  head.querySelector(".what").textContent = bits.join(" · ");
+  const det = document.createElement("details");
+  det.id = "params";
+  det.open = wasOpen;
+  const sum = document.createElement("summary");
+  sum.textContent = "parameters";
+  const table = document.createElement("table");
+  const keys = Object.keys(t.params || {}).sort((a, b) => {
+    const ia = PARAM_ORDER.indexOf(a), ib = PARAM_ORDER.indexOf(b);
+    return (ia < 0 ? 99 : ia) - (ib < 0 ? 99 : ib) || a.localeCompare(b);
+  });
+  for (const k of keys) {
+    const tr = document.createElement("tr");
+    const a = document.createElement("td"), b = document.createElement("td");
+    a.textContent = k;
+    b.textContent = String(t.params[k]);
+    tr.append(a, b);
+    table.append(tr);
+  }
+  det.append(sum, table);
+  const actions = document.createElement("div");
+  actions.className = "actions";
+  const del = document.createElement("button");
+  del.className = "btn danger";
+  del.id = "delete";
+  del.textContent = "Delete";
+  del.title = "Delete this texture and its stored files";
+  del.addEventListener("click", () => remove(t));
+  actions.append(del);
+  box.append(head, det, actions);
+}
+
+/// The selected texture's exemplar beside the view, to compare with.
+function renderInset() {
+  const fig = $("inset");
+  const t = state.selected;
+  // The exemplar route arrived with texture names in the API.
+  if (!t || !("name" in t)) {
+    fig.hidden = true;
+    return;
+  }
+  const img = fig.querySelector("img");
+  const src = `${API}/${encodeURIComponent(t.id)}/exemplar.png`;
+  if (img.getAttribute("src") !== src) {
+    fig.hidden = true;
+    img.onload = () => { fig.hidden = false; };
+    img.onerror = () => { fig.hidden = true; };
+    img.src = src;
+  }
+  fig.querySelector("figcaption").textContent = `exemplar ${t.exemplar.width}×${t.exemplar.height}`;
 }
 
 function select(t) {
   const changed = !state.selected || !t || state.selected.id !== t.id;
+  if (linkedView && (!t || t.id !== linkedView.t)) linkedView = null;
   state.selected = t;
   renderList();
-  $("current").textContent = t ? `${t.id} · ${t.status}` : "";
+  renderInfo();
+  renderInset();
   if (!t || t.status !== "ready") {
-    plane.clear(t ? `texture ${t.status}` : "no texture");
+    plane.clear(t ? `${label(t)}: ${t.status}` : "no texture: drop an exemplar on the left");
     solid.clear();
+    updateDownloads();
     return;
   }
   const lodSel = $("block-lod");
@@ -154,25 +307,64 @@ function select(t) {
     state.blockLod = t.max_lod;
     lodSel.value = String(t.max_lod);
   }
+  state.scale = Math.max(minScale(), state.scale);
+  if (linkedView) applyLinkedView();
   plane.invalidate(true);
   solid.invalidate();
 }
 
-async function upload(file) {
-  if (!file) return;
-  if (file.type && file.type !== "image/png") {
-    say(`${file.name}: only PNG exemplars are accepted`, true);
+async function remove(t) {
+  if (!window.confirm(`Delete texture “${label(t)}” (${t.id})? Its stored files are removed.`)) return;
+  let res;
+  try {
+    res = await fetch(`${API}/${encodeURIComponent(t.id)}`, { method: "DELETE" });
+  } catch (e) {
+    say(`delete failed: ${e.message}`, true);
     return;
   }
-  const levels = $("levels").value;
+  if (!res.ok) {
+    say(`could not delete ${label(t)}: ${await errorText(res)}`, true);
+    return;
+  }
+  say(`deleted ${label(t)}`);
+  if (state.selected && state.selected.id === t.id) state.selected = null;
+  await refreshList();
+  if (!state.selected) select(null);
+}
+
+/// The advanced upload parameters that are set, as a JSON object.
+function uploadParams() {
+  const p = {};
+  const seed = $("p-seed").value.trim();
+  if (seed !== "") p.seed = Number(seed);
+  if ($("p-preset").value) p.preset = $("p-preset").value;
+  if ($("p-correction").value) p.correction = $("p-correction").value;
+  const passes = $("p-passes").value.trim();
+  if (passes !== "") p.passes = Number(passes);
+  return p;
+}
+
+async function upload(file) {
+  if (!file) return;
+  if (file.type && file.type !== "image/png" && file.type !== "image/jpeg") {
+    say(`${file.name}: only PNG and JPEG exemplars are accepted`, true);
+    return;
+  }
+  const params = uploadParams();
+  if (params.seed != null && !(Number.isInteger(params.seed) && params.seed >= 0)) {
+    say("the seed must be a whole number ≥ 0", true);
+    return;
+  }
+  // A form carries the file's name, which labels the texture; parameters
+  // left unset keep the API's defaults, so the same image is the same id
+  // whatever client uploads it.
+  const form = new FormData();
+  form.append("image", file, file.name || "exemplar.png");
+  if (Object.keys(params).length) form.append("params", JSON.stringify(params));
   say(`uploading ${file.name}…`);
   let res;
   try {
-    res = await fetch(`${API}?levels=${encodeURIComponent(levels)}`, {
-      method: "POST",
-      headers: { "Content-Type": "image/png" },
-      body: file,
-    });
+    res = await fetch(API, { method: "POST", body: form });
   } catch (e) {
     say(`upload failed: ${e.message}`, true);
     return;
@@ -183,7 +375,8 @@ async function upload(file) {
   }
   const t = await res.json();
   state.uploading = t.id;
-  say(t.status === "ready" ? `texture ${t.id.slice(0, 8)} is known already` : `precomputing ${t.id.slice(0, 8)}…`);
+  const notes = t.notes && t.notes.length ? ` (${t.notes.join("; ")})` : "";
+  say((t.status === "ready" ? `${label(t)} is known already` : `precomputing ${label(t)}…`) + notes);
   await refreshList();
   const now = state.textures.find((x) => x.id === t.id);
   if (now) select(now);
@@ -201,7 +394,10 @@ function setupUpload() {
       input.click();
     }
   });
-  input.addEventListener("change", () => upload(input.files[0]));
+  input.addEventListener("change", () => {
+    upload(input.files[0]);
+    input.value = "";
+  });
   for (const ev of ["dragenter", "dragover"]) {
     drop.addEventListener(ev, (e) => {
       e.preventDefault();
@@ -221,6 +417,120 @@ function setupUpload() {
 }
 
 // ---------------------------------------------------------------------
+// Downloads: the view as PNG, and a raw brick around the view centre
+
+const BRICK = 64;
+
+/// The finest-voxel position of the view centre.
+function centreVoxel() {
+  const c = { x: 0, y: 0, z: 0 };
+  if (state.mode === "cut") {
+    const { u, v, n } = cutBasis();
+    ["x", "y", "z"].forEach((a, i) => {
+      c[a] = Math.floor(n[i] * state.position + u[i] * state.center[0] + v[i] * state.center[1]);
+    });
+    return c;
+  }
+  const frame = { z: ["x", "y"], x: ["y", "z"], y: ["z", "x"] }[state.axis];
+  c[frame[0]] = Math.floor(state.center[0]);
+  c[frame[1]] = Math.floor(state.center[1]);
+  c[state.axis] = state.position;
+  return c;
+}
+
+// ---------------------------------------------------------------------
+// The view in the address (#t=ID&m=slice&a=z&p=0&c=0,0&s=2&yaw=30&pitch=35),
+// so that a place in the infinite texture can be bookmarked and shared.
+
+let linkedView = (() => {
+  const q = new URLSearchParams(location.hash.slice(1));
+  return q.has("t") ? Object.fromEntries(q) : null;
+})();
+
+/// Applies the view named in the address, once its texture is selected.
+function applyLinkedView() {
+  const q = linkedView;
+  linkedView = null;
+  if (!q || !state.selected || q.t !== state.selected.id) return;
+  const num = (x, d) => (x != null && x !== "" && Number.isFinite(Number(x)) ? Number(x) : d);
+  if (["x", "y", "z"].includes(q.a)) {
+    state.axis = q.a;
+    $("axis").value = q.a;
+  }
+  const c = (q.c || "").split(",").map(Number);
+  if (c.length === 2 && c.every(Number.isFinite)) state.center = c.map(clampCoord);
+  state.scale = Math.max(minScale(), Math.min(MAX_SCALE, num(q.s, state.scale)));
+  for (const k of ["yaw", "pitch"]) {
+    const lim = k === "yaw" ? 180 : 90;
+    state[k] = Math.max(-lim, Math.min(lim, Math.round(num(q[k], state[k]))));
+    $(k).value = String(state[k]);
+    $(`${k}-out`).textContent = String(state[k]);
+  }
+  setPosition(num(q.p, state.position));
+  if (["slice", "cut", "solid"].includes(q.m) && q.m !== state.mode) setMode(q.m);
+}
+
+let linkTimer = null;
+function updateLink() {
+  clearTimeout(linkTimer);
+  linkTimer = setTimeout(() => {
+    const t = state.selected;
+    if (!t || linkedView) return;
+    const c = state.center.map((x) => Math.round(x)).join(",");
+    const q = `t=${encodeURIComponent(t.id)}&m=${state.mode}&a=${state.axis}&p=${state.position}&c=${c}` +
+      `&s=${+state.scale.toPrecision(4)}&yaw=${state.yaw}&pitch=${state.pitch}`;
+    if (location.hash !== `#${q}`) history.replaceState(null, "", `#${q}`);
+  }, 400);
+}
+
+function updateDownloads() {
+  updateLink();
+  const a = $("download-raw");
+  const t = state.selected;
+  if (!t || t.status !== "ready") {
+    a.setAttribute("aria-disabled", "true");
+    a.removeAttribute("href");
+    return;
+  }
+  const lod = state.mode === "solid" ? (state.blockLod ?? t.max_lod) : plane.targetLod();
+  const k = 2 ** lod;
+  const c = centreVoxel();
+  const o = ["x", "y", "z"].map((ax) => Math.max(COORD_MIN, Math.min(COORD_MAX - BRICK, Math.floor(c[ax] / k) - BRICK / 2)));
+  a.href = `${API}/${encodeURIComponent(t.id)}/region.raw?x=${o[0]}&y=${o[1]}&z=${o[2]}&w=${BRICK}&h=${BRICK}&d=${BRICK}&lod=${lod}`;
+  const base = (t.name || t.id).replace(/\.[A-Za-z0-9]+$/, "").replace(/[^A-Za-z0-9_.-]+/g, "_");
+  a.download = `${base}-${o.join("_")}-lod${lod}-${BRICK}x${BRICK}x${BRICK}.rgb8.raw`;
+  a.removeAttribute("aria-disabled");
+  a.title =
+    `${BRICK}³ voxels at lod ${lod} (voxels ${k} finest voxel${k > 1 ? "s" : ""} wide) around the view centre, ` +
+    `lowest corner ${o.join(", ")} in lod-${lod} voxels.\n` +
+    `Raw RGB8: ${BRICK ** 3 * 3} bytes, 3 per voxel (r, g, b); x varies fastest, then y, then z: ` +
+    `byte 3·(x + ${BRICK}·(y + ${BRICK}·z)) is voxel (x, y, z)'s red. ` +
+    "The X-Solidtex-* headers repeat the shape and origin.";
+}
+
+function setupDownloads() {
+  $("download-png").addEventListener("click", (e) => {
+    const canvas = state.mode === "solid" ? $("solid") : $("plane");
+    const a = $("download-png");
+    if (a.dataset.ready === "1") {
+      a.dataset.ready = "0";
+      return; // the link holds this view's PNG: let the browser save it
+    }
+    e.preventDefault();
+    const t = state.selected;
+    const where = state.mode === "slice" ? `${state.axis}${state.position}` : state.mode === "cut" ? `cut${state.yaw}_${state.pitch}_${state.position}` : "3d";
+    canvas.toBlob((blob) => {
+      if (!blob) return;
+      if (a.href.startsWith("blob:")) URL.revokeObjectURL(a.href);
+      a.href = URL.createObjectURL(blob);
+      a.download = `${t ? (t.name || t.id).replace(/\.[A-Za-z0-9]+$/, "") : "solidtex"}-${where}.png`;
+      a.dataset.ready = "1";
+      a.click();
+    }, "image/png");
+  });
+}
+
+// ---------------------------------------------------------------------
 // Slice and cut views
 
 /// Rotation of the cut plane: columns u, v (in the plane) and n (normal).
@@ -236,17 +546,33 @@ function cutBasis() {
 
 const plane = (() => {
   const canvas = $("plane");
-  const ctx = canvas.getContext("2d");
-  let shown = null; // { img, key, x0, y0, pxPerVoxel (finest units), lod }
-  let controller = null;
-  let settleTimer = null;
-  let coarseTimer = null;
-  let generation = 0;
+  const ctx = canvas.getContext("2d", { alpha: false });
+  // Tile key -> { bmp, r }: the decoded part r = [x0, y0, x1, y1] (tile
+  // pixels) of the tile, least recently used first. A tile at the edge of
+  // the view is asked for only as far as it shows (in SNAP steps) and
+  // grown when more of it comes into view.
+  const cache = new Map();
+  const inflight = new Map(); // tile key -> { ctrl, r }
+  const retryAt = new Map(); // tile key -> time before which not to ask again
+  const failed = new Map(); // tile key -> message, not asked again
+  let queue = []; // tiles to fetch, most wanted first
+  let snapshot = null; // the last complete frame, drawn under missing tiles
+  let drawQueued = false;
+  let fetchTimer = null;
+  let retryTimer = null;
+  let hudText = "";
+  let errorShown = false;
+  // Requests at once: halved on each 503 (the server's queue is full or
+  // too slow), grown back as tiles arrive.
+  let limit = MAX_INFLIGHT;
   canvas.dataset.drawn = "0";
+  canvas.dataset.complete = "0";
 
+  // Canvas size in device pixels, following its box.
   function size() {
     const r = canvas.getBoundingClientRect();
-    const w = Math.max(1, Math.round(r.width)), h = Math.max(1, Math.round(r.height));
+    const d = dpr();
+    const w = Math.max(1, Math.round(r.width * d)), h = Math.max(1, Math.round(r.height * d));
     if (canvas.width !== w || canvas.height !== h) {
       canvas.width = w;
       canvas.height = h;
@@ -254,137 +580,354 @@ const plane = (() => {
     return [w, h];
   }
 
+  /// The level of detail whose voxels match the screen's pixels: the
+  /// coarsest whose voxel is no wider than a device pixel, give or take
+  /// LOD_SLACK (2^0.15: at most 11 % magnified, which does not show, where
+  /// the next finer level would cost up to 4 times the pixels: 0.27
+  /// px/voxel is lod 2, not 1).
   function targetLod() {
     const t = state.selected;
-    const lod = Math.floor(Math.log2(1 / state.scale) + 1e-9);
+    if (!t || t.max_lod == null) return 0;
+    const voxelsPerPixel = 1 / (state.scale * dpr());
+    const lod = Math.floor(Math.log2(voxelsPerPixel) + LOD_SLACK + 1e-9);
     return Math.max(0, Math.min(t.max_lod, lod));
   }
 
-  // The request for the current view at `lod`, with `coarse` asking for
-  // fewer pixels in a cut.
-  function request(lod, coarse) {
+  /// What the canvas shows now: the plane, where, and at which scale.
+  function currentView() {
     const t = state.selected;
+    if (!t || t.status !== "ready" || state.mode === "solid") return null;
     const [W, H] = size();
-    const k = 2 ** lod;
+    const ps = state.scale * dpr(); // device pixels per finest voxel
+    const v = {
+      t, W, H, ps, mode: state.mode,
+      cx: state.center[0], cy: state.center[1],
+      target: targetLod(),
+    };
+    const id = encodeURIComponent(t.id), pos = state.position;
     if (state.mode === "slice") {
-      const s = state.scale * k; // screen px per lod voxel
-      const u0 = Math.floor((state.center[0] - W / 2 / state.scale) / k);
-      const v0 = Math.floor((state.center[1] - H / 2 / state.scale) / k);
-      const w = Math.min(4096, Math.ceil(W / s) + 2);
-      const h = Math.min(4096, Math.ceil(H / s) + 2);
-      const at = Math.floor(state.position / k);
-      const url = `${API}/${t.id}/slices/${state.axis}/${at}.png?u0=${u0}&v0=${v0}&w=${w}&h=${h}&lod=${lod}`;
-      return { url, lod, place: { x0: u0 * k, y0: v0 * k, per: k } };
+      const axis = state.axis;
+      v.plane = `${t.id}|s|${axis}`;
+      v.source = (lod) => `${v.plane}|${Math.floor(pos / 2 ** lod)}`;
+      v.url = (lod, i, j, r) =>
+        `${API}/${id}/slices/${axis}/${Math.floor(pos / 2 ** lod)}.png?u0=${i * TILE + r[0]}&v0=${j * TILE + r[1]}` +
+        `&w=${r[2] - r[0]}&h=${r[3] - r[1]}&lod=${lod}`;
+    } else {
+      const { u, v: vv, n } = cutBasis();
+      const yaw = state.yaw, pitch = state.pitch;
+      // Trilinear samples where a voxel spans screen pixels; otherwise the
+      // nearest voxel, which depends on a thinner sheet of voxels (a cold
+      // cut costs about a quarter less) and looks the same there.
+      const filter = 2 ** v.target * ps >= 1.5 ? "trilinear" : "nearest";
+      // A stale frame of another cut still stands in while tiles arrive.
+      v.plane = `${t.id}|c`;
+      v.source = () => `${v.plane}|${yaw}|${pitch}|${pos}|${filter}`;
+      const f = (a) => a.map((x) => (Math.abs(x) < 5e-7 ? 0 : x).toFixed(6)).join(",");
+      // Pixel (x, y) of tile (i, j) at lod l is n·pos + u·(i·T + x)·2^l +
+      // v·(j·T + y)·2^l finest voxels: a pixel steps one lod-l voxel.
+      v.url = (lod, i, j, r) => {
+        const k = 2 ** lod, a = i * TILE + r[0], b = j * TILE + r[1];
+        const o = [0, 1, 2].map((c) => (n[c] * pos) / k + u[c] * a + vv[c] * b);
+        return `${API}/${id}/cut.png?origin=${f(o)}&u=${f(u)}&v=${f(vv)}&w=${r[2] - r[0]}&h=${r[3] - r[1]}` +
+          `&lod=${lod}&filter=${filter}`;
+      };
     }
-    // Screen px per image px: a cut is filtered, so half the screen's
-    // resolution is enough once a voxel spans two pixels or more.
-    const r = coarse ? 4 : state.scale >= 2 ? 2 : 1;
-    const w = Math.max(1, Math.ceil(W / r)), h = Math.max(1, Math.ceil(H / r));
-    const step = r / state.scale / k; // lod voxels per image px
-    const { u, v, n } = cutBasis();
-    const cx = state.center[0], cy = state.center[1];
-    const o = [0, 1, 2].map((a) =>
-      (n[a] * state.position + u[a] * (cx - (W / 2) / state.scale) + v[a] * (cy - (H / 2) / state.scale)) / k);
-    const f = (a) => a.map((x) => +x.toFixed(6)).join(",");
-    const url = `${API}/${t.id}/cut.png?origin=${f(o)}&u=${f(u.map((x) => x * step))}&v=${f(v.map((x) => x * step))}` +
-      `&w=${w}&h=${h}&lod=${lod}&filter=trilinear`;
-    return { url, lod, place: { x0: cx - W / 2 / state.scale, y0: cy - H / 2 / state.scale, per: r / state.scale, cut: true } };
+    return v;
   }
 
+  const SNAP = 32; // tile parts are asked for in steps of SNAP pixels
+
+  /// The tiles of `lod` that the view `v` shows, nearest the centre first,
+  /// each with the part `need` of it that shows.
+  function tiles(v, lod) {
+    const k = 2 ** lod, span = TILE * k;
+    // The view in lod-l pixels.
+    const x0 = (v.cx - v.W / 2 / v.ps) / k, x1 = (v.cx + v.W / 2 / v.ps) / k;
+    const y0 = (v.cy - v.H / 2 / v.ps) / k, y1 = (v.cy + v.H / 2 / v.ps) / k;
+    const i0 = Math.floor(x0 / TILE), i1 = Math.ceil(x1 / TILE) - 1;
+    const j0 = Math.floor(y0 / TILE), j1 = Math.ceil(y1 / TILE) - 1;
+    const src = v.source(lod);
+    const out = [];
+    // Tiles past the coordinate range are left out (nothing to show).
+    const lim = (i) => i * TILE >= COORD_MIN && (i + 1) * TILE - 1 <= COORD_MAX;
+    const part = (lo, hi, i) => [
+      Math.max(0, Math.floor((lo - i * TILE) / SNAP) * SNAP),
+      Math.min(TILE, Math.ceil((hi - i * TILE) / SNAP) * SNAP),
+    ];
+    for (let j = j0; j <= j1; j++) {
+      for (let i = i0; i <= i1; i++) {
+        if (!lim(i) || !lim(j)) continue;
+        const [nx0, nx1] = part(x0, x1, i), [ny0, ny1] = part(y0, y1, j);
+        if (nx1 <= nx0 || ny1 <= ny0) continue;
+        const mx = (i + 0.5) * span - v.cx, my = (j + 0.5) * span - v.cy;
+        out.push({ lod, i, j, k, key: `${src}|${lod}|${i}|${j}`, d: mx * mx + my * my, need: [nx0, ny0, nx1, ny1] });
+      }
+    }
+    out.sort((a, b) => a.d - b.d);
+    return out;
+  }
+
+  const covers = (r, need) => r[0] <= need[0] && r[1] <= need[1] && r[2] >= need[2] && r[3] >= need[3];
+  const union = (a, b) => [Math.min(a[0], b[0]), Math.min(a[1], b[1]), Math.max(a[2], b[2]), Math.max(a[3], b[3])];
+
+  /// Whether the part of `tile` that shows is cached (or will never be).
+  function have(tile) {
+    const e = cache.get(tile.key);
+    return (e && covers(e.r, tile.need)) || failed.has(tile.key);
+  }
+
+  function touch(key) {
+    const e = cache.get(key);
+    if (e) {
+      cache.delete(key);
+      cache.set(key, e);
+    }
+    return e;
+  }
+
+  function put(key, bmp, r) {
+    const old = cache.get(key);
+    if (old && old.bmp.close) old.bmp.close();
+    cache.delete(key);
+    cache.set(key, { bmp, r });
+    while (cache.size > CACHE_TILES) {
+      const [k, e] = cache.entries().next().value;
+      cache.delete(k);
+      if (e.bmp.close) e.bmp.close();
+    }
+  }
+
+  function drawTile(v, tile, e) {
+    const s = tile.k * v.ps; // device pixels per tile pixel
+    const ox = (tile.i * TILE * tile.k - v.cx) * v.ps + v.W / 2;
+    const oy = (tile.j * TILE * tile.k - v.cy) * v.ps + v.H / 2;
+    // Rounded edges, so that neighbours meet without seams.
+    const sx0 = Math.round(ox + e.r[0] * s), sx1 = Math.round(ox + e.r[2] * s);
+    const sy0 = Math.round(oy + e.r[1] * s), sy1 = Math.round(oy + e.r[3] * s);
+    ctx.drawImage(e.bmp, sx0, sy0, sx1 - sx0, sy1 - sy0);
+  }
+
+  function requestDraw() {
+    if (drawQueued) return;
+    drawQueued = true;
+    requestAnimationFrame(() => {
+      drawQueued = false;
+      draw();
+    });
+  }
+
+  // Draws what is cached: the last complete frame, coarser levels scaled
+  // up, then the target level; updates progress and the HUD.
   function draw() {
+    const v = currentView();
     const [W, H] = size();
     ctx.fillStyle = "#0d0e10";
     ctx.fillRect(0, 0, W, H);
-    if (!shown) return;
-    const { img, place } = shown;
-    ctx.imageSmoothingEnabled = !!place.cut;
-    // Screen position of the image's corner, in the current view.
-    const sx = (place.x0 - state.center[0]) * state.scale + W / 2;
-    const sy = (place.y0 - state.center[1]) * state.scale + H / 2;
-    const sw = img.width * place.per * state.scale;
-    const sh = img.height * place.per * state.scale;
-    ctx.drawImage(img, sx, sy, sw, sh);
+    if (!v) return;
+    const want = tiles(v, v.target);
+    const done = want.filter(have).length;
+    const complete = done === want.length;
+    if (!complete) {
+      if (snapshot && snapshot.plane === v.plane) {
+        // The last complete frame, where it lies in this one.
+        const s = snapshot, f = v.ps / s.ps;
+        ctx.imageSmoothingEnabled = true;
+        ctx.drawImage(s.canvas, (s.cx - s.W / 2 / s.ps - v.cx) * v.ps + W / 2, (s.cy - s.H / 2 / s.ps - v.cy) * v.ps + H / 2, s.W * f, s.H * f);
+      }
+      // Coarser levels scaled up (smoothly), then a finer level cached
+      // from before a zoom-out.
+      ctx.imageSmoothingEnabled = true;
+      for (let lod = v.t.max_lod; lod > v.target; lod--) {
+        for (const tile of tiles(v, lod)) {
+          const e = touch(tile.key);
+          if (e) drawTile(v, tile, e);
+        }
+      }
+      if (v.target > 0) {
+        const finer = tiles(v, v.target - 1);
+        if (finer.length <= 400) {
+          for (const tile of finer) {
+            const e = cache.get(tile.key);
+            if (e) drawTile(v, tile, e);
+          }
+        }
+      }
+    }
+    // The target level: crisp voxels when magnified twice or more, except
+    // in cuts, whose pixels are trilinear samples of the plane.
+    ctx.imageSmoothingEnabled = v.mode === "cut" || 2 ** v.target * v.ps < 2;
+    for (const tile of want) {
+      const e = touch(tile.key);
+      if (e) drawTile(v, tile, e);
+    }
+    canvas.dataset.lod = String(v.target);
+    canvas.dataset.tiles = `${done}/${want.length}`;
+    canvas.dataset.complete = complete ? "1" : "0";
+    // Whether some level covers the whole view already (coarse at first).
+    let covered = complete;
+    for (let lod = v.target + 1; lod <= v.t.max_lod && !covered; lod++) covered = tiles(v, lod).every(have);
+    canvas.dataset.covered = covered ? "1" : "0";
+    $("progress").firstChild.style.width = complete ? "0" : `${(100 * Math.max(done, 0.3)) / want.length}%`;
+    if (complete) {
+      // Kept to stand in for missing tiles after the next move.
+      if (!snapshot || snapshot.canvas.width !== W || snapshot.canvas.height !== H) {
+        const c = document.createElement("canvas");
+        c.width = W;
+        c.height = H;
+        snapshot = { canvas: c };
+      }
+      snapshot.canvas.getContext("2d").drawImage(canvas, 0, 0);
+      Object.assign(snapshot, { plane: v.plane, cx: v.cx, cy: v.cy, ps: v.ps, W, H });
+    }
+    hud(v, done, want.length);
   }
 
-  async function fetchImage(req, signal) {
-    const res = await fetch(req.url, { signal });
-    if (!res.ok) throw new Error(await errorText(res));
-    const blob = await res.blob();
-    return await createImageBitmap(blob);
+  function hud(v, done, total) {
+    const where = v.mode === "slice" ? `${state.axis} = ${state.position}` : `yaw ${state.yaw}° pitch ${state.pitch}° offset ${state.position}`;
+    const zoom = state.scale >= 1 ? `${+state.scale.toFixed(2)} px/voxel` : `${+state.scale.toFixed(3)} px/voxel (${+(1 / state.scale).toFixed(2)} voxels/px)`;
+    const progress = done === total ? `${total} tiles` : `${done} / ${total} tiles`;
+    const text = `${label(v.t)} · ${where} · centre ${state.center.map((c) => c.toFixed(0)).join(", ")}\n${zoom} · lod ${v.target} · ${progress}`;
+    if (text !== hudText) {
+      $("hud").textContent = text;
+      hudText = text;
+    }
   }
 
-  // Fetches `levels` one after the other, drawing each as it arrives,
-  // until a newer view cancels them.
-  async function load(levels, coarse) {
-    if (controller) controller.abort();
-    controller = new AbortController();
-    const signal = controller.signal;
-    const my = ++generation;
-    for (const lod of levels) {
-      const req = request(lod, coarse && lod === levels[0]);
-      const key = `${state.mode}|${req.url}`;
-      if (shown && shown.key === key) continue;
-      hud(`lod ${lod}…`);
-      let img;
-      try {
-        img = await fetchImage(req, signal);
-      } catch (e) {
-        if (e.name === "AbortError" || signal.aborted) return;
-        say(`could not draw: ${e.message}`, true);
+  // Chooses the tiles to fetch for the current view: a coarse level first
+  // when nothing coarse covers the view yet, then the target level from
+  // the centre out. Requests for tiles no longer shown are cancelled.
+  function schedule() {
+    clearTimeout(fetchTimer);
+    fetchTimer = null;
+    const v = currentView();
+    const wanted = [];
+    if (v) {
+      const want = tiles(v, v.target).filter((x) => !have(x));
+      if (want.length) {
+        const coarse = Math.min(v.t.max_lod, v.target + 2);
+        let covered = false;
+        for (let lod = coarse; lod > v.target && !covered; lod--) covered = tiles(v, lod).every(have);
+        if (state.progressive && coarse > v.target && !covered) wanted.push(...tiles(v, coarse).filter((x) => !have(x)));
+        wanted.push(...want);
+      }
+    }
+    const keys = new Set(wanted.map((x) => x.key));
+    for (const [key, f] of inflight) {
+      if (!keys.has(key)) {
+        f.ctrl.abort();
+        inflight.delete(key);
+      }
+    }
+    // A tile in flight that will not cover what shows is grown once it
+    // has arrived.
+    queue = wanted.filter((x) => !inflight.has(x.key));
+    for (const x of queue) {
+      const e = cache.get(x.key);
+      x.r = e ? union(e.r, x.need) : x.need;
+      x.url = v.url(x.lod, x.i, x.j, x.r);
+    }
+    pump();
+  }
+
+  function pump() {
+    clearTimeout(retryTimer);
+    retryTimer = null;
+    const now = performance.now();
+    let wait = Infinity;
+    for (let n = 0; n < queue.length && inflight.size < Math.floor(limit);) {
+      const tile = queue[n];
+      const at = retryAt.get(tile.key) || 0;
+      if (at > now) {
+        wait = Math.min(wait, at - now);
+        n++;
+        continue;
+      }
+      queue.splice(n, 1);
+      fetchTile(tile);
+    }
+    if (wait < Infinity) retryTimer = setTimeout(pump, wait + 10);
+  }
+
+  async function fetchTile(tile) {
+    const ctrl = new AbortController();
+    inflight.set(tile.key, { ctrl, r: tile.r });
+    try {
+      const res = await fetch(tile.url, { signal: ctrl.signal });
+      if (res.status === 503 || res.status === 429 || res.status === 409) {
+        // Overloaded, or the texture still being precomputed: ask again
+        // after Retry-After.
+        const ra = Number(res.headers.get("Retry-After"));
+        if (res.status !== 409) limit = Math.max(1, limit / 2);
+        retryAt.set(tile.key, performance.now() + 1000 * (Number.isFinite(ra) && ra > 0 ? Math.min(ra, 30) : 1));
+        const msg = await errorText(res);
+        if (res.status === 409 && !/pending/.test(msg)) failed.set(tile.key, msg);
         return;
       }
-      if (my !== generation) return;
-      shown = { img, key, place: req.place, lod, mode: state.mode };
-      draw();
+      if (!res.ok) {
+        const msg = await errorText(res);
+        failed.set(tile.key, msg);
+        if (!errorShown) say(`could not draw a tile: ${msg}`, true);
+        errorShown = true;
+        return;
+      }
+      const bmp = await createImageBitmap(await res.blob());
+      if (ctrl.signal.aborted) {
+        if (bmp.close) bmp.close();
+        return;
+      }
+      retryAt.delete(tile.key);
+      limit = Math.min(MAX_INFLIGHT, limit + 0.25);
+      put(tile.key, bmp, tile.r);
       canvas.dataset.drawn = String(Number(canvas.dataset.drawn) + 1);
-      canvas.dataset.lod = String(lod);
-      hud(`lod ${lod}${lod === levels[levels.length - 1] ? "" : " · refining"}`);
+      requestDraw();
+    } catch (e) {
+      if (e.name === "AbortError" || ctrl.signal.aborted) return;
+      // The connection failed: the server may be restarting.
+      retryAt.set(tile.key, performance.now() + 2000);
+      say(`could not load a tile: ${e.message}; retrying`, true);
+    } finally {
+      const f = inflight.get(tile.key);
+      if (f && f.ctrl === ctrl) {
+        inflight.delete(tile.key);
+        if (!ctrl.signal.aborted) schedule();
+      }
     }
-    canvas.dataset.settled = String(my);
   }
 
-  function hud(text) {
-    const t = state.selected;
-    const where = state.mode === "slice" ? `${state.axis} = ${state.position}` : `yaw ${state.yaw}° pitch ${state.pitch}° offset ${state.position}`;
-    $("hud").textContent = `${t.id.slice(0, 8)} · ${where} · centre ${state.center.map((c) => c.toFixed(0)).join(", ")} · ${state.scale.toFixed(2)} px/voxel · ${text}`;
-  }
-
-  // Redraws what is shown at once, asks for a coarse image now and
-  // refines once the view has rested.
+  // Redraws at once from the cache; asks for missing tiles now
+  // (`immediate`) or within a few frames while the view keeps moving.
   function invalidate(immediate) {
     if (!state.selected || state.selected.status !== "ready" || state.mode === "solid") return;
-    if (shown && shown.mode !== state.mode) shown = null;
-    draw();
-    const fine = targetLod();
-    const coarse = Math.min(state.selected.max_lod, fine + 2);
-    clearTimeout(settleTimer);
-    if (immediate) {
-      clearTimeout(coarseTimer);
-      coarseTimer = null;
-      const levels = [];
-      for (let l = coarse; l >= fine; l--) levels.push(l);
-      load(levels, false);
-      return;
-    }
-    // At most one coarse request per frame or so while dragging.
-    if (!coarseTimer) {
-      coarseTimer = setTimeout(() => {
-        coarseTimer = null;
-        load([Math.min(state.selected.max_lod, targetLod() + 2)], true);
-      }, 50);
-    }
-    settleTimer = setTimeout(() => {
-      const levels = [];
-      for (let l = coarse; l >= fine; l--) levels.push(l);
-      load(levels, false);
-    }, 300);
+    canvas.dataset.complete = "0";
+    canvas.dataset.covered = "0";
+    requestDraw();
+    updateDownloads();
+    if (immediate) schedule();
+    else if (!fetchTimer) fetchTimer = setTimeout(schedule, 100);
   }
 
   function clear(text) {
-    if (controller) controller.abort();
-    shown = null;
-    draw();
-    $("hud").textContent = text || "";
+    for (const [, f] of inflight) f.ctrl.abort();
+    inflight.clear();
+    queue = [];
+    failed.clear();
+    retryAt.clear();
+    errorShown = false;
+    const [W, H] = size();
+    ctx.fillStyle = "#0d0e10";
+    ctx.fillRect(0, 0, W, H);
+    canvas.dataset.complete = "0";
+    $("progress").firstChild.style.width = "0";
+    hudText = text || "";
+    $("hud").textContent = hudText;
+  }
+
+  /// Sets scale (clamped) keeping the plane point under (mx, my) CSS
+  /// pixels from the canvas centre in place.
+  function zoomAt(scale, mx, my) {
+    const before = [state.center[0] + mx / state.scale, state.center[1] + my / state.scale];
+    state.scale = Math.max(minScale(), Math.min(MAX_SCALE, scale));
+    state.center = [before[0] - mx / state.scale, before[1] - my / state.scale].map(clampCoord);
   }
 
   // Mouse and keyboard.
@@ -396,22 +939,54 @@ const plane = (() => {
   });
   canvas.addEventListener("pointermove", (e) => {
     if (!drag) return;
-    state.center = [drag.c[0] - (e.clientX - drag.x) / state.scale, drag.c[1] - (e.clientY - drag.y) / state.scale];
+    state.center = [drag.c[0] - (e.clientX - drag.x) / state.scale, drag.c[1] - (e.clientY - drag.y) / state.scale].map(clampCoord);
     invalidate(false);
   });
-  canvas.addEventListener("pointerup", () => { drag = null; });
+  const endDrag = () => {
+    if (drag) invalidate(true);
+    drag = null;
+  };
+  canvas.addEventListener("pointerup", endDrag);
+  canvas.addEventListener("pointercancel", endDrag);
   canvas.addEventListener("wheel", (e) => {
     e.preventDefault();
     const r = canvas.getBoundingClientRect();
-    const mx = e.clientX - r.left - r.width / 2, my = e.clientY - r.top - r.height / 2;
-    const before = [state.center[0] + mx / state.scale, state.center[1] + my / state.scale];
-    state.scale = Math.max(1 / 64, Math.min(32, state.scale * Math.exp(-e.deltaY * 0.0015)));
-    state.center = [before[0] - mx / state.scale, before[1] - my / state.scale];
+    zoomAt(state.scale * Math.exp(-e.deltaY * 0.0015), e.clientX - r.left - r.width / 2, e.clientY - r.top - r.height / 2);
     invalidate(false);
   }, { passive: false });
-  window.addEventListener("resize", () => invalidate(false));
+  // The canvas follows its box (the controls wrap, the window resizes):
+  // the first image and every later one fill it.
+  new ResizeObserver(() => {
+    size();
+    if (state.mode !== "solid") invalidate(false);
+  }).observe(canvas);
 
-  return { invalidate, clear, draw, pan(dx, dy) { state.center[0] += dx / state.scale; state.center[1] += dy / state.scale; invalidate(false); }, zoom(f) { state.scale = Math.max(1 / 64, Math.min(32, state.scale * f)); invalidate(false); } };
+  return {
+    invalidate, clear, draw, targetLod,
+    pan(dx, dy) {
+      state.center = [state.center[0] + dx / state.scale, state.center[1] + dy / state.scale].map(clampCoord);
+      invalidate(false);
+    },
+    zoom(f) {
+      zoomAt(state.scale * f, 0, 0);
+      invalidate(false);
+    },
+    /// Sets any of { mode, axis, position, center, scale } and asks for
+    /// that view at once.
+    setView(o) {
+      if (o.axis) {
+        state.axis = o.axis;
+        $("axis").value = o.axis;
+      }
+      if (o.center) state.center = o.center.map(clampCoord);
+      if (o.position != null) setPosition(o.position);
+      if (o.scale != null) state.scale = Math.max(minScale(), Math.min(MAX_SCALE, o.scale));
+      if (o.mode && o.mode !== state.mode) setMode(o.mode);
+      else if (state.mode === "solid") solid.invalidate();
+      else invalidate(true);
+    },
+    stats: () => ({ cached: cache.size, inflight: inflight.size, queued: queue.length, failed: failed.size }),
+  };
 })();
 
 // ---------------------------------------------------------------------
@@ -634,8 +1209,10 @@ function setMode(mode) {
   }
   $("plane").hidden = mode === "solid";
   $("solid").hidden = mode !== "solid";
+  $("progress").hidden = mode === "solid";
   if (mode === "solid") solid.invalidate();
   else plane.invalidate(true);
+  updateDownloads();
 }
 
 function bindRange(id, apply, fmt) {
@@ -646,6 +1223,7 @@ function bindRange(id, apply, fmt) {
     if (state.mode === "solid") {
       if (id === "position") solid.invalidate();
       else solid.render();
+      updateDownloads();
     } else {
       plane.invalidate(settled);
     }
@@ -654,19 +1232,56 @@ function bindRange(id, apply, fmt) {
   input.addEventListener("change", () => update(true));
 }
 
+/// Moves the slice (or the cut's offset) to `p`, any integer in the
+/// coordinate range; the slider spans ±512 around where it was typed.
 function setPosition(p) {
+  p = clampCoord(Math.trunc(p));
   state.position = p;
-  $("position").value = String(p);
-  $("position-out").textContent = String(p);
+  const at = $("at"), slider = $("position");
+  if (document.activeElement !== at || Number(at.value) !== p) at.value = String(p);
+  if (p < Number(slider.min) || p > Number(slider.max)) {
+    const lo = Math.max(COORD_MIN, Math.min(COORD_MAX - 1024, p - 512));
+    slider.min = String(lo);
+    slider.max = String(lo + 1024);
+  }
+  slider.value = String(p);
+}
+
+function movePosition(p, settled) {
+  setPosition(p);
+  if (state.mode === "solid") {
+    solid.invalidate();
+    updateDownloads();
+  } else {
+    plane.invalidate(settled);
+  }
 }
 
 function setupControls() {
+  $("inset").addEventListener("click", () => $("inset").classList.toggle("big"));
   for (const b of document.querySelectorAll("nav .tab")) b.addEventListener("click", () => setMode(b.dataset.mode));
   $("axis").addEventListener("change", () => {
     state.axis = $("axis").value;
     plane.invalidate(true);
   });
-  bindRange("position", (v) => { state.position = v; });
+  const slider = $("position");
+  slider.addEventListener("input", () => movePosition(Number(slider.value), false));
+  slider.addEventListener("change", () => movePosition(Number(slider.value), true));
+  const at = $("at");
+  at.addEventListener("change", () => {
+    const p = Number(at.value.trim());
+    if (at.value.trim() === "" || !Number.isFinite(p)) {
+      at.value = String(state.position);
+      say(`a position is an integer within ${COORD_MIN} … ${COORD_MAX}`, true);
+      return;
+    }
+    if (p < COORD_MIN || p > COORD_MAX) say(`position clamped to the coordinate range ${COORD_MIN} … ${COORD_MAX}`, true);
+    at.value = String(clampCoord(Math.trunc(p)));
+    movePosition(p, true);
+  });
+  at.addEventListener("keydown", (e) => {
+    if (e.key === "Enter") at.dispatchEvent(new Event("change"));
+  });
   bindRange("yaw", (v) => { state.yaw = v; });
   bindRange("pitch", (v) => { state.pitch = v; });
   bindRange("carve", (v) => { state.carve = v / 100; }, (v) => (v / 100).toFixed(2));
@@ -677,10 +1292,11 @@ function setupControls() {
   $("block-lod").addEventListener("change", () => {
     state.blockLod = Number($("block-lod").value);
     solid.invalidate();
+    updateDownloads();
   });
   window.addEventListener("keydown", (e) => {
     const tag = e.target.tagName;
-    if (tag === "INPUT" || tag === "SELECT" || tag === "TEXTAREA") return;
+    if (tag === "INPUT" || tag === "SELECT" || tag === "TEXTAREA" || e.ctrlKey || e.metaKey || e.altKey) return;
     const k = e.key.toLowerCase();
     const step = e.shiftKey ? 16 : 1;
     if (k === "s") setMode("slice");
@@ -691,11 +1307,9 @@ function setupControls() {
       $("axis").value = k;
       plane.invalidate(true);
     } else if (k === "[" || k === "pagedown") {
-      setPosition(state.position - step);
-      state.mode === "solid" ? solid.invalidate() : plane.invalidate(false);
+      movePosition(state.position - step, false);
     } else if (k === "]" || k === "pageup") {
-      setPosition(state.position + step);
-      state.mode === "solid" ? solid.invalidate() : plane.invalidate(false);
+      movePosition(state.position + step, false);
     } else if (k.startsWith("arrow")) {
       e.preventDefault();
       const d = { arrowleft: [-1, 0], arrowright: [1, 0], arrowup: [0, -1], arrowdown: [0, 1] }[k];
@@ -710,9 +1324,10 @@ function setupControls() {
 }
 
 // Exposed for tests and for poking at from the console.
-window.solidtex = { state, select, setMode, upload };
+window.solidtex = { state, select, setMode, upload, setView: plane.setView, stats: plane.stats };
 
 setupUpload();
+setupDownloads();
 setupControls();
 setMode("slice");
 refreshList();
