@@ -88,6 +88,14 @@ struct LoadtestArgs {
     /// Give up on one request after this long.
     #[arg(long, default_value = "120s", value_parser = solidtex::loadtest::parse_duration)]
     timeout: std::time::Duration,
+    /// A soak: also upload, read and delete small textures and hang up on
+    /// requests while the load runs.
+    #[arg(long)]
+    churn: bool,
+    /// Compare a sample of the answers, byte for byte, with a fresh server
+    /// at this URL serving the same texture; differences fail the command.
+    #[arg(long)]
+    verify_url: Option<String>,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -562,12 +570,19 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 revalidate: a.revalidate.clamp(0.0, 1.0),
                 sweep: a.sweep,
                 timeout: a.timeout,
+                churn: a.churn,
+                verify_url: a.verify_url,
             };
             let report = solidtex::loadtest::run_blocking(&cfg)?;
             if a.json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
                 print!("{}", report.table());
+            }
+            if let Some(v) = &report.verify
+                && v.mismatched > 0
+            {
+                bail!("{} answers differ from a fresh server's", v.mismatched);
             }
         }
         Command::Precompute(a) => {

@@ -109,3 +109,35 @@ async fn command_line_sweep_reports_json() {
     assert_eq!(v["cuts_per_s"], v["total"]["requests_per_s"]);
     s.stop().await;
 }
+
+/// A short soak: the load runs with uploads, deletions and hang-ups beside
+/// it, nothing answers a server error, and the sampled answers are byte
+/// for byte those of a fresh server that saw nothing else.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_soak_with_churn_matches_a_fresh_server() {
+    let (dir, fresh_dir) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let s = TestServer::start(test_args(dir.path())).await;
+    let fresh = TestServer::start(test_args(fresh_dir.path())).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 31).await;
+    assert_eq!(ready_texture(&c, &fresh, 31).await, id);
+    let cfg = LoadConfig {
+        duration: Duration::from_secs(3),
+        churn: true,
+        verify_url: Some(fresh.base.clone()),
+        ..small(&s.base, &id)
+    };
+    let r = run(&cfg).await.unwrap();
+    assert_eq!(r.total.statuses.other, 0, "{}", r.table());
+    assert_eq!(r.total.statuses.transport_errors, 0, "{}", r.table());
+    let churn = r.churn.clone().expect("churn ran");
+    assert!(churn.uploads >= 1 && churn.deletes >= 1, "{churn:?}");
+    assert!(churn.served >= 1, "{churn:?}");
+    assert_eq!(churn.server_errors(), 0, "{churn:?}");
+    let v = r.verify.clone().expect("verified");
+    assert!(v.checked >= 4, "{v:?}");
+    assert_eq!((v.mismatched, v.failed), (0, 0), "{v:?}");
+    assert!(r.table().contains("verified against a fresh server"));
+    s.stop().await;
+    fresh.stop().await;
+}

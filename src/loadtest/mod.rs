@@ -11,6 +11,7 @@
 //! - [`report`]: histograms, status counts, the table and JSON.
 //! - [`scrape`]: the server's `/metrics` before, during and after the run.
 
+pub mod churn;
 pub mod report;
 pub mod scrape;
 pub mod workload;
@@ -51,6 +52,12 @@ pub struct LoadConfig {
     pub sweep: Option<SweepPlane>,
     /// Give up on one request after this long.
     pub timeout: Duration,
+    /// Also upload, read and delete textures and hang up on requests
+    /// while the load runs (a soak).
+    pub churn: bool,
+    /// Compare a sample of the answers with this fresh server's (base URL,
+    /// serving the same texture).
+    pub verify_url: Option<String>,
 }
 
 impl LoadConfig {
@@ -69,6 +76,8 @@ impl LoadConfig {
             revalidate: 0.05,
             sweep: None,
             timeout: Duration::from_secs(120),
+            churn: false,
+            verify_url: None,
         }
     }
 
@@ -179,6 +188,9 @@ impl Source {
 /// Answers a client keeps for revalidation (a bounded ring).
 const REMEMBERED: usize = 64;
 
+/// Answers a client keeps the fingerprint of, for `verify_url`.
+const SAMPLED: usize = 48;
+
 /// One closed-loop client.
 async fn client_loop(
     client: reqwest::Client,
@@ -187,9 +199,10 @@ async fn client_loop(
     mut rng: workload::Rng,
     revalidate: f64,
     deadline: Instant,
-) -> Recorder {
+) -> (Recorder, Vec<(String, u64)>) {
     let mut rec = Recorder::default();
     let mut seen: Vec<(Request, String)> = Vec::new();
+    let mut samples: Vec<(String, u64)> = Vec::new();
     while Instant::now() < deadline {
         let revisit = !seen.is_empty() && rng.unit() < revalidate;
         let (req, etag) = if revisit {
@@ -216,14 +229,19 @@ async fn client_loop(
                     .get(RETRY_AFTER)
                     .and_then(|v| v.to_str().ok())
                     .and_then(|v| v.parse::<u64>().ok());
-                r.bytes().await.map(|b| (status, tag, retry, b.len()))
+                r.bytes()
+                    .await
+                    .map(|b| (status, tag, retry, b.len(), churn::fingerprint(&b)))
             }
             Err(e) => Err(e),
         };
         let micros = t0.elapsed().as_micros() as u64;
         match answer {
-            Ok((status, tag, retry, bytes)) => {
+            Ok((status, tag, retry, bytes, print)) => {
                 rec.kind(req.kind).answered(status, micros, bytes as u64);
+                if status == 200 && samples.len() < SAMPLED {
+                    samples.push((req.path.clone(), print));
+                }
                 if let (200, Some(tag), None) = (status, tag, &etag) {
                     if seen.len() < REMEMBERED {
                         seen.push((req, tag));
@@ -244,7 +262,7 @@ async fn client_loop(
             }
         }
     }
-    rec
+    (rec, samples)
 }
 
 /// Runs a load test against a live server.
@@ -326,12 +344,39 @@ pub async fn run(cfg: &LoadConfig) -> anyhow::Result<Report> {
             deadline,
         )));
     }
+    let churn = cfg.churn.then(|| {
+        tokio::spawn(churn::churn(
+            client.clone(),
+            base.clone(),
+            texture_url.clone(),
+            cfg.seed,
+            deadline,
+        ))
+    });
     let mut all = Recorder::default();
+    let mut samples = Vec::new();
     for c in clients {
-        all.merge(&c.await.context("client task")?);
+        let (rec, s) = c.await.context("client task")?;
+        all.merge(&rec);
+        samples.extend(s);
     }
+    let churn = match churn {
+        Some(c) => Some(c.await.context("churn task")?),
+        None => None,
+    };
     let elapsed = t0.elapsed().as_secs_f64();
     sampler.abort();
+    let verify = match &cfg.verify_url {
+        Some(fresh) => {
+            let fresh = format!(
+                "{}/v1/textures/{}",
+                fresh.trim_end_matches('/'),
+                cfg.texture
+            );
+            Some(churn::verify(&client, &fresh, &samples).await)
+        }
+        None => None,
+    };
     let after = scrape(&client, &base).await;
     let server = match (before, after) {
         (Some(b), Some(a)) => {
@@ -350,6 +395,8 @@ pub async fn run(cfg: &LoadConfig) -> anyhow::Result<Report> {
         kinds,
         total,
         server,
+        churn,
+        verify,
     })
 }
 

@@ -182,6 +182,12 @@ pub struct Report {
     pub cuts_per_s: Option<f64>,
     /// The server's metrics over the run, when it exposes them.
     pub server: Option<ServerDelta>,
+    /// Uploads, deletions and hang-ups alongside the load (a soak).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub churn: Option<super::churn::ChurnReport>,
+    /// Sampled answers against a fresh server's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub verify: Option<super::churn::VerifyReport>,
 }
 
 fn mib(bytes: f64) -> String {
@@ -275,6 +281,30 @@ impl Report {
                 );
             }
         }
+        if let Some(c) = &self.churn {
+            let statuses: Vec<String> = c
+                .statuses
+                .iter()
+                .map(|(s, n)| format!("{s}: {n}"))
+                .collect();
+            let _ = writeln!(
+                out,
+                "churn: {} uploads ({} served a slice), {} deletions, {} hang-ups; answers {}; {} server errors",
+                c.uploads,
+                c.served,
+                c.deletes,
+                c.hangups,
+                statuses.join(", "),
+                c.server_errors()
+            );
+        }
+        if let Some(v) = &self.verify {
+            let _ = writeln!(
+                out,
+                "verified against a fresh server: {} answers, {} differ, {} not answered",
+                v.checked, v.mismatched, v.failed
+            );
+        }
         out
     }
 }
@@ -326,8 +356,29 @@ mod tests {
             total,
             cuts_per_s: Some(51.5),
             server: None,
+            churn: Some(crate::loadtest::churn::ChurnReport {
+                uploads: 3,
+                served: 2,
+                deletes: 2,
+                hangups: 4,
+                statuses: [(202, 3), (200, 2), (204, 2), (500, 1), (503, 1)].into(),
+            }),
+            verify: Some(crate::loadtest::churn::VerifyReport {
+                checked: 9,
+                mismatched: 1,
+                failed: 0,
+            }),
         };
         let table = report.table();
+        assert!(
+            table.contains("3 uploads (2 served a slice), 2 deletions, 4 hang-ups"),
+            "{table}"
+        );
+        assert!(table.contains("; 1 server errors"), "{table}");
+        assert!(
+            table.contains("9 answers, 1 differ, 0 not answered"),
+            "{table}"
+        );
         assert!(table.lines().any(|l| l.starts_with("all ")), "{table}");
         assert!(table.contains("server metrics: unavailable"));
         assert!(table.contains("sweep: 51.50 cuts/s"));
