@@ -431,14 +431,8 @@ async fn multipart_uploads() {
         .part("yz", part(exemplar_png(32, 2)))
         .part("zx", part(exemplar_png(32, 3)))
         .text("params", r#"{"levels": 3, "seed": 5}"#);
-    let r = c
-        .post(s.url("/v1/textures"))
-        .multipart(form)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status().as_u16(), 202);
-    let v: Value = r.json().await.unwrap();
+    let (status, v) = upload_form(&c, &s, form).await;
+    assert_eq!(status, 202);
     assert_eq!(v["exemplar"]["planes"], 3);
     assert_eq!(v["params"]["seed"], 5);
     let id = v["id"].as_str().unwrap().to_string();
@@ -456,14 +450,8 @@ async fn multipart_uploads() {
     let form = reqwest::multipart::Form::new()
         .part("image", part(exemplar_png(32, 4)))
         .text("params", r#"{"levels": 3}"#);
-    let r = c
-        .post(s.url("/v1/textures"))
-        .multipart(form)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status().as_u16(), 202);
-    let v: Value = r.json().await.unwrap();
+    let (status, v) = upload_form(&c, &s, form).await;
+    assert_eq!(status, 202);
     let (_, raw) = upload(&c, &s, exemplar_png(32, 4), "levels=3").await;
     assert_eq!(v["id"], raw["id"]);
 
@@ -1165,14 +1153,8 @@ async fn uploads_keep_their_name_take_jpeg_and_downscale_photos() {
     let form = reqwest::multipart::Form::new()
         .part("image", part)
         .text("params", r#"{"levels": 3}"#);
-    let r = c
-        .post(s.url("/v1/textures"))
-        .multipart(form)
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status().as_u16(), 202);
-    let v: Value = r.json().await.unwrap();
+    let (status, v) = upload_form(&c, &s, form).await;
+    assert_eq!(status, 202);
     assert_eq!(v["name"], "leaf.png");
     assert!(v.get("notes").is_none(), "{v}");
     let id = v["id"].as_str().unwrap().to_string();

@@ -134,6 +134,22 @@ pub async fn upload(
     (status, r.json().await.unwrap())
 }
 
+/// Uploads a multipart form; returns (status, body).
+pub async fn upload_form(
+    c: &reqwest::Client,
+    s: &TestServer,
+    form: reqwest::multipart::Form,
+) -> (u16, Value) {
+    let r = c
+        .post(s.url("/v1/textures"))
+        .multipart(form)
+        .send()
+        .await
+        .unwrap();
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap())
+}
+
 /// Polls a texture until it is ready (panics if it fails or takes too long).
 pub async fn wait_ready(c: &reqwest::Client, s: &TestServer, id: &str) -> Value {
     let t0 = Instant::now();

@@ -64,17 +64,21 @@ fn checked_id(id: &str) -> Result<(), ApiError> {
     }
 }
 
+/// The texture `id`, in any status; the span records its id.
+fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
+    checked_id(id)?;
+    tracing::Span::current().record("texture", id);
+    s.registry
+        .get(id)
+        .ok_or_else(|| ApiError::unknown_texture(id))
+}
+
 /// `GET /v1/textures/{id}`.
 pub async fn show(
     State(s): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
-    checked_id(&id)?;
-    tracing::Span::current().record("texture", id.as_str());
-    let e = s
-        .registry
-        .get(&id)
-        .ok_or_else(|| ApiError::unknown_texture(&id))?;
+    let e = known(&s, &id)?;
     Ok(Json(view(&e, s.brick_size)))
 }
 
@@ -349,12 +353,7 @@ pub async fn exemplar(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    checked_id(&id)?;
-    tracing::Span::current().record("texture", id.as_str());
-    let e = s
-        .registry
-        .get(&id)
-        .ok_or_else(|| ApiError::unknown_texture(&id))?;
+    let e = known(&s, &id)?;
     let tag = etag(&e, "exemplar.png");
     if not_modified(&headers, &tag) {
         return Ok(not_modified_response(&tag));
