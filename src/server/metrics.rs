@@ -97,6 +97,12 @@ pub struct Metrics {
     pub precompute_seconds: Histogram,
     /// Precomputations queued or running.
     pub precomputes_pending: Gauge,
+    /// Open client connections.
+    pub connections_open: Gauge,
+    /// Idle connections closed to make room for new ones.
+    pub connections_evicted: Counter,
+    /// Connections answered 503 because every open one was busy.
+    pub connections_refused: Counter,
     /// Textures loaded from the data directory at start.
     pub textures_loaded: Counter,
     /// Textures by status.
@@ -202,6 +208,24 @@ impl Metrics {
             "Precomputations queued or running",
             precomputes_pending.clone(),
         );
+        let connections_open = Gauge::default();
+        registry.register(
+            "connections_open",
+            "Open client connections",
+            connections_open.clone(),
+        );
+        let connections_evicted = Counter::default();
+        registry.register(
+            "connections_evicted",
+            "Idle connections closed to make room under the connection cap",
+            connections_evicted.clone(),
+        );
+        let connections_refused = Counter::default();
+        registry.register(
+            "connections_refused",
+            "Connections answered 503 because every open one had a request in flight",
+            connections_refused.clone(),
+        );
         let textures_loaded = Counter::default();
         registry.register(
             "textures_loaded",
@@ -229,6 +253,9 @@ impl Metrics {
             precomputes,
             precompute_seconds,
             precomputes_pending,
+            connections_open,
+            connections_evicted,
+            connections_refused,
             textures_loaded,
             textures,
         }

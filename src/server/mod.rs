@@ -10,7 +10,9 @@
 //! - [`store`]: the data directory, written atomically and durably.
 //! - [`registry`]: textures, their status and background precomputes.
 //! - [`jobs`]: the bounded synthesis queue (backpressure → 503).
+//! - [`listen`]: connections: header timeout and a connection cap.
 //! - [`routes`]: the router, handlers and middleware.
+//! - [`host`]: the `Host` allow-list.
 //! - [`metrics`], [`process`], [`error`], [`query`], [`png`]: the supporting
 //!   pieces.
 //!
@@ -21,7 +23,9 @@
 
 pub mod config;
 pub mod error;
+pub mod host;
 pub mod jobs;
+pub mod listen;
 pub mod metrics;
 pub mod png;
 pub mod process;
@@ -54,6 +58,7 @@ pub const DEFAULT_EXEMPLAR: &[u8] = include_bytes!("../../assets/default.png");
 pub struct Server {
     listener: tokio::net::TcpListener,
     state: AppState,
+    limits: listen::Limits,
 }
 
 impl Server {
@@ -141,6 +146,9 @@ impl Server {
                 .collect::<anyhow::Result<_>>()?,
             default_texture: args.default_texture,
             pending_wait: std::time::Duration::from_secs_f64(args.pending_wait),
+            body_timeout: Duration::from_secs_f64(args.body_timeout),
+            allowed_hosts: host::AllowedHosts::resolve(&args.allowed_hosts, args.addr)
+                .map_err(|e| anyhow::anyhow!("--allowed-hosts: {e}"))?,
         });
         tracing::info!(
             addr = %listener.local_addr()?,
@@ -148,7 +156,16 @@ impl Server {
             textures = state.registry.list().len(),
             "server ready"
         );
-        Ok(Server { listener, state })
+        let limits = listen::Limits {
+            header_timeout: Duration::from_secs_f64(args.header_timeout),
+            max_connections: usize::try_from(args.max_connections).unwrap_or(usize::MAX),
+            max_head_bytes: routes::MAX_HEAD_BYTES,
+        };
+        Ok(Server {
+            listener,
+            state,
+            limits,
+        })
     }
 
     /// The bound address (useful with port 0).
@@ -167,11 +184,10 @@ impl Server {
         self,
         shutdown: impl Future<Output = ()> + Send + 'static,
     ) -> anyhow::Result<()> {
+        let metrics = self.state.metrics.clone();
         let app = routes::router(self.state);
-        axum::serve(self.listener, app)
-            .with_graceful_shutdown(shutdown)
-            .await
-            .context("serving")
+        listen::serve(self.listener, app, self.limits, metrics, shutdown).await;
+        Ok(())
     }
 }
 
