@@ -6,6 +6,8 @@ mod server_support;
 
 #[path = "abuse/connections.rs"]
 mod connections;
+#[path = "abuse/errors.rs"]
+mod errors;
 #[path = "abuse/hosts.rs"]
 mod hosts;
 #[path = "abuse/raw.rs"]

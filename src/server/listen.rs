@@ -34,6 +34,8 @@ pub struct Limits {
     pub max_connections: usize,
     /// Largest request head hyper buffers, bytes.
     pub max_head_bytes: usize,
+    /// Most header fields hyper parses.
+    pub max_headers: usize,
 }
 
 /// One open connection.
@@ -136,7 +138,8 @@ pub async fn serve(
     let mut http = hyper::server::conn::http1::Builder::new();
     http.timer(TokioTimer::new())
         .header_read_timeout(limits.header_timeout)
-        .max_buf_size(limits.max_head_bytes);
+        .max_buf_size(limits.max_head_bytes)
+        .max_headers(limits.max_headers);
     // Every connection task holds a receiver; `closed` resolves once all
     // are gone.
     let (done_tx, done_rx) = tokio::sync::watch::channel(());

@@ -117,11 +117,7 @@ impl TextureParams {
 
     /// Parses a JSON text holding a flat object of parameters.
     pub fn from_json(text: &str) -> Result<TextureParams, ApiError> {
-        match serde_json::from_str::<Value>(text) {
-            Ok(Value::Object(m)) => Self::from_flat(&m),
-            Ok(_) => Err(invalid_params("`params` must be a JSON object".into())),
-            Err(e) => Err(invalid_params(format!("`params` is not JSON: {e}"))),
-        }
+        Self::from_flat(&params_object(text)?)
     }
 
     /// Parameters from query-string pairs: each value is read as a JSON
@@ -171,6 +167,49 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("fine_levels", "1"),
     ("correction", r#""colour""#),
 ];
+
+/// The members of a JSON object in the order written, repeated keys kept.
+struct Members(Vec<(String, Value)>);
+
+impl<'de> Deserialize<'de> for Members {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Members, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = Members;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a JSON object")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut m: A,
+            ) -> Result<Members, A::Error> {
+                let mut out = Vec::new();
+                while let Some(kv) = m.next_entry::<String, Value>()? {
+                    out.push(kv);
+                }
+                Ok(Members(out))
+            }
+        }
+        d.deserialize_map(Visit)
+    }
+}
+
+/// Parses the JSON text of a `params` object. A key given twice is refused
+/// (a JSON parser would keep the last one silently).
+pub fn params_object(text: &str) -> Result<Map<String, Value>, ApiError> {
+    let Members(members) = serde_json::from_str(text)
+        .map_err(|e| invalid_params(format!("`params` must be a JSON object: {e}")))?;
+    let mut m = Map::new();
+    for (k, v) in members {
+        if m.contains_key(&k) {
+            return Err(invalid_params(format!(
+                "parameter `{k}` given more than once in `params`"
+            )));
+        }
+        m.insert(k, v);
+    }
+    Ok(m)
+}
 
 fn invalid_params(message: String) -> ApiError {
     ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)

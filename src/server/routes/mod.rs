@@ -86,8 +86,19 @@ pub struct Shared {
     pub allowed_hosts: AllowedHosts,
 }
 
-/// Largest request head hyper buffers, bytes.
+/// Longest request target (path and query) answered, bytes; longer: 414.
+pub const MAX_URI_BYTES: usize = 8 << 10;
+/// Most header fields in a request; more: 431.
+pub const MAX_HEADERS: usize = 100;
+/// Largest total of header names and values (plus 4 bytes per field for
+/// `: ` and CRLF); larger: 431.
+pub const MAX_HEADER_BYTES: usize = 32 << 10;
+/// Largest request head hyper buffers, bytes, and most header fields it
+/// parses: above the limits [`head_limits`] enforces, so that requests
+/// between the two get a JSON answer instead of hyper's empty one.
 pub const MAX_HEAD_BYTES: usize = 64 << 10;
+/// See [`MAX_HEAD_BYTES`].
+pub const HYPER_MAX_HEADERS: usize = 2 * MAX_HEADERS;
 
 /// Handler state: cheap to clone.
 pub type AppState = Arc<Shared>;
@@ -207,6 +218,7 @@ fn with_middleware(routes: Router<AppState>, state: AppState) -> Router {
         .layer(CatchPanicLayer::custom(panic_response))
         .layer(middleware::from_fn_with_state(state.clone(), authorize))
         .layer(middleware::from_fn_with_state(state.clone(), check_host))
+        .layer(middleware::from_fn(head_limits))
         .layer(middleware::from_fn_with_state(state.clone(), track))
         .layer(trace)
         .layer(cors)
@@ -257,6 +269,35 @@ async fn authorize(State(s): State<AppState>, req: Request, next: Next) -> Respo
 /// Compares secrets in time that depends on their lengths only.
 fn same_secret(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |d, (x, y)| d | (x ^ y)) == 0
+}
+
+/// Answers requests with an oversized target (414) or head (431) in JSON.
+async fn head_limits(req: Request, next: Next) -> Response {
+    let uri_len = req.uri().path_and_query().map_or(0, |p| p.as_str().len());
+    if uri_len > MAX_URI_BYTES {
+        return axum::response::IntoResponse::into_response(ApiError::new(
+            StatusCode::URI_TOO_LONG,
+            "uri_too_long",
+            format!("request target of {uri_len} bytes; at most {MAX_URI_BYTES}"),
+        ));
+    }
+    let count = req.headers().len();
+    let bytes: usize = req
+        .headers()
+        .iter()
+        .map(|(k, v)| k.as_str().len() + v.len() + 4)
+        .sum();
+    if count > MAX_HEADERS || bytes > MAX_HEADER_BYTES {
+        return axum::response::IntoResponse::into_response(ApiError::new(
+            StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+            "headers_too_large",
+            format!(
+                "{count} header fields of {bytes} bytes; at most {MAX_HEADERS} fields of \
+                 {MAX_HEADER_BYTES} bytes"
+            ),
+        ));
+    }
+    next.run(req).await
 }
 
 /// Refuses requests whose `Host` is not on the allow-list (421), before
