@@ -6,6 +6,8 @@ mod server_support;
 
 #[path = "abuse/connections.rs"]
 mod connections;
+#[path = "abuse/data_dir.rs"]
+mod data_dir;
 #[path = "abuse/errors.rs"]
 mod errors;
 #[path = "abuse/hosts.rs"]

@@ -186,19 +186,24 @@ pub async fn serve(
         let metrics = metrics.clone();
         let done = done_rx.clone();
         tokio::spawn(async move {
-            let mut conn = std::pin::pin!(conn);
-            let mut closing = false;
-            loop {
-                tokio::select! {
-                    r = conn.as_mut() => {
-                        if let Err(e) = r {
-                            tracing::debug!(error = %e, "connection ended with an error");
+            {
+                // Dropped before `done`: once `serve` returns, no
+                // connection holds the application (and its data
+                // directory) any more.
+                let mut conn = std::pin::pin!(conn);
+                let mut closing = false;
+                loop {
+                    tokio::select! {
+                        r = conn.as_mut() => {
+                            if let Err(e) = r {
+                                tracing::debug!(error = %e, "connection ended with an error");
+                            }
+                            break;
                         }
-                        break;
-                    }
-                    _ = close.notified(), if !closing => {
-                        closing = true;
-                        conn.as_mut().graceful_shutdown();
+                        _ = close.notified(), if !closing => {
+                            closing = true;
+                            conn.as_mut().graceful_shutdown();
+                        }
                     }
                 }
             }

@@ -105,6 +105,8 @@ pub struct Metrics {
     pub connections_refused: Counter,
     /// Textures loaded from the data directory at start.
     pub textures_loaded: Counter,
+    /// Stored textures not served because they do not match their id.
+    pub textures_refused: Counter,
     /// Textures by status.
     pub textures: Family<StatusLabels, Gauge>,
 }
@@ -232,6 +234,12 @@ impl Metrics {
             "Ready textures loaded from the data directory without recomputation",
             textures_loaded.clone(),
         );
+        let textures_refused = Counter::default();
+        registry.register(
+            "textures_refused",
+            "Stored textures not served because their content does not match their id",
+            textures_refused.clone(),
+        );
         let textures = Family::<StatusLabels, Gauge>::default();
         registry.register("textures", "Textures by status", textures.clone());
         registry.register_collector(Box::new(CacheCollector { cache }));
@@ -257,6 +265,7 @@ impl Metrics {
             connections_evicted,
             connections_refused,
             textures_loaded,
+            textures_refused,
             textures,
         }
     }

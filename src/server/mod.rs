@@ -75,6 +75,19 @@ impl Server {
                 );
             }
         }
+        let allowed_hosts = host::AllowedHosts::resolve(&args.allowed_hosts, args.addr)
+            .map_err(|e| anyhow::anyhow!("--allowed-hosts: {e}"))?;
+        let cors_origins = args
+            .cors_origins
+            .iter()
+            .map(|o| {
+                axum::http::HeaderValue::from_str(o).with_context(|| format!("CORS origin `{o}`"))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        // Bound first: an instance that cannot listen touches nothing.
+        let listener = tokio::net::TcpListener::bind(args.addr)
+            .await
+            .with_context(|| format!("binding {}", args.addr))?;
         let data_dir = args.resolved_data_dir();
         let store = {
             let d = data_dir.clone();
@@ -124,9 +137,6 @@ impl Server {
             std::time::Duration::from_secs_f64(args.max_queue_wait),
             metrics.clone(),
         );
-        let listener = tokio::net::TcpListener::bind(args.addr)
-            .await
-            .with_context(|| format!("binding {}", args.addr))?;
         let state = Arc::new(Shared {
             registry,
             jobs,
@@ -136,19 +146,11 @@ impl Server {
             max_request_voxels: args.max_request_voxels,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
             token: args.token.clone().filter(|t| !t.is_empty()),
-            cors_origins: args
-                .cors_origins
-                .iter()
-                .map(|o| {
-                    axum::http::HeaderValue::from_str(o)
-                        .with_context(|| format!("CORS origin `{o}`"))
-                })
-                .collect::<anyhow::Result<_>>()?,
+            cors_origins,
             default_texture: args.default_texture,
             pending_wait: std::time::Duration::from_secs_f64(args.pending_wait),
             body_timeout: Duration::from_secs_f64(args.body_timeout),
-            allowed_hosts: host::AllowedHosts::resolve(&args.allowed_hosts, args.addr)
-                .map_err(|e| anyhow::anyhow!("--allowed-hosts: {e}"))?,
+            allowed_hosts,
         });
         tracing::info!(
             addr = %listener.local_addr()?,
