@@ -38,6 +38,53 @@ pub struct Limits {
     pub max_headers: usize,
 }
 
+/// Open files kept besides connections: the listener, the data
+/// directory's files, the runtime's own.
+pub const SPARE_DESCRIPTORS: u64 = 64;
+
+/// How many of `max_connections` fit in the process's limit on open files,
+/// after raising its soft limit towards the hard one if needed. A cap above
+/// the limit would let idle sockets exhaust the descriptors before the cap
+/// is reached, which is what the cap is there to prevent.
+pub fn fit_descriptor_limit(max_connections: usize) -> usize {
+    #[cfg(unix)]
+    {
+        use rustix::process::{Resource, Rlimit, getrlimit, setrlimit};
+        let want = u64::try_from(max_connections)
+            .unwrap_or(u64::MAX)
+            .saturating_add(SPARE_DESCRIPTORS);
+        let limit = getrlimit(Resource::Nofile);
+        // None: unlimited.
+        let mut soft = limit.current.unwrap_or(u64::MAX);
+        if soft < want {
+            let raised = want.min(limit.maximum.unwrap_or(u64::MAX));
+            let set = setrlimit(
+                Resource::Nofile,
+                Rlimit {
+                    current: Some(raised),
+                    maximum: limit.maximum,
+                },
+            );
+            if set.is_ok() {
+                soft = raised;
+            }
+        }
+        let fit = usize::try_from(soft.saturating_sub(SPARE_DESCRIPTORS))
+            .unwrap_or(usize::MAX)
+            .max(1);
+        if fit < max_connections {
+            tracing::warn!(
+                max_connections,
+                open_files_limit = soft,
+                lowered_to = fit,
+                "the connection cap does not fit in the open-file limit; lowered"
+            );
+            return fit;
+        }
+    }
+    max_connections
+}
+
 /// One open connection.
 struct Conn {
     /// Requests being answered on it.
@@ -237,4 +284,16 @@ fn is_connection_error(e: &std::io::Error) -> bool {
         e.kind(),
         ConnectionRefused | ConnectionAborted | ConnectionReset
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cap_fits_in_the_open_file_limit() {
+        assert_eq!(fit_descriptor_limit(8), 8);
+        let most = fit_descriptor_limit(usize::MAX);
+        assert!((1..usize::MAX).contains(&most));
+    }
 }

@@ -160,7 +160,9 @@ impl Server {
         );
         let limits = listen::Limits {
             header_timeout: Duration::from_secs_f64(args.header_timeout),
-            max_connections: usize::try_from(args.max_connections).unwrap_or(usize::MAX),
+            max_connections: listen::fit_descriptor_limit(
+                usize::try_from(args.max_connections).unwrap_or(usize::MAX),
+            ),
             max_head_bytes: routes::MAX_HEAD_BYTES,
             max_headers: routes::HYPER_MAX_HEADERS,
         };
