@@ -367,5 +367,10 @@ mod tests {
         );
         assert!(Cli::try_parse_from(["x", "--max-connections", "0"]).is_err());
         assert!(Cli::try_parse_from(["x", "--header-timeout", "0"]).is_err());
+        assert!(c.allowed_hosts.is_empty());
+        let c = Cli::try_parse_from(["x", "--allowed-hosts", "a.example,b.example:8443"])
+            .unwrap()
+            .serve;
+        assert_eq!(c.allowed_hosts, ["a.example", "b.example:8443"]);
     }
 }

@@ -25,6 +25,17 @@ async fn a_loopback_server_answers_loopback_names_only() {
         let a = get_with_host(s.addr, "/v1/textures", Some(&host)).await;
         a.assert_error(421, "host_not_allowed");
     }
+    // A Host that is no text is no allowed name either.
+    let a = crate::raw::send(
+        s.addr,
+        b"GET /healthz HTTP/1.1\r\nhost: local\xffhost\r\nconnection: close\r\n\r\n",
+    )
+    .await;
+    a.assert_error(421, "host_not_allowed");
+    // Without any (HTTP/1.0): browsers always send one, so this is no
+    // rebinding.
+    let a = crate::raw::send(s.addr, b"GET /healthz HTTP/1.0\r\n\r\n").await;
+    assert_eq!(a.status, 200);
     // Through an HTTP client too (its Host is the address it connects to).
     let (status, _, _) = get(&client(), &s.url("/healthz")).await;
     assert_eq!(status, 200);

@@ -1,8 +1,9 @@
 //! The HTTP surface: the route table, the shared state handlers see, and
 //! the middleware stack every request passes through.
 //!
-//! Outermost first: CORS → tracing span → metrics → panic catcher → JSON
-//! error shape → handler. Handlers only parse, call the registry or the job
+//! Outermost first: CORS → tracing span → metrics → head size limits →
+//! Host allow-list → bearer token → panic catcher → request body deadline
+//! → JSON error shape → handler. Handlers only parse, call the registry or the job
 //! queue, and shape responses; no synthesis logic lives here.
 
 mod ops;
