@@ -192,6 +192,7 @@ pub async fn serve(
     let (done_tx, done_rx) = tokio::sync::watch::channel(());
     let mut shutdown = std::pin::pin!(shutdown);
     let mut next_id = 0u64;
+    let lingering = Arc::new(tokio::sync::Semaphore::new(REFUSALS_LINGERING));
     loop {
         let stream = tokio::select! {
             _ = &mut shutdown => break,
@@ -213,7 +214,7 @@ pub async fn serve(
             Admission::Admitted(id, n, c) => (id, n, c),
             Admission::Refused => {
                 metrics.connections_refused.inc();
-                refuse(stream);
+                refuse(stream, &lingering);
                 continue;
             }
         };
@@ -265,16 +266,47 @@ pub async fn serve(
     done_tx.closed().await;
 }
 
-/// Answers a connection over the cap with 503 and closes it. The answer
-/// is small enough for the socket's send buffer, so it is written without
-/// waiting; a client that cannot take it just sees the connection close.
-fn refuse(stream: TcpStream) {
+/// Refused connections still being closed gracefully at most.
+const REFUSALS_LINGERING: usize = 64;
+/// How long a refused connection may take to be closed gracefully.
+const REFUSAL_LINGER: Duration = Duration::from_secs(1);
+
+/// Answers a connection over the cap with 503 and closes it. Closing a
+/// socket with unread request bytes resets it, and the reset can destroy
+/// the answer before the client reads it; so the answer is followed by a
+/// FIN and what the client sent is read off first, for at most
+/// [`REFUSAL_LINGER`], by at most [`REFUSALS_LINGERING`] tasks at once.
+/// Beyond that the answer is written without waiting and the socket
+/// closed at once.
+fn refuse(mut stream: TcpStream, lingering: &Arc<tokio::sync::Semaphore>) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
     let body = error_body("overloaded", "too many open connections; retry later");
-    let head = format!(
-        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\nretry-after: 1\r\nconnection: close\r\ncontent-length: {}\r\n\r\n",
+    let answer = format!(
+        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\nretry-after: 1\r\nconnection: close\r\ncontent-length: {}\r\n\r\n{body}",
         body.len()
     );
-    let _ = stream.try_write(format!("{head}{body}").as_bytes());
+    let Ok(permit) = lingering.clone().try_acquire_owned() else {
+        let _ = stream.try_write(answer.as_bytes());
+        return;
+    };
+    tokio::spawn(async move {
+        let _permit = permit;
+        let _ = tokio::time::timeout(REFUSAL_LINGER, async {
+            stream.write_all(answer.as_bytes()).await?;
+            stream.shutdown().await?;
+            let mut buf = [0u8; 4096];
+            let mut left = 64usize << 10;
+            while left > 0 {
+                let n = stream.read(&mut buf).await?;
+                if n == 0 {
+                    break;
+                }
+                left = left.saturating_sub(n);
+            }
+            Ok::<_, std::io::Error>(())
+        })
+        .await;
+    });
 }
 
 /// Errors of one connection that say nothing about the listener.

@@ -69,6 +69,18 @@ async fn when_every_connection_is_busy_a_new_one_gets_503() {
     let body = text.split("\r\n\r\n").nth(1).unwrap();
     let v: serde_json::Value = serde_json::from_str(body).unwrap();
     assert_eq!(v["error"]["code"], "overloaded");
+    // A client that sends its request at once still reads the answer
+    // (closing over unread bytes would reset the connection instead).
+    for _ in 0..5 {
+        let mut c = TcpStream::connect(s.addr).await.unwrap();
+        c.write_all(b"GET /healthz HTTP/1.1\r\nHost: localhost\r\n\r\n")
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let (answer, _) = read_until_closed(&mut c, Duration::from_secs(5)).await;
+        let text = String::from_utf8_lossy(&answer);
+        assert!(text.starts_with("HTTP/1.1 503"), "{text:?}");
+    }
     drop(busy);
     // Once they are gone, a client gets through again.
     tokio::time::sleep(Duration::from_millis(200)).await;
