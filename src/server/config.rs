@@ -112,6 +112,31 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_CORS_ORIGINS", value_delimiter = ',')]
     pub cors_origins: Vec<String>,
 
+    /// Seconds a client has to send a complete request head, counted from
+    /// when its connection opens or its previous response ends; a
+    /// keep-alive connection idle that long is closed too.
+    #[arg(long, env = "SOLIDTEX_HEADER_TIMEOUT", default_value_t = 10.0, value_parser = parse_wait)]
+    pub header_timeout: f64,
+
+    /// Seconds a client has to send a whole request body (an upload)
+    /// once its head has arrived; a slower one is answered 408.
+    #[arg(long, env = "SOLIDTEX_BODY_TIMEOUT", default_value_t = 60.0, value_parser = parse_wait)]
+    pub body_timeout: f64,
+
+    /// Open client connections at most. A new connection over it closes
+    /// the oldest idle one (no request in flight); when every connection
+    /// is busy it is answered 503 with `Retry-After` and closed.
+    #[arg(long, env = "SOLIDTEX_MAX_CONNECTIONS", default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub max_connections: u32,
+
+    /// Host names (or `host:port`) that requests may name in their `Host`
+    /// header, comma-separated; others get 421 `host_not_allowed`, which
+    /// defeats DNS rebinding. `*` allows any. Default: `localhost`,
+    /// `127.0.0.1` and `[::1]` when listening on a loopback address, any
+    /// host otherwise.
+    #[arg(long, env = "SOLIDTEX_ALLOWED_HOSTS", value_delimiter = ',')]
+    pub allowed_hosts: Vec<String>,
+
     /// Seconds to wait for in-flight requests after SIGINT/SIGTERM.
     #[arg(long, env = "SOLIDTEX_SHUTDOWN_TIMEOUT", default_value_t = 30)]
     pub shutdown_timeout: u64,
@@ -159,6 +184,10 @@ impl ServeArgs {
             token: None,
             cors_origins: Vec::new(),
             pending_wait: 0.0,
+            header_timeout: 10.0,
+            body_timeout: 60.0,
+            max_connections: 1024,
+            allowed_hosts: Vec::new(),
             shutdown_timeout: 30,
             log_format: LogFormat::Pretty,
             log: "info".into(),
@@ -340,5 +369,17 @@ mod tests {
         assert!(!c.default_texture);
         assert_eq!(c.log_format, LogFormat::Json);
         assert!(Cli::try_parse_from(["x", "--max-jobs", "0"]).is_err());
+        let c = Cli::try_parse_from(["x"]).unwrap().serve;
+        assert_eq!(
+            (c.header_timeout, c.body_timeout, c.max_connections),
+            (10.0, 60.0, 1024)
+        );
+        assert!(Cli::try_parse_from(["x", "--max-connections", "0"]).is_err());
+        assert!(Cli::try_parse_from(["x", "--header-timeout", "0"]).is_err());
+        assert!(c.allowed_hosts.is_empty());
+        let c = Cli::try_parse_from(["x", "--allowed-hosts", "a.example,b.example:8443"])
+            .unwrap()
+            .serve;
+        assert_eq!(c.allowed_hosts, ["a.example", "b.example:8443"]);
     }
 }

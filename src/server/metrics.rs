@@ -97,8 +97,16 @@ pub struct Metrics {
     pub precompute_seconds: Histogram,
     /// Precomputations queued or running.
     pub precomputes_pending: Gauge,
+    /// Open client connections.
+    pub connections_open: Gauge,
+    /// Idle connections closed to make room for new ones.
+    pub connections_evicted: Counter,
+    /// Connections answered 503 because every open one was busy.
+    pub connections_refused: Counter,
     /// Textures loaded from the data directory at start.
     pub textures_loaded: Counter,
+    /// Stored textures not served because they do not match their id.
+    pub textures_refused: Counter,
     /// Textures by status.
     pub textures: Family<StatusLabels, Gauge>,
 }
@@ -202,11 +210,35 @@ impl Metrics {
             "Precomputations queued or running",
             precomputes_pending.clone(),
         );
+        let connections_open = Gauge::default();
+        registry.register(
+            "connections_open",
+            "Open client connections",
+            connections_open.clone(),
+        );
+        let connections_evicted = Counter::default();
+        registry.register(
+            "connections_evicted",
+            "Idle connections closed to make room under the connection cap",
+            connections_evicted.clone(),
+        );
+        let connections_refused = Counter::default();
+        registry.register(
+            "connections_refused",
+            "Connections answered 503 because every open one had a request in flight",
+            connections_refused.clone(),
+        );
         let textures_loaded = Counter::default();
         registry.register(
             "textures_loaded",
             "Ready textures loaded from the data directory without recomputation",
             textures_loaded.clone(),
+        );
+        let textures_refused = Counter::default();
+        registry.register(
+            "textures_refused",
+            "Stored textures not served because their content does not match their id",
+            textures_refused.clone(),
         );
         let textures = Family::<StatusLabels, Gauge>::default();
         registry.register("textures", "Textures by status", textures.clone());
@@ -229,7 +261,11 @@ impl Metrics {
             precomputes,
             precompute_seconds,
             precomputes_pending,
+            connections_open,
+            connections_evicted,
+            connections_refused,
             textures_loaded,
+            textures_refused,
             textures,
         }
     }

@@ -10,7 +10,9 @@
 //! - [`store`]: the data directory, written atomically and durably.
 //! - [`registry`]: textures, their status and background precomputes.
 //! - [`jobs`]: the bounded synthesis queue (backpressure → 503).
+//! - [`listen`]: connections: header timeout and a connection cap.
 //! - [`routes`]: the router, handlers and middleware.
+//! - [`host`]: the `Host` allow-list.
 //! - [`metrics`], [`process`], [`error`], [`query`], [`png`]: the supporting
 //!   pieces.
 //!
@@ -21,7 +23,9 @@
 
 pub mod config;
 pub mod error;
+pub mod host;
 pub mod jobs;
+pub mod listen;
 pub mod metrics;
 pub mod png;
 pub mod process;
@@ -51,6 +55,7 @@ pub const DEFAULT_ID: &str = "default";
 pub struct Server {
     listener: tokio::net::TcpListener,
     state: AppState,
+    limits: listen::Limits,
 }
 
 impl Server {
@@ -67,6 +72,19 @@ impl Server {
                 );
             }
         }
+        let allowed_hosts = host::AllowedHosts::resolve(&args.allowed_hosts, args.addr)
+            .map_err(|e| anyhow::anyhow!("--allowed-hosts: {e}"))?;
+        let cors_origins = args
+            .cors_origins
+            .iter()
+            .map(|o| {
+                axum::http::HeaderValue::from_str(o).with_context(|| format!("CORS origin `{o}`"))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        // Bound first: an instance that cannot listen touches nothing.
+        let listener = tokio::net::TcpListener::bind(args.addr)
+            .await
+            .with_context(|| format!("binding {}", args.addr))?;
         let data_dir = args.resolved_data_dir();
         let store = {
             let d = data_dir.clone();
@@ -116,9 +134,6 @@ impl Server {
             metrics.clone(),
         )
         .with_work_budget(args.max_request_work);
-        let listener = tokio::net::TcpListener::bind(args.addr)
-            .await
-            .with_context(|| format!("binding {}", args.addr))?;
         let state = Arc::new(Shared {
             registry,
             jobs,
@@ -128,16 +143,11 @@ impl Server {
             max_request_voxels: args.max_request_voxels,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
             token: args.token.clone().filter(|t| !t.is_empty()),
-            cors_origins: args
-                .cors_origins
-                .iter()
-                .map(|o| {
-                    axum::http::HeaderValue::from_str(o)
-                        .with_context(|| format!("CORS origin `{o}`"))
-                })
-                .collect::<anyhow::Result<_>>()?,
+            cors_origins,
             default_texture: args.default_texture,
             pending_wait: std::time::Duration::from_secs_f64(args.pending_wait),
+            body_timeout: Duration::from_secs_f64(args.body_timeout),
+            allowed_hosts,
         });
         tracing::info!(
             addr = %listener.local_addr()?,
@@ -145,7 +155,19 @@ impl Server {
             textures = state.registry.list().len(),
             "server ready"
         );
-        Ok(Server { listener, state })
+        let limits = listen::Limits {
+            header_timeout: Duration::from_secs_f64(args.header_timeout),
+            max_connections: listen::fit_descriptor_limit(
+                usize::try_from(args.max_connections).unwrap_or(usize::MAX),
+            ),
+            max_head_bytes: routes::MAX_HEAD_BYTES,
+            max_headers: routes::HYPER_MAX_HEADERS,
+        };
+        Ok(Server {
+            listener,
+            state,
+            limits,
+        })
     }
 
     /// The bound address (useful with port 0).
@@ -164,11 +186,10 @@ impl Server {
         self,
         shutdown: impl Future<Output = ()> + Send + 'static,
     ) -> anyhow::Result<()> {
+        let metrics = self.state.metrics.clone();
         let app = routes::router(self.state);
-        axum::serve(self.listener, app)
-            .with_graceful_shutdown(shutdown)
-            .await
-            .context("serving")
+        listen::serve(self.listener, app, self.limits, metrics, shutdown).await;
+        Ok(())
     }
 }
 

@@ -383,32 +383,44 @@ impl Registry {
         Ok(Submitted::Pending(entry))
     }
 
-    /// Removes texture `id` and its files; 404 when unknown.
+    /// Removes texture `id` and its files; 404 when unknown. The files go
+    /// first: when they cannot be removed the texture stays as it was.
     pub async fn delete(self: &Arc<Self>, id: &str) -> Result<(), ApiError> {
-        let entry = {
-            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
-            let e = map
-                .remove(id)
-                .ok_or_else(|| ApiError::unknown_texture(id))?;
-            e.deleted.store(true, Ordering::SeqCst);
-            e
-        };
-        self.update_gauges();
+        let entry = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
         let this = self.clone();
+        let id_for_error = id.to_string();
         let id = id.to_string();
-        tokio::task::spawn_blocking(move || {
+        let found = tokio::task::spawn_blocking(move || {
+            // Under the store's lock, as a precompute's final writes are,
+            // so that none lands after the removal.
             let _g = this.store.lock();
-            // A re-upload of the same content may own the directory by now.
-            if this.get(&id).is_some() {
-                return Ok(());
+            // A concurrent delete or re-upload may have replaced it by now;
+            // the new one owns the directory.
+            let (present, current) = {
+                let map = this.map.read().unwrap_or_else(|e| e.into_inner());
+                let e = map.get(&id);
+                (e.is_some(), e.is_some_and(|e| Arc::ptr_eq(e, &entry)))
+            };
+            if !current {
+                return Ok(present);
             }
-            this.store.remove(&id)
+            this.store.remove(&id)?;
+            let mut map = this.map.write().unwrap_or_else(|e| e.into_inner());
+            if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
+                map.remove(&id);
+            }
+            entry.deleted.store(true, Ordering::SeqCst);
+            Ok::<_, std::io::Error>(true)
         })
         .await
         .map_err(|e| ApiError::internal(e.to_string()))?
         .map_err(|e| ApiError::internal(format!("could not remove the texture's files: {e}")))?;
-        drop(entry);
-        Ok(())
+        self.update_gauges();
+        if found {
+            Ok(())
+        } else {
+            Err(ApiError::unknown_texture(&id_for_error))
+        }
     }
 
     /// Counts one more precompute as pending.
@@ -602,6 +614,22 @@ impl Registry {
                 }
             };
             let spec = TextureSpec { planes, params };
+            // What is served must be what the id names: recompute it from
+            // the pixels and parameters as loaded (a tampered exemplar or
+            // metadata is refused, and never shares its candidates).
+            let hash = spec.content_hash_as_stored(&meta.params);
+            if hash != meta.content_hash
+                || (meta.id != meta.content_hash && meta.id != super::DEFAULT_ID)
+            {
+                tracing::error!(
+                    id = %meta.id,
+                    content_hash = %meta.content_hash,
+                    computed = %hash,
+                    "stored texture does not match its id; not served"
+                );
+                self.metrics.textures_refused.inc();
+                continue;
+            }
             let entry = Arc::new(
                 Entry::new(
                     meta.id.clone(),
@@ -659,6 +687,10 @@ impl Registry {
         let c = Candidates::load(&bytes).map_err(|e| e.to_string())?;
         if c.params() != &entry.params.analysis {
             return Err("stored candidates were made with other parameters".into());
+        }
+        let set = entry.planes.to_set().map_err(|e| e.message)?;
+        if c.exemplars() != &set {
+            return Err("stored candidates were made from other exemplars".into());
         }
         let c = Arc::new(c);
         let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())

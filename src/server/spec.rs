@@ -117,11 +117,7 @@ impl TextureParams {
 
     /// Parses a JSON text holding a flat object of parameters.
     pub fn from_json(text: &str) -> Result<TextureParams, ApiError> {
-        match serde_json::from_str::<Value>(text) {
-            Ok(Value::Object(m)) => Self::from_flat(&m),
-            Ok(_) => Err(invalid_params("`params` must be a JSON object".into())),
-            Err(e) => Err(invalid_params(format!("`params` is not JSON: {e}"))),
-        }
+        Self::from_flat(&params_object(text)?)
     }
 
     /// Parameters from query-string pairs: each value is read as a JSON
@@ -171,6 +167,49 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("fine_levels", "1"),
     ("correction", r#""colour""#),
 ];
+
+/// The members of a JSON object in the order written, repeated keys kept.
+struct Members(Vec<(String, Value)>);
+
+impl<'de> Deserialize<'de> for Members {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Members, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = Members;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a JSON object")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut m: A,
+            ) -> Result<Members, A::Error> {
+                let mut out = Vec::new();
+                while let Some(kv) = m.next_entry::<String, Value>()? {
+                    out.push(kv);
+                }
+                Ok(Members(out))
+            }
+        }
+        d.deserialize_map(Visit)
+    }
+}
+
+/// Parses the JSON text of a `params` object. A key given twice is refused
+/// (a JSON parser would keep the last one silently).
+pub fn params_object(text: &str) -> Result<Map<String, Value>, ApiError> {
+    let Members(members) = serde_json::from_str(text)
+        .map_err(|e| invalid_params(format!("`params` must be a JSON object: {e}")))?;
+    let mut m = Map::new();
+    for (k, v) in members {
+        if m.contains_key(&k) {
+            return Err(invalid_params(format!(
+                "parameter `{k}` given more than once in `params`"
+            )));
+        }
+        m.insert(k, v);
+    }
+    Ok(m)
+}
 
 fn invalid_params(message: String) -> ApiError {
     ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)
@@ -234,6 +273,19 @@ impl TextureSpec {
         hex(&h.finalize()[..16])
     }
 
+    /// The content hash as it was computed when `stored`, the flat
+    /// parameters of a `meta.json`, were written: parameters added since
+    /// were not part of it (the hash is over each parameter struct's JSON,
+    /// and the structs had only the stored keys then, in today's order).
+    pub fn content_hash_as_stored(&self, stored: &Map<String, Value>) -> String {
+        let mut h = Sha256::new();
+        h.update(b"solidtex texture v1\0");
+        self.hash_planes(&mut h);
+        hash_json_keys(&mut h, &self.params.analysis, stored);
+        hash_json_keys(&mut h, &self.params.synth, stored);
+        hex(&h.finalize()[..16])
+    }
+
     /// What the precomputed candidates depend on: the pixels and the
     /// analysis parameters only. Textures that differ in synthesis
     /// parameters alone share their candidates.
@@ -262,6 +314,23 @@ impl TextureSpec {
 
 fn hash_json<T: Serialize>(h: &mut Sha256, v: &T) {
     let s = serde_json::to_string(v).unwrap_or_default();
+    h.update((s.len() as u64).to_le_bytes());
+    h.update(s.as_bytes());
+}
+
+/// [`hash_json`] of `v` restricted to the keys of `keep`, members in the
+/// order `v` writes them.
+fn hash_json_keys<T: Serialize>(h: &mut Sha256, v: &T, keep: &Map<String, Value>) {
+    let full = serde_json::to_string(v).unwrap_or_default();
+    let Ok(Members(members)) = serde_json::from_str::<Members>(&full) else {
+        return hash_json(h, v);
+    };
+    let kept: Vec<String> = members
+        .iter()
+        .filter(|(k, _)| keep.contains_key(k))
+        .map(|(k, v)| format!("{}:{v}", Value::String(k.clone())))
+        .collect();
+    let s = format!("{{{}}}", kept.join(","));
     h.update((s.len() as u64).to_le_bytes());
     h.update(s.as_bytes());
 }
@@ -525,6 +594,94 @@ mod tests {
             spec(img(3), 1).analysis_hash(),
             spec(img(5), 1).analysis_hash()
         );
+    }
+
+    /// The synthesis parameters as the first stored layout had them, in
+    /// their order then.
+    #[derive(Serialize)]
+    struct SynthParamsVersion1 {
+        seed: u64,
+        passes: u32,
+        subpass_side: u32,
+        scheme: Value,
+        grid: u32,
+        jitter: f32,
+        correct_init_level: bool,
+        contrast: f32,
+    }
+
+    #[test]
+    fn ids_are_recomputed_as_they_were_stored() {
+        let now = TextureSpec {
+            planes: Planes::Single(img(3)),
+            params: TextureParams {
+                synth: SynthParams {
+                    seed: 7,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+        };
+        assert_eq!(
+            now.content_hash_as_stored(&now.params.to_flat()),
+            now.content_hash()
+        );
+        // A texture stored by the first layout: its parameters lack the
+        // keys added since, and its id hashed the structs of then.
+        let mut old = now.params.to_flat();
+        for k in [
+            "slices",
+            "consistency",
+            "fine_levels",
+            "correction",
+            "finest_passes",
+            "slab_thickness",
+        ] {
+            old.remove(k);
+        }
+        let d = SynthParams::default();
+        let then = SynthParamsVersion1 {
+            seed: 7,
+            passes: d.passes,
+            subpass_side: d.subpass_side,
+            scheme: old["scheme"].clone(),
+            grid: d.grid,
+            jitter: d.jitter,
+            correct_init_level: d.correct_init_level,
+            contrast: d.contrast,
+        };
+        let mut h = Sha256::new();
+        h.update(b"solidtex texture v1\0");
+        now.hash_planes(&mut h);
+        hash_json(&mut h, &now.params.analysis);
+        hash_json(&mut h, &then);
+        let id_then = hex(&h.finalize()[..16]);
+        let loaded = TextureSpec {
+            planes: now.planes.clone(),
+            params: TextureParams::from_stored(&old).unwrap(),
+        };
+        assert_ne!(loaded.content_hash(), id_then);
+        assert_eq!(loaded.content_hash_as_stored(&old), id_then);
+        // Another seed or other pixels do not match.
+        let mut other = old.clone();
+        other.insert("seed".into(), Value::from(8));
+        let loaded = TextureSpec {
+            planes: now.planes.clone(),
+            params: TextureParams::from_stored(&other).unwrap(),
+        };
+        assert_ne!(loaded.content_hash_as_stored(&other), id_then);
+    }
+
+    #[test]
+    fn params_objects_refuse_repeated_keys() {
+        assert_eq!(params_object(r#"{"seed": 1}"#).unwrap()["seed"], 1);
+        for bad in [r#"{"seed": 1, "seed": 1}"#, "[1]", "7", "{"] {
+            assert_eq!(
+                params_object(bad).unwrap_err().code,
+                "invalid_params",
+                "{bad}"
+            );
+        }
     }
 
     #[test]

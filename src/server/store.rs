@@ -17,6 +17,11 @@
 //! serialises directory-level changes (create, delete, final writes) so a
 //! delete racing a re-upload of the same content cannot remove the new
 //! files.
+//!
+//! `<data-dir>/solidtex.lock` is held locked while a server uses the
+//! directory, so that two servers never write it at once. Only files the
+//! server writes are ever removed: anything else found there is reported
+//! and left alone.
 
 use super::spec::{ExemplarInfo, Planes, valid_id};
 use crate::{Candidates, Exemplar};
@@ -30,6 +35,20 @@ use std::sync::{Mutex, MutexGuard};
 /// Version of the metadata layout.
 pub const META_VERSION: u32 = 1;
 const TMP_SUFFIX: &str = ".tmp";
+/// Suffix of a texture directory being deleted.
+const DELETING_SUFFIX: &str = ".deleting.tmp";
+/// The file locked while a server uses the data directory.
+pub const LOCK_FILE: &str = "solidtex.lock";
+/// The files the server writes in a texture directory (besides their
+/// temporaries): only these are ever removed.
+const WRITTEN: [&str; 6] = [
+    "meta.json",
+    "exemplar.png",
+    "xy.png",
+    "yz.png",
+    "zx.png",
+    "candidates.stx",
+];
 
 /// Status as persisted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -83,36 +102,45 @@ pub struct Found {
 pub struct Store {
     root: PathBuf,
     lock: Mutex<()>,
+    /// Holds the exclusive lock on [`LOCK_FILE`] while the store lives.
+    _owner: File,
 }
 
 impl Store {
-    /// Opens (creating) `root` and clears debris of interrupted writes:
-    /// temporary files and texture directories without metadata.
+    /// Opens (creating) `root`, locks it against other servers, and clears
+    /// debris of interrupted writes: temporary files, texture directories
+    /// without metadata and deletions cut short. Only files the server
+    /// writes are removed; anything else is reported and left alone.
     pub fn open(root: &Path) -> io::Result<Store> {
+        fs::create_dir_all(root)?;
+        let owner = lock_exclusive(root)?;
         let textures = root.join("textures");
         fs::create_dir_all(&textures)?;
         let store = Store {
             root: root.to_path_buf(),
             lock: Mutex::new(()),
+            _owner: owner,
         };
         for entry in fs::read_dir(&textures)? {
             let entry = entry?;
             let path = entry.path();
             let name = entry.file_name().to_string_lossy().to_string();
-            if !entry.file_type()?.is_dir() || !valid_id(&name) {
-                tracing::warn!(path = %path.display(), "removing stray entry in data directory");
-                remove_any(&path)?;
+            let is_dir = entry.file_type()?.is_dir();
+            let deleting = name.strip_suffix(DELETING_SUFFIX).is_some_and(valid_id);
+            if !is_dir || !(valid_id(&name) || deleting) {
+                tracing::warn!(path = %path.display(), "ignoring an entry the server did not write");
                 continue;
             }
             for f in fs::read_dir(&path)? {
                 let f = f?;
-                if f.file_name().to_string_lossy().ends_with(TMP_SUFFIX) {
+                let n = f.file_name().to_string_lossy().to_string();
+                if f.file_type()?.is_file() && is_temporary(&n) {
                     fs::remove_file(f.path())?;
                 }
             }
-            if !path.join("meta.json").exists() {
-                tracing::warn!(id = %name, "removing texture directory without metadata");
-                fs::remove_dir_all(&path)?;
+            if deleting || !path.join("meta.json").exists() {
+                tracing::warn!(path = %path.display(), "removing debris of an interrupted write or deletion");
+                remove_written(&path)?;
             }
         }
         Ok(store)
@@ -137,8 +165,11 @@ impl Store {
     /// leftover directory of the same id). Caller holds [`Store::lock`].
     pub fn create(&self, meta: &StoredMeta, planes: &Planes) -> io::Result<()> {
         let dir = self.dir(&meta.id);
-        if dir.exists() {
-            fs::remove_dir_all(&dir)?;
+        if dir.exists() && !remove_written(&dir)? {
+            return Err(io::Error::other(format!(
+                "{} holds files the server did not write",
+                dir.display()
+            )));
         }
         fs::create_dir_all(&dir)?;
         for (name, e) in planes.named() {
@@ -186,21 +217,32 @@ impl Store {
         }
     }
 
-    /// Removes a texture's directory. Caller holds [`Store::lock`].
+    /// Removes a texture's directory. Caller holds [`Store::lock`]. Once
+    /// this returns `Ok` the texture is gone from the disk; on an error
+    /// nothing changed.
     pub fn remove(&self, id: &str) -> io::Result<()> {
         let dir = self.dir(id);
         if !dir.exists() {
             return Ok(());
         }
         // Rename first so that a crash mid-way leaves no half directory
-        // under a valid id (the `.tmp` name is cleared at the next start).
+        // under a valid id (the trash is cleared at the next start).
         let trash = self
             .root
             .join("textures")
-            .join(format!("{id}.deleting{TMP_SUFFIX}"));
+            .join(format!("{id}{DELETING_SUFFIX}"));
         fs::rename(&dir, &trash)?;
         sync_dir(&self.root.join("textures"))?;
-        fs::remove_dir_all(&trash)
+        match remove_written(&trash) {
+            Ok(true) => {}
+            Ok(false) => {
+                tracing::warn!(path = %trash.display(), "left files the server did not write")
+            }
+            Err(e) => {
+                tracing::warn!(path = %trash.display(), error = %e, "could not clear a deleted texture; retried at the next start")
+            }
+        }
+        Ok(())
     }
 
     /// Every texture with readable metadata. A directory whose metadata
@@ -208,7 +250,11 @@ impl Store {
     pub fn scan(&self) -> io::Result<Vec<Found>> {
         let mut out = Vec::new();
         for entry in fs::read_dir(self.root.join("textures"))? {
-            let dir = entry?.path();
+            let entry = entry?;
+            if !entry.file_type()?.is_dir() || !valid_id(&entry.file_name().to_string_lossy()) {
+                continue;
+            }
+            let dir = entry.path();
             let meta_path = dir.join("meta.json");
             let meta = fs::read(&meta_path)
                 .map_err(|e| e.to_string())
@@ -232,12 +278,71 @@ impl Store {
     }
 }
 
-fn remove_any(path: &Path) -> io::Result<()> {
-    if path.is_dir() {
-        fs::remove_dir_all(path)
-    } else {
-        fs::remove_file(path)
+/// Takes the exclusive lock of the data directory `root`. A server still
+/// exiting gets two seconds to let go; then another one is assumed to use
+/// it and opening fails.
+fn lock_exclusive(root: &Path) -> io::Result<File> {
+    let path = root.join(LOCK_FILE);
+    let f = File::options()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)?;
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
+    loop {
+        match f.try_lock() {
+            Ok(()) => return Ok(f),
+            Err(fs::TryLockError::WouldBlock) if std::time::Instant::now() < deadline => {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            Err(fs::TryLockError::WouldBlock) => {
+                return Err(io::Error::new(
+                    io::ErrorKind::WouldBlock,
+                    format!(
+                        "{} is in use by another solidtex server (it holds {})",
+                        root.display(),
+                        path.display()
+                    ),
+                ));
+            }
+            Err(fs::TryLockError::Error(e)) => return Err(e),
+        }
     }
+}
+
+/// A temporary of [`write_atomic_with`] for one of the [`WRITTEN`] files:
+/// `.NAME.PID.tmp`.
+fn is_temporary(name: &str) -> bool {
+    let Some(inner) = name
+        .strip_prefix('.')
+        .and_then(|n| n.strip_suffix(TMP_SUFFIX))
+    else {
+        return false;
+    };
+    inner.rsplit_once('.').is_some_and(|(file, pid)| {
+        WRITTEN.contains(&file) && !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit())
+    })
+}
+
+/// Removes a texture directory if it holds only files the server writes
+/// (true); leaves it untouched otherwise (false).
+fn remove_written(dir: &Path) -> io::Result<bool> {
+    let mut files = Vec::new();
+    for f in fs::read_dir(dir)? {
+        let f = f?;
+        let name = f.file_name().to_string_lossy().to_string();
+        if !f.file_type()?.is_file() || !(WRITTEN.contains(&name.as_str()) || is_temporary(&name)) {
+            tracing::warn!(path = %f.path().display(), "not written by the server; left in place");
+            return Ok(false);
+        }
+        files.push(f.path());
+    }
+    for f in files {
+        fs::remove_file(f)?;
+    }
+    fs::remove_dir(dir)?;
+    Ok(true)
 }
 
 /// Writes `bytes` to `path` atomically and durably.

@@ -1,8 +1,9 @@
 //! The HTTP surface: the route table, the shared state handlers see, and
 //! the middleware stack every request passes through.
 //!
-//! Outermost first: CORS → tracing span → metrics → panic catcher → JSON
-//! error shape → handler. Handlers only parse, call the registry or the job
+//! Outermost first: CORS → tracing span → metrics → head size limits →
+//! Host allow-list → bearer token → panic catcher → request body deadline
+//! → JSON error shape → handler. Handlers only parse, call the registry or the job
 //! queue, and shape responses; no synthesis logic lives here.
 
 mod ops;
@@ -14,6 +15,7 @@ mod voxels;
 pub use volumes::{WINDOW_LOG2, window};
 
 use super::error::{ApiError, json_errors, panic_response};
+use super::host::AllowedHosts;
 use super::jobs::Jobs;
 use super::metrics::Metrics;
 use super::registry::Registry;
@@ -27,6 +29,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tower_http::catch_panic::CatchPanicLayer;
 use tower_http::cors::{AllowOrigin, Any, CorsLayer};
+use tower_http::timeout::{DeadlineBody, TimeoutError};
 use tower_http::trace::TraceLayer;
 
 /// Every route as (method, path in OpenAPI notation). The router below
@@ -79,7 +82,25 @@ pub struct Shared {
     pub default_texture: bool,
     /// How long a voxel request waits for a pending texture before 409.
     pub pending_wait: std::time::Duration,
+    /// Time a request body may take to arrive in full.
+    pub body_timeout: std::time::Duration,
+    /// Which `Host` headers are answered.
+    pub allowed_hosts: AllowedHosts,
 }
+
+/// Longest request target (path and query) answered, bytes; longer: 414.
+pub const MAX_URI_BYTES: usize = 8 << 10;
+/// Most header fields in a request; more: 431.
+pub const MAX_HEADERS: usize = 100;
+/// Largest total of header names and values (plus 4 bytes per field for
+/// `: ` and CRLF); larger: 431.
+pub const MAX_HEADER_BYTES: usize = 32 << 10;
+/// Largest request head hyper buffers, bytes, and most header fields it
+/// parses: above the limits [`head_limits`] enforces, so that requests
+/// between the two get a JSON answer instead of hyper's empty one.
+pub const MAX_HEAD_BYTES: usize = 64 << 10;
+/// See [`MAX_HEAD_BYTES`].
+pub const HYPER_MAX_HEADERS: usize = 2 * MAX_HEADERS;
 
 /// Handler state: cheap to clone.
 pub type AppState = Arc<Shared>;
@@ -194,8 +215,11 @@ fn with_middleware(routes: Router<AppState>, state: AppState) -> Router {
     routes
         .fallback(no_route)
         .layer(middleware::from_fn(json_errors))
+        .layer(middleware::from_fn_with_state(state.clone(), body_deadline))
         .layer(CatchPanicLayer::custom(panic_response))
         .layer(middleware::from_fn_with_state(state.clone(), authorize))
+        .layer(middleware::from_fn_with_state(state.clone(), check_host))
+        .layer(middleware::from_fn(head_limits))
         .layer(middleware::from_fn_with_state(state.clone(), track))
         .layer(trace)
         .layer(cors)
@@ -260,6 +284,92 @@ async fn authorize(State(s): State<AppState>, req: Request, next: Next) -> Respo
 /// Compares secrets in time that depends on their lengths only.
 fn same_secret(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |d, (x, y)| d | (x ^ y)) == 0
+}
+
+/// Answers requests with an oversized target (414) or head (431) in JSON.
+async fn head_limits(req: Request, next: Next) -> Response {
+    let uri_len = req.uri().path_and_query().map_or(0, |p| p.as_str().len());
+    if uri_len > MAX_URI_BYTES {
+        return axum::response::IntoResponse::into_response(ApiError::new(
+            StatusCode::URI_TOO_LONG,
+            "uri_too_long",
+            format!("request target of {uri_len} bytes; at most {MAX_URI_BYTES}"),
+        ));
+    }
+    let count = req.headers().len();
+    let bytes: usize = req
+        .headers()
+        .iter()
+        .map(|(k, v)| k.as_str().len() + v.len() + 4)
+        .sum();
+    if count > MAX_HEADERS || bytes > MAX_HEADER_BYTES {
+        return axum::response::IntoResponse::into_response(ApiError::new(
+            StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+            "headers_too_large",
+            format!(
+                "{count} header fields of {bytes} bytes; at most {MAX_HEADERS} fields of \
+                 {MAX_HEADER_BYTES} bytes"
+            ),
+        ));
+    }
+    next.run(req).await
+}
+
+/// Refuses requests whose `Host` is not on the allow-list (421), before
+/// anything else looks at them.
+async fn check_host(State(s): State<AppState>, req: Request, next: Next) -> Response {
+    let host = req
+        .headers()
+        .get(axum::http::header::HOST)
+        .map(|v| v.to_str().unwrap_or("\u{fffd}"))
+        .or_else(|| req.uri().authority().map(|a| a.as_str()));
+    if s.allowed_hosts.allows(host) {
+        return next.run(req).await;
+    }
+    axum::response::IntoResponse::into_response(ApiError::new(
+        StatusCode::MISDIRECTED_REQUEST,
+        "host_not_allowed",
+        format!(
+            "host `{}` is not served here (see --allowed-hosts)",
+            host.unwrap_or_default()
+        ),
+    ))
+}
+
+/// Gives the request body `body_timeout` to arrive in full (a client
+/// trickling an upload would otherwise hold its connection and buffer for
+/// ever) and answers 408 when it does not.
+async fn body_deadline(State(s): State<AppState>, req: Request, next: Next) -> Response {
+    use http_body_util::BodyExt;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let expired = Arc::new(AtomicBool::new(false));
+    let flag = expired.clone();
+    let req = req.map(|b| {
+        axum::body::Body::new(DeadlineBody::new(s.body_timeout, b).map_err(move |e| {
+            if e.is::<TimeoutError>() {
+                flag.store(true, Ordering::SeqCst);
+            }
+            e
+        }))
+    });
+    let res = next.run(req).await;
+    if !expired.load(Ordering::SeqCst) {
+        return res;
+    }
+    let mut res = axum::response::IntoResponse::into_response(ApiError::new(
+        StatusCode::REQUEST_TIMEOUT,
+        "body_timeout",
+        format!(
+            "the request body did not arrive within {} s",
+            s.body_timeout.as_secs_f64()
+        ),
+    ));
+    // The rest of the body is never read: the connection cannot be reused.
+    res.headers_mut().insert(
+        axum::http::header::CONNECTION,
+        axum::http::HeaderValue::from_static("close"),
+    );
+    res
 }
 
 /// Counts requests and their latency per route template.

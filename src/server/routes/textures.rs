@@ -6,7 +6,7 @@ use crate::Exemplar;
 use crate::server::error::ApiError;
 use crate::server::query::Query;
 use crate::server::registry::{Entry, Status, Submitted};
-use crate::server::spec::{Planes, TextureParams, TextureSpec, valid_id};
+use crate::server::spec::{Planes, TextureParams, TextureSpec, params_object, valid_id};
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Request, State};
@@ -237,6 +237,7 @@ async fn read_multipart(
         )
     })?;
     let (mut single, mut xy, mut yz, mut zx) = (None, None, None, None);
+    let mut params_given = false;
     while let Some(field) = mp.next_field().await.map_err(multipart_error)? {
         let name = field.name().unwrap_or("").to_string();
         if matches!(name.as_str(), "image" | "exemplar" | "xy") && label.is_none() {
@@ -249,6 +250,13 @@ async fn read_multipart(
             "yz" => &mut yz,
             "zx" => &mut zx,
             "params" => {
+                if std::mem::replace(&mut params_given, true) {
+                    return Err(ApiError::new(
+                        StatusCode::BAD_REQUEST,
+                        "invalid_request",
+                        "form field `params` given more than once",
+                    ));
+                }
                 let text = std::str::from_utf8(&data).map_err(|_| {
                     ApiError::new(
                         StatusCode::BAD_REQUEST,
@@ -256,15 +264,15 @@ async fn read_multipart(
                         "`params` is not UTF-8",
                     )
                 })?;
-                match serde_json::from_str::<Value>(text) {
-                    Ok(Value::Object(m)) => flat.extend(m),
-                    _ => {
+                for (k, v) in params_object(text)? {
+                    if flat.contains_key(&k) {
                         return Err(ApiError::new(
                             StatusCode::BAD_REQUEST,
                             "invalid_params",
-                            "`params` must be a JSON object",
+                            format!("parameter `{k}` given both in the query and in `params`"),
                         ));
                     }
+                    flat.insert(k, v);
                 }
                 continue;
             }

@@ -244,7 +244,10 @@ pub async fn cut(
             ));
         }
     };
-    let limit = COORD_LIMIT as f64 - 1.0;
+    check_plane(u, v)?;
+    // Every sample point within ±2^31, like every integer coordinate (a
+    // trilinear sample exactly at +2^31 also reads its neighbour at weight 0).
+    let limit = COORD_LIMIT as f64;
     for (i, j) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)] {
         for a in 0..3 {
             let c = origin[a] + i as f64 * u[a] + j as f64 * v[a];
@@ -286,6 +289,36 @@ pub async fn cut(
     }
     let png = png_job(&s, w, h, move || tex.cut(&plane, lod, filter)).await?;
     Ok(body_response(png, "image/png", &tag))
+}
+
+/// Checks that `u` and `v` span a plane: neither is zero and they are not
+/// parallel (a degenerate cut would show one line of voxels stretched).
+fn check_plane(u: [f64; 3], v: [f64; 3]) -> Result<(), ApiError> {
+    // Scaled by their largest component so that no product overflows.
+    let unit = |a: [f64; 3]| {
+        let m = a.iter().fold(0f64, |m, x| m.max(x.abs()));
+        (m > 0.0).then(|| a.map(|x| x / m))
+    };
+    let Some(a) = unit(u) else {
+        return Err(ApiError::invalid_parameter("u", "must not be zero"));
+    };
+    let Some(b) = unit(v) else {
+        return Err(ApiError::invalid_parameter("v", "must not be zero"));
+    };
+    let norm = |x: [f64; 3]| (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt();
+    let cross = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
+    // |u × v| = |u||v| sin θ: parallel below about 1e-9 rad.
+    if norm(cross) <= 1e-9 * norm(a) * norm(b) {
+        return Err(ApiError::invalid_parameter(
+            "v",
+            "is parallel to `u`: they must span a plane",
+        ));
+    }
+    Ok(())
 }
 
 fn shape_headers(res: &mut Response, origin: [i64; 3], size: [u32; 3], lod: u32) {

@@ -1,0 +1,16 @@
+//! The server against hostile or broken clients: idle and slow
+//! connections, wrong Host headers, malformed requests, and a data
+//! directory that is tampered with or shared.
+
+mod server_support;
+
+#[path = "abuse/connections.rs"]
+mod connections;
+#[path = "abuse/data_dir.rs"]
+mod data_dir;
+#[path = "abuse/errors.rs"]
+mod errors;
+#[path = "abuse/hosts.rs"]
+mod hosts;
+#[path = "abuse/raw.rs"]
+mod raw;

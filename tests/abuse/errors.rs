@@ -1,0 +1,192 @@
+//! Every error is JSON: oversized heads, degenerate cut planes, parameters
+//! given twice, coordinates at the edge of the served range.
+
+use crate::raw::send;
+use crate::server_support::*;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn oversized_targets_and_heads_get_json_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let long = "a".repeat(9000);
+    let a = send(
+        s.addr,
+        format!("GET /healthz?x={long} HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\n\r\n")
+            .as_bytes(),
+    )
+    .await;
+    a.assert_error(414, "uri_too_long");
+
+    let many: String = (0..150).map(|i| format!("x-h{i}: v\r\n")).collect();
+    let a = send(
+        s.addr,
+        format!("GET /healthz HTTP/1.1\r\nhost: localhost\r\n{many}connection: close\r\n\r\n")
+            .as_bytes(),
+    )
+    .await;
+    a.assert_error(431, "headers_too_large");
+
+    let big = "b".repeat(40 << 10);
+    let a = send(
+        s.addr,
+        format!(
+            "GET /healthz HTTP/1.1\r\nhost: localhost\r\nx-big: {big}\r\nconnection: close\r\n\r\n"
+        )
+        .as_bytes(),
+    )
+    .await;
+    a.assert_error(431, "headers_too_large");
+
+    // Beyond what hyper buffers (64 KiB) it answers by itself, with no
+    // body: documented.
+    let huge = "c".repeat(100 << 10);
+    let a = send(
+        s.addr,
+        format!("GET /healthz HTTP/1.1\r\nhost: localhost\r\nx-huge: {huge}\r\n\r\n").as_bytes(),
+    )
+    .await;
+    assert_eq!(a.status, 431);
+
+    // Within the limits all is well.
+    let a = send(
+        s.addr,
+        b"GET /healthz HTTP/1.1\r\nhost: localhost\r\nconnection: close\r\n\r\n",
+    )
+    .await;
+    assert_eq!(a.status, 200);
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn degenerate_cut_planes_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 3).await;
+    let cut = |q: &str| s.url(&format!("/v1/textures/{id}/cut.png?w=8&h=8&{q}"));
+    for q in [
+        "u=0,0,0",
+        "v=0,0,0",
+        "u=0,0,0&v=0,0,0",
+        "u=1,0,0&v=2,0,0",
+        "u=1,1,0&v=-2,-2,0",
+        "u=0.5,0.25,1&v=1,0.5,2",
+        "u=1e-300,0,0&v=1,0,0",
+    ] {
+        let (st, h, b) = get(&c, &cut(q)).await;
+        assert_error(st, &h, &b, 400, "invalid_parameter");
+    }
+    for q in [
+        "u=1,0,0&v=0,1,0",
+        "u=0.6,0.8,0&v=0,0,1",
+        "u=1,1e-6,0&v=1,0,0",
+    ] {
+        let (st, _, b) = get(&c, &cut(q)).await;
+        assert_eq!(st, 200, "{q}: {}", String::from_utf8_lossy(&b));
+    }
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cuts_reach_as_far_as_slices() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 4).await;
+    let t = |p: &str| s.url(&format!("/v1/textures/{id}{p}"));
+    // The plane x = 2^31, as a slice and as a cut sampling whole voxels.
+    let (st, _, slice) = get(&c, &t("/slices/x/2147483648.png?u0=5&v0=6&w=4&h=4")).await;
+    assert_eq!(st, 200);
+    let (st, _, cut) = get(
+        &c,
+        &t("/cut.png?origin=2147483648,5,6&u=0,1,0&v=0,0,1&w=4&h=4"),
+    )
+    .await;
+    assert_eq!(st, 200, "{}", String::from_utf8_lossy(&cut));
+    assert_eq!(decode_png(&slice), decode_png(&cut));
+    let (st, _, cut) = get(
+        &c,
+        &t("/cut.png?origin=-2147483648,5,6&u=0,1,0&v=0,0,1&w=4&h=4&filter=trilinear"),
+    )
+    .await;
+    assert_eq!(st, 200, "{}", String::from_utf8_lossy(&cut));
+    // One step further is out of range for both.
+    let (st, h, b) = get(&c, &t("/slices/x/2147483649.png?w=4&h=4")).await;
+    assert_error(st, &h, &b, 400, "out_of_range");
+    let (st, h, b) = get(&c, &t("/cut.png?origin=2147483648.5,0,0&w=1&h=1")).await;
+    assert_error(st, &h, &b, 400, "out_of_range");
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn parameters_given_twice_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 5).await;
+    let (st, h, b) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=4&h=4&w=8")),
+    )
+    .await;
+    assert_error(st, &h, &b, 400, "invalid_parameter");
+    let (st, v) = upload(&c, &s, exemplar_png(32, 6), "levels=3&seed=1&seed=2").await;
+    assert_eq!(st, 400, "{v}");
+    assert_eq!(v["error"]["code"], "invalid_parameter");
+
+    let part = || {
+        reqwest::multipart::Part::bytes(exemplar_png(32, 6))
+            .file_name("e.png")
+            .mime_str("image/png")
+            .unwrap()
+    };
+    let post = |form: reqwest::multipart::Form, query: &'static str| {
+        let c = c.clone();
+        let url = s.url(&format!("/v1/textures{query}"));
+        async move {
+            let r = c.post(url).multipart(form).send().await.unwrap();
+            let status = r.status().as_u16();
+            let v: serde_json::Value = r.json().await.unwrap();
+            (status, v)
+        }
+    };
+    // Two `params` fields.
+    let form = reqwest::multipart::Form::new()
+        .part("image", part())
+        .text("params", r#"{"levels": 3}"#)
+        .text("params", r#"{"seed": 9}"#);
+    let (st, v) = post(form, "").await;
+    assert_eq!(
+        (st, v["error"]["code"].as_str()),
+        (400, Some("invalid_request")),
+        "{v}"
+    );
+    // A key twice in one `params`.
+    let form = reqwest::multipart::Form::new()
+        .part("image", part())
+        .text("params", r#"{"levels": 3, "seed": 1, "seed": 2}"#);
+    let (st, v) = post(form, "").await;
+    assert_eq!(
+        (st, v["error"]["code"].as_str()),
+        (400, Some("invalid_params")),
+        "{v}"
+    );
+    // A key in the query and in `params`.
+    let form = reqwest::multipart::Form::new()
+        .part("image", part())
+        .text("params", r#"{"levels": 3, "seed": 2}"#);
+    let (st, v) = post(form, "?seed=1").await;
+    assert_eq!(
+        (st, v["error"]["code"].as_str()),
+        (400, Some("invalid_params")),
+        "{v}"
+    );
+    // Each once: accepted.
+    let form = reqwest::multipart::Form::new()
+        .part("image", part())
+        .text("params", r#"{"levels": 3}"#);
+    let (st, v) = post(form, "?seed=1").await;
+    assert!(st == 201 || st == 202, "{st} {v}");
+    assert_eq!(v["params"]["seed"], 1);
+    s.stop().await;
+}
