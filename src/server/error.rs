@@ -144,7 +144,11 @@ pub fn error_body(code: &str, message: &str) -> String {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        if self.status.is_server_error() {
+        // Shedding load (503) is the server working as configured, not a
+        // failure; `log_response` reports it at INFO.
+        if self.status == StatusCode::SERVICE_UNAVAILABLE {
+            tracing::debug!(code = self.code, message = %self.message, "request shed");
+        } else if self.status.is_server_error() {
             tracing::error!(code = self.code, message = %self.message, "request failed");
         } else {
             tracing::debug!(code = self.code, message = %self.message, "request rejected");
