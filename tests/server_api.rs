@@ -1228,3 +1228,50 @@ async fn uploads_keep_their_name_take_jpeg_and_downscale_photos() {
     assert!(notes.contains("downscaled from 1040x32 to 512x16"), "{v}");
     s.stop().await;
 }
+
+/// Uploads beyond the configured number of textures, or beyond the bytes
+/// they may take on disk, are refused with 507 until some are deleted.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stored_textures_are_bounded_in_number_and_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.max_textures = 2;
+    let s = TestServer::start(args).await;
+    let c = client();
+    let first = ready_texture(&c, &s, 41).await;
+    ready_texture(&c, &s, 42).await;
+    let (st, v) = upload(&c, &s, exemplar_png(32, 43), SMALL_PARAMS).await;
+    assert_eq!(st, 507, "{v}");
+    assert_eq!(v["error"]["code"], "storage_full");
+    // Known textures are still answered, and a deletion makes room.
+    let (st, _) = upload(&c, &s, exemplar_png(32, 42), SMALL_PARAMS).await;
+    assert_eq!(st, 201);
+    let r = c
+        .delete(s.url(&format!("/v1/textures/{first}")))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 204);
+    let (st, v) = upload(&c, &s, exemplar_png(32, 43), SMALL_PARAMS).await;
+    assert_eq!(st, 202, "{v}");
+    s.stop().await;
+
+    // 300 kB on disk: a 32² exemplar's candidates would need more, a 16²
+    // one's fit.
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.max_stored_bytes = 300_000;
+    let s = TestServer::start(args).await;
+    let (st, v) = upload(&c, &s, exemplar_png(32, 44), SMALL_PARAMS).await;
+    assert_eq!(st, 507, "{v}");
+    assert!(
+        v["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("--max-stored-bytes"),
+        "{v}"
+    );
+    let (st, v) = upload(&c, &s, exemplar_png(16, 44), SMALL_PARAMS).await;
+    assert_eq!(st, 202, "{v}");
+    s.stop().await;
+}

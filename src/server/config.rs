@@ -91,6 +91,17 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_REQUEST_WORK", default_value_t = 4 << 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_request_work: u64,
 
+    /// Uploaded textures kept at most; more uploads get 507 `storage_full`
+    /// until some are deleted (the bundled texture is not counted).
+    #[arg(long, env = "SOLIDTEX_MAX_TEXTURES", default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_textures: u32,
+
+    /// Bytes the textures may take on disk (exemplars and candidates; a
+    /// 128² exemplar takes about 6 MB, a 512² one about 100 MB). An upload
+    /// that would go over gets 507 `storage_full`.
+    #[arg(long, env = "SOLIDTEX_MAX_STORED_BYTES", default_value_t = 4 << 30, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_stored_bytes: u64,
+
     /// Register the bundled exemplar under the id `default` at start.
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
     pub default_texture: bool,
@@ -180,6 +191,8 @@ impl ServeArgs {
             chunk_size: 32,
             max_request_voxels: 16 << 20,
             max_request_work: 4 << 20,
+            max_textures: 256,
+            max_stored_bytes: 4 << 30,
             default_texture: false,
             token: None,
             cors_origins: Vec::new(),

@@ -91,7 +91,12 @@ impl ApiError {
         )
     }
 
-    /// 503: the synthesis queue is full.
+    /// 507: the server keeps no more textures until some are deleted.
+    pub fn storage_full(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::INSUFFICIENT_STORAGE, "storage_full", message)
+    }
+
+    /// 503: too much work queued; retry later.
     pub fn overloaded(what: &str) -> Self {
         Self::new(
             StatusCode::SERVICE_UNAVAILABLE,

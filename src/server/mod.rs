@@ -102,14 +102,17 @@ impl Server {
             .thread_name(|i| format!("precompute-{i}"))
             .build()
             .context("starting the precompute pool")?;
-        let registry = Arc::new(Registry::new(
-            store,
-            cache,
-            metrics.clone(),
-            args.max_precomputes,
-            args.precompute_queue,
-            pool,
-        ));
+        let registry = Arc::new(
+            Registry::new(
+                store,
+                cache,
+                metrics.clone(),
+                args.max_precomputes,
+                args.precompute_queue,
+                pool,
+            )
+            .with_storage_limits(args.max_textures as usize, args.max_stored_bytes),
+        );
         let todo = {
             let r = registry.clone();
             tokio::task::spawn_blocking(move || r.recover())

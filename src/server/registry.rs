@@ -223,7 +223,16 @@ pub struct Registry {
     pool: rayon::ThreadPool,
     pending: AtomicUsize,
     max_pending: usize,
+    /// Uploaded textures kept at most (the bundled one not counted).
+    max_textures: usize,
+    /// Bytes the textures may take on disk.
+    max_stored_bytes: u64,
 }
+
+/// Disk bytes a texture takes per exemplar pixel and plane once its
+/// candidates are written (a 128² exemplar: about 6 MB), for admitting an
+/// upload before its candidates exist.
+const STORED_BYTES_PER_PIXEL: u64 = 400;
 
 fn now() -> u64 {
     SystemTime::now()
@@ -251,7 +260,17 @@ impl Registry {
             slots: Arc::new(Semaphore::new(max_precomputes.max(1) as usize)),
             pending: AtomicUsize::new(0),
             max_pending: (max_precomputes + precompute_queue) as usize,
+            max_textures: usize::MAX,
+            max_stored_bytes: u64::MAX,
         }
+    }
+
+    /// The same registry, refusing uploads (507 `storage_full`) beyond
+    /// `max_textures` textures or `max_stored_bytes` bytes on disk.
+    pub fn with_storage_limits(mut self, max_textures: usize, max_stored_bytes: u64) -> Registry {
+        self.max_textures = max_textures;
+        self.max_stored_bytes = max_stored_bytes;
+        self
     }
 
     /// The shared tile cache.
@@ -328,6 +347,20 @@ impl Registry {
         let hash = spec.content_hash();
         let fixed_id = id.is_some();
         let id = id.map(str::to_string).unwrap_or_else(|| hash.clone());
+        let (w, h) = spec.planes.size();
+        let planes = spec.planes.named().len() as u64;
+        let estimate = (u64::from(w) * u64::from(h))
+            .saturating_mul(planes)
+            .saturating_mul(STORED_BYTES_PER_PIXEL);
+        let stored = if fixed_id || self.max_stored_bytes == u64::MAX {
+            0
+        } else {
+            let store = self.store.clone();
+            tokio::task::spawn_blocking(move || store.bytes())
+                .await
+                .map_err(|e| ApiError::internal(e.to_string()))?
+                .map_err(|e| ApiError::internal(format!("reading the data directory: {e}")))?
+        };
         let entry = {
             let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
             if let Some(e) = map.get(&id).filter(|e| e.content_hash == hash) {
@@ -344,6 +377,26 @@ impl Registry {
             if !fixed_id && self.pending.load(Ordering::SeqCst) >= self.max_pending {
                 self.metrics.jobs_rejected.inc();
                 return Err(ApiError::overloaded("precompute queue is full"));
+            }
+            if !fixed_id {
+                let uploaded = map.values().filter(|e| e.id == e.content_hash).count();
+                if uploaded >= self.max_textures {
+                    return Err(ApiError::storage_full(format!(
+                        "this server keeps at most {} textures (--max-textures); delete one first",
+                        self.max_textures
+                    )));
+                }
+                // Precomputes in flight have not written their candidates
+                // yet: count them at the estimate too.
+                let pending = self.pending.load(Ordering::SeqCst) as u64;
+                let needed = stored.saturating_add(estimate.saturating_mul(pending + 1));
+                if needed > self.max_stored_bytes {
+                    return Err(ApiError::storage_full(format!(
+                        "the textures take {stored} bytes on disk and this one would need about \
+                         {estimate} more; the limit is {} (--max-stored-bytes); delete some first",
+                        self.max_stored_bytes
+                    )));
+                }
             }
             self.reserve_precompute();
             if let Some(old) = map.get(&id) {

@@ -151,6 +151,25 @@ impl Store {
         &self.root
     }
 
+    /// Bytes of the files under `textures/` (every texture's exemplars,
+    /// metadata and candidates).
+    pub fn bytes(&self) -> io::Result<u64> {
+        let mut total = 0u64;
+        for entry in fs::read_dir(self.root.join("textures"))? {
+            let entry = entry?;
+            if !entry.file_type()?.is_dir() {
+                continue;
+            }
+            for f in fs::read_dir(entry.path())? {
+                let m = f?.metadata()?;
+                if m.is_file() {
+                    total = total.saturating_add(m.len());
+                }
+            }
+        }
+        Ok(total)
+    }
+
     /// The directory of texture `id`.
     pub fn dir(&self, id: &str) -> PathBuf {
         self.root.join("textures").join(id)
