@@ -190,12 +190,20 @@ pub fn code_for_status(status: StatusCode) -> &'static str {
 
 /// Middleware: rewrites any error response that is not already JSON
 /// (framework rejections, empty 405s) into the JSON error shape, keeping
-/// its status and headers.
+/// its status and headers. An error to an upload closes the connection.
 pub async fn json_errors(req: axum::extract::Request, next: axum::middleware::Next) -> Response {
-    let res = next.run(req).await;
+    let upload = req.method() == axum::http::Method::POST;
+    let mut res = next.run(req).await;
     let status = res.status();
     if !(status.is_client_error() || status.is_server_error()) {
         return res;
+    }
+    if upload {
+        // The upload may have been refused before its body was read (too
+        // large, bad query or type): the connection cannot be reused, and
+        // saying so keeps the client from sending its next request on it.
+        res.headers_mut()
+            .insert(header::CONNECTION, HeaderValue::from_static("close"));
     }
     let is_json = res
         .headers()
