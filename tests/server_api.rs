@@ -1275,3 +1275,43 @@ async fn stored_textures_are_bounded_in_number_and_bytes() {
     assert_eq!(st, 202, "{v}");
     s.stop().await;
 }
+
+/// Beyond the memory bound the least recently used textures leave memory;
+/// asked for again, they come back from disk and give the same voxels as a
+/// server that never let them go.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn textures_beyond_the_memory_bound_are_evicted_and_loaded_again() {
+    let (dir, fresh_dir) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let mut args = test_args(dir.path());
+    // Only the texture last used stays in memory.
+    args.max_resident_bytes = 1;
+    let s = TestServer::start(args).await;
+    let fresh = TestServer::start(test_args(fresh_dir.path())).await;
+    let c = client();
+    let a = ready_texture(&c, &s, 51).await;
+    let b = ready_texture(&c, &s, 52).await;
+    assert_eq!(ready_texture(&c, &fresh, 51).await, a);
+    let loaded = |text: &str| metric(text, "solidtex_textures_loaded_total");
+    let before = loaded(&metrics(&c, &s).await);
+    // `a` was evicted when `b` became ready: a cold slice of it loads it
+    // back (evicting `b`), then `b` comes back the same way.
+    let slice = |srv: &TestServer, id: &str| {
+        srv.url(&format!(
+            "/v1/textures/{id}/slices/x/-9.png?u0=4&v0=-20&w=24&h=24"
+        ))
+    };
+    let (st, _, got) = get(&c, &slice(&s, &a)).await;
+    assert_eq!(st, 200);
+    let (st, _, want) = get(&c, &slice(&fresh, &a)).await;
+    assert_eq!(st, 200);
+    assert_eq!(got, want);
+    let (st, _, _) = get(&c, &slice(&s, &b)).await;
+    assert_eq!(st, 200);
+    assert_eq!(loaded(&metrics(&c, &s).await) - before, 2.0);
+    let (_, _, listing) = get(&c, &s.url(&format!("/v1/textures/{a}"))).await;
+    let v: Value = serde_json::from_slice(&listing).unwrap();
+    assert_eq!(v["status"], "ready");
+    assert!(v["max_lod"].as_u64().is_some(), "{v}");
+    s.stop().await;
+    fresh.stop().await;
+}

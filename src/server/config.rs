@@ -102,6 +102,13 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_STORED_BYTES", default_value_t = 4 << 30, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_stored_bytes: u64,
 
+    /// Bytes of precomputed candidates kept in memory (a 128² texture
+    /// takes about 60 MB). Beyond it the least recently used textures are
+    /// evicted, and loaded again from disk (in about a second) when next
+    /// asked for.
+    #[arg(long, env = "SOLIDTEX_MAX_RESIDENT_BYTES", default_value_t = 2 << 30, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_resident_bytes: u64,
+
     /// Register the bundled exemplar under the id `default` at start.
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
     pub default_texture: bool,
@@ -193,6 +200,7 @@ impl ServeArgs {
             max_request_work: 4 << 20,
             max_textures: 256,
             max_stored_bytes: 4 << 30,
+            max_resident_bytes: 2 << 30,
             default_texture: false,
             token: None,
             cors_origins: Vec::new(),

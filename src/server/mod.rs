@@ -111,7 +111,8 @@ impl Server {
                 args.precompute_queue,
                 pool,
             )
-            .with_storage_limits(args.max_textures as usize, args.max_stored_bytes),
+            .with_storage_limits(args.max_textures as usize, args.max_stored_bytes)
+            .with_memory_limit(args.max_resident_bytes),
         );
         let todo = {
             let r = registry.clone();

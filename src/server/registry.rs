@@ -16,7 +16,7 @@ use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
 use crate::{Candidates, Stage, Texture, TileCache};
 use axum::http::StatusCode;
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use tokio::sync::Semaphore;
@@ -28,6 +28,9 @@ pub enum Status {
     Pending,
     /// Ready to synthesize.
     Ready(Texture),
+    /// Ready, but evicted from memory to keep within the server's bound;
+    /// loaded again from disk when asked for.
+    Stored,
     /// Precompute failed.
     Failed(String),
 }
@@ -56,6 +59,14 @@ pub struct Entry {
     deleted: AtomicBool,
     /// Woken whenever the status changes.
     settled: tokio::sync::Notify,
+    /// When it was last asked for (the registry's use counter).
+    last_used: AtomicU64,
+    /// Its candidates are on disk, so it may be evicted from memory.
+    on_disk: AtomicBool,
+    /// Highest level of detail, known once ready.
+    max_lod: AtomicU32,
+    /// Serialises loading it back from disk.
+    loading: Mutex<()>,
 }
 
 impl Entry {
@@ -86,6 +97,10 @@ impl Entry {
             precompute_seconds: Mutex::new(None),
             deleted: AtomicBool::new(false),
             settled: tokio::sync::Notify::new(),
+            last_used: AtomicU64::new(0),
+            on_disk: AtomicBool::new(false),
+            max_lod: AtomicU32::new(0),
+            loading: Mutex::new(()),
         }
     }
 
@@ -116,8 +131,20 @@ impl Entry {
     }
 
     fn set_ready(&self, c: Arc<Candidates>, t: Texture) {
+        self.max_lod.store(t.max_lod(), Ordering::Relaxed);
         *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = Some(c);
         self.set_status(Status::Ready(t));
+    }
+
+    /// Highest level of detail served (meaningful once ready).
+    pub fn max_lod(&self) -> u32 {
+        self.max_lod.load(Ordering::Relaxed)
+    }
+
+    /// Drops its candidates from memory; requests in flight keep theirs.
+    fn evict(&self) {
+        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        self.set_status(Status::Stored);
     }
 
     fn set_status(&self, s: Status) {
@@ -175,7 +202,7 @@ impl Entry {
     fn meta(&self) -> StoredMeta {
         let (status, reason) = match self.status() {
             Status::Pending => (StoredStatus::Pending, None),
-            Status::Ready(_) => (StoredStatus::Ready, None),
+            Status::Ready(_) | Status::Stored => (StoredStatus::Ready, None),
             Status::Failed(r) => (StoredStatus::Failed, Some(r)),
         };
         StoredMeta {
@@ -225,6 +252,11 @@ pub struct Registry {
     max_pending: usize,
     /// Uploaded textures kept at most (the bundled one not counted).
     max_textures: usize,
+    /// Bytes of candidates kept in memory; beyond it the least recently
+    /// used textures are evicted.
+    max_resident_bytes: u64,
+    /// Counts uses, to find the least recently used texture.
+    uses: AtomicU64,
     /// Bytes the textures may take on disk.
     max_stored_bytes: u64,
 }
@@ -262,6 +294,85 @@ impl Registry {
             max_pending: (max_precomputes + precompute_queue) as usize,
             max_textures: usize::MAX,
             max_stored_bytes: u64::MAX,
+            max_resident_bytes: u64::MAX,
+            uses: AtomicU64::new(0),
+        }
+    }
+
+    /// The same registry, keeping at most `bytes` of candidates in memory:
+    /// beyond it, the least recently used textures are evicted and loaded
+    /// again from disk when next asked for.
+    pub fn with_memory_limit(mut self, bytes: u64) -> Registry {
+        self.max_resident_bytes = bytes;
+        self
+    }
+
+    /// The texture `id` ready to synthesize, loaded back from disk first
+    /// when it was evicted from memory.
+    pub async fn loaded(self: &Arc<Self>, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
+        // A texture evicted again between its load and its use (memory
+        // contended by many) is loaded again, a few times at most.
+        for _ in 0..3 {
+            let Some(e) = self.get(id) else { break };
+            if !matches!(e.status(), Status::Stored) {
+                break;
+            }
+            let this = self.clone();
+            tokio::task::spawn_blocking(move || this.reload(&e))
+                .await
+                .map_err(|e| ApiError::internal(e.to_string()))??;
+        }
+        self.ready(id)
+    }
+
+    /// Loads an evicted texture's candidates back from disk (blocking).
+    fn reload(&self, entry: &Arc<Entry>) -> Result<(), ApiError> {
+        let _one = entry.loading.lock().unwrap_or_else(|e| e.into_inner());
+        if !matches!(entry.status(), Status::Stored) {
+            return Ok(());
+        }
+        let (c, t) = self
+            .load_ready(entry)
+            .map_err(|e| ApiError::internal(format!("loading texture `{}`: {e}", entry.id)))?;
+        entry.set_ready(c, t);
+        let now = self.uses.fetch_add(1, Ordering::Relaxed) + 1;
+        entry.last_used.store(now, Ordering::Relaxed);
+        self.metrics.textures_loaded.inc();
+        tracing::info!(id = %entry.id, "texture loaded back into memory");
+        self.keep_within_memory(&entry.id);
+        Ok(())
+    }
+
+    /// Evicts the least recently used ready textures (never `keep`, never
+    /// one whose candidates are not on disk) until the candidates in memory
+    /// fit the bound.
+    fn keep_within_memory(&self, keep: &str) {
+        if self.max_resident_bytes == u64::MAX {
+            return;
+        }
+        let mut resident: Vec<(u64, u64, Arc<Entry>)> = self
+            .map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .filter(|e| matches!(e.status(), Status::Ready(_)))
+            .filter_map(|e| {
+                let bytes = e.candidates()?.memory_bytes().1 as u64;
+                Some((e.last_used.load(Ordering::Relaxed), bytes, e.clone()))
+            })
+            .collect();
+        let mut total: u64 = resident.iter().map(|r| r.1).sum();
+        resident.sort_by_key(|r| r.0);
+        for (_, bytes, e) in resident {
+            if total <= self.max_resident_bytes {
+                break;
+            }
+            if e.id == keep || !e.on_disk.load(Ordering::Relaxed) {
+                continue;
+            }
+            e.evict();
+            total = total.saturating_sub(bytes);
+            tracing::info!(id = %e.id, bytes, "texture evicted from memory");
         }
     }
 
@@ -305,7 +416,17 @@ impl Registry {
     pub fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
         let e = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
         match e.status() {
-            Status::Ready(t) => Ok((e, t)),
+            Status::Ready(t) => {
+                let now = self.uses.fetch_add(1, Ordering::Relaxed) + 1;
+                e.last_used.store(now, Ordering::Relaxed);
+                Ok((e, t))
+            }
+            Status::Stored => Err(ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "texture_loading",
+                format!("texture `{id}` is being loaded back into memory"),
+            )
+            .retry_after(1)),
             Status::Pending => Err(ApiError::new(
                 StatusCode::CONFLICT,
                 "texture_pending",
@@ -328,7 +449,7 @@ impl Registry {
         for e in self.map.read().unwrap_or_else(|e| e.into_inner()).values() {
             match e.status() {
                 Status::Pending => p += 1,
-                Status::Ready(_) => r += 1,
+                Status::Ready(_) | Status::Stored => r += 1,
                 Status::Failed(_) => f += 1,
             }
         }
@@ -365,7 +486,9 @@ impl Registry {
             let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
             if let Some(e) = map.get(&id).filter(|e| e.content_hash == hash) {
                 match e.status() {
-                    Status::Ready(_) => return Ok(Submitted::Known(e.clone())),
+                    Status::Ready(_) | Status::Stored => {
+                        return Ok(Submitted::Known(e.clone()));
+                    }
                     Status::Pending => return Ok(Submitted::Pending(e.clone())),
                     Status::Failed(_) => {}
                 }
@@ -595,11 +718,13 @@ impl Registry {
                     tracing::error!(error = %e, "could not store candidates");
                     entry.set_ready(c, t);
                 } else {
+                    entry.on_disk.store(true, Ordering::Relaxed);
                     entry.set_ready(c, t);
                     if let Err(e) = self.store.write_meta(&entry.meta()) {
                         tracing::error!(error = %e, "could not store texture metadata");
                     }
                 }
+                self.keep_within_memory(&entry.id);
             }
             Err(why) => {
                 tracing::error!(reason = %why, "precompute failed");
@@ -700,6 +825,7 @@ impl Registry {
                 StoredStatus::Ready => match self.load_ready(&entry) {
                     Ok((c, t)) => {
                         entry.set_progress("done", 1.0);
+                        entry.on_disk.store(true, Ordering::Relaxed);
                         entry.set_ready(c, t);
                         self.metrics.textures_loaded.inc();
                         tracing::info!(id = %meta.id, "texture loaded");
@@ -722,6 +848,9 @@ impl Registry {
                 }
             }
             self.insert(entry);
+            // A data directory larger than the memory bound loads one
+            // texture at a time past it.
+            self.keep_within_memory("");
         }
         self.update_gauges();
         Ok(todo)

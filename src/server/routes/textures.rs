@@ -30,9 +30,9 @@ pub fn view(e: &Entry, brick_size: u32) -> Value {
     });
     match e.status() {
         Status::Pending => {}
-        Status::Ready(t) => {
+        Status::Ready(_) | Status::Stored => {
             v["status"] = "ready".into();
-            v["max_lod"] = t.max_lod().into();
+            v["max_lod"] = e.max_lod().into();
         }
         Status::Failed(r) => {
             v["status"] = "failed".into();
