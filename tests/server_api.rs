@@ -962,11 +962,26 @@ async fn synthesis_work_per_request_is_bounded() {
     for path in [
         "/slices/z/0.png?w=256&h=256",
         "/cut.png?w=16&h=16&u=1000,0,0&v=0,0,1000",
-        "/region.raw?w=64&h=64&d=64",
+        "/region.raw?w=32&h=32&d=32",
     ] {
         let (st, h, b) = get(&c, &t(path)).await;
         assert_error(st, &h, &b, 400, "over_budget");
     }
+    // A request whose own voxels exceed the budget is refused before any
+    // work: nothing is synthesized for it.
+    let voxels = |text: &str| {
+        text.lines()
+            .filter(|l| l.starts_with("solidtex_synth_voxels_total"))
+            .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+            .sum::<f64>()
+    };
+    let before = voxels(&metrics(&c, &s).await);
+    assert!(before > 0.0, "the requests above synthesized voxels");
+    for path in ["/slices/x/5.png?w=300&h=300", "/region.raw?w=40&h=40&d=40"] {
+        let (st, h, b) = get(&c, &t(path)).await;
+        assert_error(st, &h, &b, 400, "over_budget");
+    }
+    assert_eq!(voxels(&metrics(&c, &s).await), before);
     // Stopped requests leave the cache consistent: the small slice is the
     // same bytes again.
     let (st, _, again) = get(&c, &t("/slices/z/0.png?w=8&h=8")).await;

@@ -65,10 +65,10 @@ impl Server {
         // Fixed-size answers must fit the per-request work budget.
         for (what, edge) in [("bricks", args.brick_size), ("chunks", args.chunk_size)] {
             let voxels = u64::from(edge).pow(3);
-            if voxels > args.max_request_voxels {
+            let budget = args.max_request_voxels.min(args.max_request_work);
+            if voxels > budget {
                 anyhow::bail!(
-                    "{what} of edge {edge} ({voxels} voxels) exceed the request budget of {} voxels",
-                    args.max_request_voxels
+                    "{what} of edge {edge} ({voxels} voxels) exceed the request budget of {budget} voxels"
                 );
             }
         }
@@ -145,6 +145,7 @@ impl Server {
             brick_size: args.brick_size,
             chunk_size: args.chunk_size,
             max_request_voxels: args.max_request_voxels,
+            max_request_work: args.max_request_work,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
             token: args.token.clone().filter(|t| !t.is_empty()),
             cors_origins,

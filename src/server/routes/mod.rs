@@ -71,6 +71,8 @@ pub struct Shared {
     pub chunk_size: u32,
     /// Work budget of one voxel request (see [`crate::server::ServeArgs`]).
     pub max_request_voxels: u64,
+    /// Most voxels one request may synthesize (see `ServeArgs`).
+    pub max_request_work: u64,
     /// Largest accepted upload, bytes.
     pub max_upload_bytes: usize,
     /// Bearer token that mutating routes and `/metrics` require, if any.

@@ -17,7 +17,8 @@
 
 use super::AppState;
 use super::voxels::{
-    body_response, check_budget, etag, not_modified, not_modified_response, raw_job, texture,
+    body_response, check_budget, check_work_floor, etag, not_modified, not_modified_response,
+    raw_job, texture,
 };
 use crate::Region;
 use crate::server::error::ApiError;
@@ -88,6 +89,7 @@ async fn chunk_rgb(
 ) -> Result<Vec<u8>, ApiError> {
     let edge = s.chunk_size;
     check_budget(s, "chunk", u64::from(edge).pow(3))?;
+    check_work_floor(s, u64::from(edge).pow(3))?;
     let region = Region {
         origin,
         size: [edge; 3],

@@ -53,6 +53,15 @@ fn coord(q: &Query, name: &str) -> Result<i64, ApiError> {
     q.int(name, 0i64, -COORD_LIMIT, COORD_LIMIT)
 }
 
+/// Refuses before any work a request whose own voxels, each of which is
+/// synthesized unless cached, already exceed the synthesis budget.
+pub(super) fn check_work_floor(s: &AppState, voxels: u64) -> Result<(), ApiError> {
+    if voxels > s.max_request_work {
+        return Err(ApiError::over_budget(s.max_request_work));
+    }
+    Ok(())
+}
+
 /// Checks a request's work against the server's budget.
 pub(super) fn check_budget(s: &AppState, what: &str, voxels: u64) -> Result<(), ApiError> {
     if voxels > s.max_request_voxels {
@@ -203,6 +212,7 @@ pub async fn slice(
     check_extent("u0", u0, w)?;
     check_extent("v0", v0, h)?;
     check_budget(&s, "slice", w as u64 * h as u64)?;
+    check_work_floor(&s, w as u64 * h as u64)?;
     let name = match axis {
         Axis::X => "x",
         Axis::Y => "y",
@@ -391,6 +401,7 @@ pub async fn region(
         check_extent(name, origin[a], size[a])?;
     }
     check_budget(&s, "region", voxels)?;
+    check_work_floor(&s, voxels)?;
     region_response(&s, &entry, tex, region, lod, &headers).await
 }
 
