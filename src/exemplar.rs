@@ -225,3 +225,35 @@ impl ExemplarSet {
         self.planes[0].height
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn png(w: u32, h: u32) -> Vec<u8> {
+        let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i % 251) as u8).collect();
+        crate::server::png::encode(w, h, &rgb).unwrap()
+    }
+
+    #[test]
+    fn photos_up_to_the_photo_limit_are_downscaled_and_larger_ones_refused() {
+        let (e, original) = Exemplar::decode_fitting(&png(MAX_PHOTO_SIDE, 376)).unwrap();
+        assert_eq!((e.width(), e.height()), (MAX_SIDE, 32));
+        assert_eq!(original, Some((MAX_PHOTO_SIDE, 376)));
+        // At the exemplar limit nothing is downscaled.
+        let (e, original) = Exemplar::decode_fitting(&png(MAX_SIDE, 20)).unwrap();
+        assert_eq!((e.width(), e.height(), original), (MAX_SIDE, 20, None));
+        let size_error = |w, h| match Exemplar::decode_fitting(&png(w, h)) {
+            Err(Error::ImageSize { width, height, .. }) => (width, height),
+            other => panic!("{w}x{h}: {other:?}"),
+        };
+        // Past the photo limit, and too thin to keep MIN_SIDE: the size sent.
+        assert_eq!(
+            size_error(MAX_PHOTO_SIDE + 1, 376),
+            (MAX_PHOTO_SIDE + 1, 376)
+        );
+        assert_eq!(size_error(600, 16), (600, 16));
+        // The strict decoder still refuses anything over MAX_SIDE.
+        assert!(Exemplar::decode(&png(MAX_SIDE + 1, 20)).is_err());
+    }
+}

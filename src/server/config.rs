@@ -84,8 +84,10 @@ pub struct ServeArgs {
     pub max_request_voxels: u64,
 
     /// Most voxels one request may synthesize, all pyramid levels together
-    /// (voxels found in the cache are free). A request that needs more is
-    /// stopped and answered 400 `over_budget`. The default keeps any request
+    /// (voxels found in the cache are free). A request whose own voxels
+    /// exceed it is refused at once, one whose dependencies need more is
+    /// stopped as soon as it goes over; both are answered 400
+    /// `over_budget`. The default keeps any request
     /// on a 128² exemplar to about ten seconds on two cores (a cold 256²
     /// slice synthesizes about 0.4 Mi voxels, a 128³ region 3.2 Mi).
     #[arg(long, env = "SOLIDTEX_MAX_REQUEST_WORK", default_value_t = 4 << 20, value_parser = clap::value_parser!(u64).range(1..))]

@@ -375,3 +375,23 @@ pub async fn exemplar(
     .map_err(|e| ApiError::internal(e.to_string()))?;
     Ok(body_response(png, "image/png", &tag))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn display_names_are_a_printable_file_name_of_bounded_length() {
+        assert_eq!(
+            display_name("../dir\\sub/leaf.png").as_deref(),
+            Some("leaf.png")
+        );
+        assert_eq!(display_name(" a\u{1}b\n.jpg ").as_deref(), Some("ab.jpg"));
+        assert_eq!(display_name("dir/"), None);
+        assert_eq!(display_name("\u{7}"), None);
+        let at = "x".repeat(MAX_NAME_CHARS);
+        assert_eq!(display_name(&at).as_deref(), Some(at.as_str()));
+        let past = "é".repeat(MAX_NAME_CHARS + 1);
+        assert_eq!(display_name(&past).unwrap().chars().count(), MAX_NAME_CHARS);
+    }
+}
