@@ -35,27 +35,28 @@ impl Pca {
         for m in &mut mean {
             *m /= n.max(1) as f64;
         }
-        let mut cov = DMatrix::<f64>::zeros(input, input);
+        // The upper triangle, row by row (each entry sums its products in
+        // sample order); rows as slices so the inner loop vectorises.
+        let mut upper = vec![0f64; input * input];
         let mut centred = vec![0f64; input];
         for s in samples.chunks_exact(input) {
-            for i in 0..input {
-                centred[i] = s[i] as f64 - mean[i];
+            for (c, (&v, &m)) in centred.iter_mut().zip(s.iter().zip(&mean)) {
+                *c = v as f64 - m;
             }
-            for i in 0..input {
+            for (i, row) in upper.chunks_exact_mut(input).enumerate() {
                 let ci = centred[i];
                 if ci == 0.0 {
                     continue;
                 }
-                for j in i..input {
-                    cov[(i, j)] += ci * centred[j];
+                for (o, &cj) in row[i..].iter_mut().zip(&centred[i..]) {
+                    *o += ci * cj;
                 }
             }
         }
-        for i in 0..input {
-            for j in 0..i {
-                cov[(i, j)] = cov[(j, i)];
-            }
-        }
+        let cov = DMatrix::<f64>::from_fn(input, input, |i, j| {
+            let (i, j) = (i.min(j), i.max(j));
+            upper[i * input + j]
+        });
         let eig = SymmetricEigen::new(cov);
         let mut order: Vec<usize> = (0..input).collect();
         order.sort_by(|&a, &b| {
@@ -327,7 +328,7 @@ pub fn neighbourhood(stack: &GaussianStack, k: usize, n: u32, x: i64, y: i64, ou
 }
 
 /// Appearance vectors of every pixel of one plane at one level.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct AppearanceLevel {
     /// The neighbourhood PCA.
     pub pca: Pca,

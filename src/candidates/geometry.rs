@@ -16,9 +16,38 @@ pub struct Dims {
     pub w: u32,
     /// Height in pixels.
     pub h: u32,
+    /// ⌈2^RECIP_SHIFT / w⌉: a pixel's column without a division.
+    recip: u64,
 }
 
+/// Exact for every pixel index below 2^20 and widths up to 2^13 (larger
+/// exemplars are refused long before): the rounding of `recip` adds less
+/// than 2^-20 to c / w, whose fractional part is at most 1 − 1/w, and
+/// c · recip stays below 2^60.
+const RECIP_SHIFT: u32 = 40;
+
 impl Dims {
+    /// Dimensions of a `w` × `h` image.
+    pub fn new(w: u32, h: u32) -> Dims {
+        assert!(
+            w > 0 && w <= 1 << 13 && (w as u64 * h as u64) <= 1 << 20,
+            "exemplar size {w}×{h} out of range"
+        );
+        Dims {
+            w,
+            h,
+            recip: (1u64 << RECIP_SHIFT).div_ceil(w as u64),
+        }
+    }
+
+    /// Column of pixel `c`.
+    #[inline(always)]
+    fn column(self, c: u32) -> u32 {
+        debug_assert!(c < 1 << 20);
+        let q = ((c as u64 * self.recip) >> RECIP_SHIFT) as u32;
+        c - q * self.w
+    }
+
     /// Number of pixels.
     #[inline]
     pub fn len(self) -> usize {
@@ -52,7 +81,7 @@ impl Dims {
         let w = self.w as i64;
         let mut c = c as i64;
         if du != 0 {
-            let x = (c as u32 % self.w) as i64;
+            let x = self.column(c as u32) as i64;
             let nx = x + du;
             let nx = if (0..w).contains(&nx) {
                 nx
@@ -96,8 +125,24 @@ mod tests {
     use super::*;
 
     #[test]
+    fn columns_need_no_division() {
+        for w in [
+            1, 2, 3, 7, 13, 100, 127, 128, 129, 1000, 4093, 6000, 8191, 8192,
+        ] {
+            let dims = Dims::new(w, 1);
+            let rows = (1u32 << 20) / w;
+            for y in [0, 1, 2, rows / 3, rows / 2, rows - 2, rows - 1] {
+                for x in [0, 1, w / 2, w - 1].into_iter().filter(|&x| x < w) {
+                    let c = y * w + x;
+                    assert_eq!(dims.column(c), x, "w {w}, pixel {c}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn shifting_a_pixel_wraps_like_its_coordinates() {
-        let dims = Dims { w: 13, h: 7 };
+        let dims = Dims::new(13, 7);
         for c in 0..dims.len() as u32 {
             let (x, y) = dims.xy(c);
             for du in -30..=30 {

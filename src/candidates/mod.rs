@@ -298,10 +298,7 @@ impl Candidates {
         progress: &(dyn Fn(Stage, f32) + Sync),
     ) -> Result<Candidates> {
         params.validate()?;
-        let dims = Dims {
-            w: exemplars.width(),
-            h: exemplars.height(),
-        };
+        let dims = Dims::new(exemplars.width(), exemplars.height());
         let single = exemplars.is_single();
         let levels_n = params.levels as usize;
         let n = params.neighbourhood;
@@ -456,10 +453,7 @@ impl Candidates {
         report: PrecomputeReport,
     ) -> Result<Candidates> {
         params.validate()?;
-        let dims = Dims {
-            w: exemplars.width(),
-            h: exemplars.height(),
-        };
+        let dims = Dims::new(exemplars.width(), exemplars.height());
         if stored.len() != params.levels as usize {
             return Err(Error::CorruptFile(crate::error::CorruptKind::Invalid(
                 "level count".into(),

@@ -14,7 +14,7 @@
 
 use super::PlaneCandidates;
 use super::geometry::Dims;
-use crate::appearance::{AppearanceLevel, Pca, Projector, dot};
+use crate::appearance::{AppearanceLevel, Pca, dot};
 use rayon::prelude::*;
 
 /// Dimensions of a quantised sparse neighbourhood vector: one SSE register.
@@ -24,23 +24,38 @@ pub const SPARSE_DIMS: usize = 16;
 /// spacing.
 pub const DIAGONALS: [(i64, i64); 4] = [(-1, -1), (1, -1), (-1, 1), (1, 1)];
 
-/// A quantised sparse neighbourhood vector.
+/// A quantised sparse neighbourhood vector, as stored for the precomputed
+/// candidates: round(v·scale) + 128, clamped to a byte.
 pub type SparseVector = [u8; SPARSE_DIMS];
+
+/// A sparse neighbourhood vector in the units of [`SparseVector`] with a
+/// wider range: queries and coherent triples, which are not stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(C, align(32))]
+pub struct WideVector(pub [i16; SPARSE_DIMS]);
+
+/// The range of a [`WideVector`]'s values: wide enough that stretched
+/// queries are not clipped, narrow enough that a squared distance over
+/// sixteen of them cannot overflow.
+pub const WIDE_RANGE: (i16, i16) = (-1024, 1280);
 
 /// 3D candidates of a pixel that a correction tries (Dong et al.'s number
 /// at the finest level), best crossbar error first.
 pub const BEST_CANDIDATES: usize = 4;
 
-/// The vectors of a pixel's [`BEST_CANDIDATES`] candidates: one cache
-/// line, found from the pixel alone (no offsets table to read first), so
-/// a correction can prefetch it as soon as it knows the pixel. A pixel
-/// with fewer candidates repeats its last one.
+/// A pixel's [`BEST_CANDIDATES`] 3D candidates, best first: their
+/// vectors fill one cache line and their triples the next, found from the
+/// pixel alone (no offsets table to read first), so a correction can
+/// prefetch them as soon as it knows the pixel. A pixel with fewer
+/// candidates repeats its last one.
 #[derive(Clone, Copy, Debug)]
-#[repr(C, align(64))]
-pub struct BestVectors(pub [SparseVector; BEST_CANDIDATES]);
-
-/// The triples of [`BestVectors`], in the same order.
-pub type BestTriples = [[u32; 3]; BEST_CANDIDATES];
+#[repr(C, align(128))]
+pub struct BestCandidates {
+    /// Their vectors.
+    pub vectors: [SparseVector; BEST_CANDIDATES],
+    /// Their triples.
+    pub triples: [[u32; 3]; BEST_CANDIDATES],
+}
 
 /// The sparse neighbourhood tables of one level.
 #[derive(Clone, Debug)]
@@ -49,18 +64,35 @@ pub struct SparseTables {
     dims: usize,
     /// From the 12 concatenated locations (xy, yz, zx; diagonals in
     /// [`DIAGONALS`] order) to [`SPARSE_DIMS`] dimensions.
-    projector: Projector,
-    /// Byte = round(v·scale) + 128.
+    pca: Pca,
+    /// Vector units per projected appearance unit.
     scale: f32,
-    /// Each pixel's share of the projection, per plane.
-    shares: [Vec<[f32; SPARSE_DIMS]>; 3],
-    /// The projected mean, which a sum of shares still contains.
-    offsets: [f32; SPARSE_DIMS],
-    /// Each pixel's best candidates' quantised vectors, per plane.
-    vectors: [Vec<BestVectors>; 3],
-    /// Their triples.
-    triples: [Vec<BestTriples>; 3],
+    /// Each pixel's share of the projection per plane, in vector units:
+    /// a triple's vector is the sum of its three shares and `bias`.
+    shares: [Vec<WideVector>; 3],
+    /// The byte offset 128 less the projected mean, in vector units.
+    bias: WideVector,
+    /// Each pixel's best candidates, per plane.
+    best: [Vec<BestCandidates>; 3],
+    /// Each plane's appearance vectors in fixed point, for building
+    /// queries: a quarter of the floats' cache footprint. Planes of one
+    /// exemplar share theirs (see `appearance_of`).
+    appearance: Vec<Vec<i16>>,
+    /// Index into `appearance` of each plane.
+    appearance_of: [usize; 3],
+    /// Fixed-point units per appearance unit, per plane.
+    appearance_scale: [f32; 3],
 }
+
+/// Values per fixed-point appearance vector of `d` dimensions: one of
+/// two fixed widths, which the correction is compiled for.
+pub fn appearance_stride(d: usize) -> usize {
+    if d <= 8 { 8 } else { 16 }
+}
+
+/// The largest fixed-point appearance coordinate: a sum of three fits in
+/// i16 with room to spare.
+const APPEARANCE_MAX: f32 = 8000.0;
 
 /// The 4 diagonal appearance vectors of pixel `c` of one plane,
 /// concatenated into `out` (4·dims floats).
@@ -107,11 +139,7 @@ impl SparseTables {
             }
         }
         let pca = Pca::fit(&sample, input, SPARSE_DIMS);
-        let projector = Projector::new(&pca);
-        let mut offsets = [0f32; SPARSE_DIMS];
-        for (o, m) in offsets.iter_mut().zip(pca.mean_offsets()) {
-            *o = m;
-        }
+        let offsets = pca.mean_offsets();
         let pixels = dims.len();
         let shares = [0, 1, 2].map(|p| {
             (0..pixels as u32)
@@ -131,49 +159,102 @@ impl SparseTables {
                 )
                 .collect::<Vec<_>>()
         });
-        // Candidates are scored exactly like coherent triples: from their
-        // three shares, which also costs far less than a projection each.
-        let sum = |t: [u32; 3]| {
-            let mut v = [0f32; SPARSE_DIMS];
-            for (j, o) in v.iter_mut().enumerate() {
-                *o = shares[0][t[0] as usize][j]
-                    + shares[1][t[1] as usize][j]
-                    + shares[2][t[2] as usize][j]
-                    - offsets[j];
-            }
-            v
-        };
         let mut max = 1e-6f32;
         for c in candidates {
             for t in c.triples.iter().step_by(stride) {
-                for v in sum(*t) {
+                for (j, offset) in offsets.iter().enumerate() {
+                    let v = shares[0][t[0] as usize][j]
+                        + shares[1][t[1] as usize][j]
+                        + shares[2][t[2] as usize][j]
+                        - offset;
                     max = max.max(v.abs());
                 }
             }
         }
         let scale = 127.0 / max;
-        let best = |p: usize, c: usize| -> BestTriples {
+        // A share alone can exceed the range of a sum; ±4096 keeps a sum
+        // of three and the bias within i16.
+        let to_units = |v: f32| (v * scale).clamp(-4096.0, 4096.0).round() as i16;
+        let shares = shares.map(|plane| {
+            plane
+                .into_iter()
+                .map(|s| WideVector(s.map(to_units)))
+                .collect::<Vec<_>>()
+        });
+        let mut bias = WideVector([128; SPARSE_DIMS]);
+        for (b, &o) in bias.0.iter_mut().zip(&offsets) {
+            *b -= to_units(o);
+        }
+        let best = |p: usize, c: usize| -> [[u32; 3]; BEST_CANDIDATES] {
             let all = &candidates[p].triples[candidates[p].range(c as u32)];
             debug_assert!(!all.is_empty(), "coherence filtering keeps a candidate");
             let last = all.len().clamp(1, BEST_CANDIDATES) - 1;
             std::array::from_fn(|i| all.get(i.min(last)).copied().unwrap_or([0; 3]))
         };
         let triples = [0, 1, 2].map(|p| (0..pixels).map(|c| best(p, c)).collect::<Vec<_>>());
-        let vectors = [0, 1, 2].map(|p| {
-            triples[p]
-                .par_iter()
-                .map(|ts| BestVectors(ts.map(|t| quantise_vector(&sum(t), scale))))
-                .collect()
+        let mut appearance_of = [0, 1, 2];
+        for p in 1..3 {
+            if let Some(q) = (0..p).find(|&q| appearance[q] == appearance[p]) {
+                appearance_of[p] = appearance_of[q];
+            }
+        }
+        let appearance_scale = [0, 1, 2].map(|p| {
+            let max = appearance[p]
+                .vectors
+                .iter()
+                .fold(1e-6f32, |m, v| m.max(v.abs()));
+            APPEARANCE_MAX / max
         });
-        SparseTables {
+        let stride = appearance_stride(d);
+        let appearance_fixed = (0..3)
+            .filter(|&p| appearance_of[p] == p)
+            .map(|p| {
+                let s = appearance_scale[p];
+                let mut rows = vec![0i16; pixels * stride];
+                for (row, v) in rows
+                    .chunks_exact_mut(stride)
+                    .zip(appearance[p].vectors.chunks_exact(d))
+                {
+                    for (o, x) in row.iter_mut().zip(v) {
+                        *o = (x * s).round() as i16;
+                    }
+                }
+                rows
+            })
+            .collect();
+        // Planes that share vectors are numbered by the distinct ones.
+        let mut distinct = [0usize; 3];
+        for p in 0..3 {
+            distinct[p] = if appearance_of[p] == p {
+                (0..p).filter(|&q| appearance_of[q] == q).count()
+            } else {
+                distinct[appearance_of[p]]
+            };
+        }
+        let mut tables = SparseTables {
             dims: d,
-            projector,
+            pca,
             scale,
             shares,
-            offsets,
-            vectors,
-            triples,
-        }
+            bias,
+            best: [Vec::new(), Vec::new(), Vec::new()],
+            appearance: appearance_fixed,
+            appearance_of: distinct,
+            appearance_scale,
+        };
+        // Candidates are scored exactly like coherent triples: from their
+        // three shares.
+        let best = triples.map(|triples| {
+            triples
+                .into_par_iter()
+                .map(|triples| BestCandidates {
+                    vectors: triples.map(|t| tables.stored_vector(t)),
+                    triples,
+                })
+                .collect()
+        });
+        tables.best = best;
+        tables
     }
 
     /// Appearance dimensions per location.
@@ -188,43 +269,48 @@ impl SparseTables {
         self.scale
     }
 
-    /// The best candidates of pixel `c` in plane `p`: their vectors.
-    #[inline]
-    pub fn best_vectors(&self, p: usize, c: u32) -> &BestVectors {
-        &self.vectors[p][c as usize]
+    /// The best candidates of pixel `c` in plane `p`.
+    #[inline(always)]
+    pub fn best(&self, p: usize, c: u32) -> &BestCandidates {
+        &self.best[p][c as usize]
     }
 
-    /// The best candidates of pixel `c` in plane `p`: their triples.
+    /// The projection from the 12 concatenated locations.
     #[inline]
-    pub fn best_triples(&self, p: usize, c: u32) -> &BestTriples {
-        &self.triples[p][c as usize]
+    pub fn pca(&self) -> &Pca {
+        &self.pca
     }
 
-    /// Projects and quantises a query (12 locations of
-    /// [`SparseTables::location_dims`] floats).
-    #[inline]
-    pub fn query(&self, locations: &[f32]) -> SparseVector {
-        let mut out = [0f32; SPARSE_DIMS];
-        self.projector.project(locations, &mut out);
-        quantise_vector(&out, self.scale)
+    /// The vector of any triple, from its three shares.
+    #[inline(always)]
+    pub fn triple_vector(&self, t: [u32; 3]) -> WideVector {
+        let [a, b, c] = [0, 1, 2].map(|p| &self.shares[p][t[p] as usize].0);
+        WideVector(std::array::from_fn(|j| {
+            (a[j] + b[j] + c[j] + self.bias.0[j]).clamp(WIDE_RANGE.0, WIDE_RANGE.1)
+        }))
     }
 
-    /// The quantised vector of any triple, from its three shares.
+    /// [`SparseTables::triple_vector`] clamped to bytes, as stored.
+    pub fn stored_vector(&self, t: [u32; 3]) -> SparseVector {
+        self.triple_vector(t).0.map(|v| v.clamp(0, 255) as u8)
+    }
+
+    /// Plane `p`'s appearance vectors in fixed point, each padded with
+    /// zeros to [`appearance_stride`] values.
+    #[inline(always)]
+    pub fn appearance(&self, p: usize) -> &[i16] {
+        &self.appearance[self.appearance_of[p]]
+    }
+
+    /// Fixed-point units per appearance unit of plane `p`.
     #[inline]
-    pub fn triple_vector(&self, t: [u32; 3]) -> SparseVector {
-        let mut v = [0f32; SPARSE_DIMS];
-        for (j, o) in v.iter_mut().enumerate() {
-            *o = self.shares[0][t[0] as usize][j]
-                + self.shares[1][t[1] as usize][j]
-                + self.shares[2][t[2] as usize][j]
-                - self.offsets[j];
-        }
-        quantise_vector(&v, self.scale)
+    pub fn appearance_scale(&self, p: usize) -> f32 {
+        self.appearance_scale[p]
     }
 
     /// Plane `p`'s share of pixel `c` (for prefetching).
     #[inline]
-    pub fn share(&self, p: usize, c: u32) -> &[f32; SPARSE_DIMS] {
+    pub fn share(&self, p: usize, c: u32) -> &WideVector {
         &self.shares[p][c as usize]
     }
 
@@ -232,23 +318,183 @@ impl SparseTables {
     pub fn memory_bytes(&self) -> usize {
         (0..3)
             .map(|p| {
-                self.shares[p].len() * 4 * SPARSE_DIMS
-                    + self.vectors[p].len() * std::mem::size_of::<BestVectors>()
-                    + self.triples[p].len() * std::mem::size_of::<BestTriples>()
+                self.shares[p].len() * std::mem::size_of::<WideVector>()
+                    + self.best[p].len() * std::mem::size_of::<BestCandidates>()
             })
-            .sum()
+            .sum::<usize>()
+            + self.appearance.iter().map(|a| a.len() * 2).sum::<usize>()
     }
 }
 
-fn quantise_vector(v: &[f32; SPARSE_DIMS], scale: f32) -> SparseVector {
-    v.map(|x| super::quantise(x, scale))
+/// Squared distance between a vector and a query.
+#[inline(always)]
+pub fn wide_distance(a: &WideVector, q: &WideVector) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of the x86_64 baseline; both vectors are
+        // 32 bytes, 32-byte aligned.
+        #[allow(unsafe_code)]
+        unsafe {
+            let pa = a.0.as_ptr().cast::<__m128i>();
+            let pq = q.0.as_ptr().cast::<__m128i>();
+            let lo = _mm_sub_epi16(_mm_load_si128(pa), _mm_load_si128(pq));
+            let hi = _mm_sub_epi16(_mm_load_si128(pa.add(1)), _mm_load_si128(pq.add(1)));
+            horizontal_sum(_mm_add_epi32(
+                _mm_madd_epi16(lo, lo),
+                _mm_madd_epi16(hi, hi),
+            ))
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        scalar_distance(&a.0, q)
+    }
 }
 
-/// Squared distance between two quantised vectors.
+/// Squared distance between a stored vector and a query.
 #[inline(always)]
-pub fn sparse_distance(a: &SparseVector, b: &SparseVector) -> u32 {
-    let e: [i16; SPARSE_DIMS] = std::array::from_fn(|j| a[j] as i16 - b[j] as i16);
-    super::sum_of_squares(&e)
+pub fn sparse_distance(a: &SparseVector, q: &WideVector) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of the x86_64 baseline; `a` is 16 bytes
+        // (read unaligned), `q` 32 bytes, 32-byte aligned.
+        #[allow(unsafe_code)]
+        unsafe {
+            let bytes = _mm_loadu_si128(a.as_ptr().cast());
+            let zero = _mm_setzero_si128();
+            let pq = q.0.as_ptr().cast::<__m128i>();
+            let lo = _mm_sub_epi16(_mm_unpacklo_epi8(bytes, zero), _mm_load_si128(pq));
+            let hi = _mm_sub_epi16(_mm_unpackhi_epi8(bytes, zero), _mm_load_si128(pq.add(1)));
+            horizontal_sum(_mm_add_epi32(
+                _mm_madd_epi16(lo, lo),
+                _mm_madd_epi16(hi, hi),
+            ))
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        scalar_distance(&a.map(|v| v as i16), q)
+    }
+}
+
+/// Squared distances of a pixel's [`BEST_CANDIDATES`] stored vectors to a
+/// query, four at once; `AVX2` says the caller runs with AVX2 enabled.
+#[inline(always)]
+pub fn best_distances<const AVX2: bool>(
+    v: &[SparseVector; BEST_CANDIDATES],
+    q: &WideVector,
+) -> [u32; BEST_CANDIDATES] {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[allow(unsafe_code)]
+        if AVX2 {
+            // SAFETY: callers pass AVX2 only when the CPU has it.
+            unsafe { best_distances_avx2(v, q) }
+        } else {
+            // SAFETY: SSE2 is part of the x86_64 baseline.
+            unsafe { best_distances_sse2(v, q) }
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        v.map(|a| scalar_distance(&a.map(|x| x as i16), q))
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+#[allow(unsafe_code)]
+fn best_distances_avx2(
+    v: &[SparseVector; BEST_CANDIDATES],
+    q: &WideVector,
+) -> [u32; BEST_CANDIDATES] {
+    use std::arch::x86_64::*;
+    // SAFETY: the loads read the 16 bytes of each vector (unaligned) and
+    // the 32 bytes of the 32-byte aligned query; the store writes 16 bytes
+    // of a local `[u32; 4]`.
+    unsafe {
+        let query = _mm256_load_si256(q.0.as_ptr().cast());
+        let squares = |bytes: &SparseVector| {
+            let e = _mm256_sub_epi16(
+                _mm256_cvtepu8_epi16(_mm_loadu_si128(bytes.as_ptr().cast())),
+                query,
+            );
+            _mm256_madd_epi16(e, e)
+        };
+        let [a, b, c, d] = [0, 1, 2, 3].map(|i| squares(&v[i]));
+        // Pairwise sums within each 128-bit half: after two rounds, half h
+        // holds (a, b, c, d) summed over its lanes.
+        let abcd = _mm256_hadd_epi32(_mm256_hadd_epi32(a, b), _mm256_hadd_epi32(c, d));
+        let sum = _mm_add_epi32(
+            _mm256_castsi256_si128(abcd),
+            _mm256_extracti128_si256::<1>(abcd),
+        );
+        let mut out = [0u32; BEST_CANDIDATES];
+        _mm_storeu_si128(out.as_mut_ptr().cast(), sum);
+        out
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(unsafe_code)]
+unsafe fn best_distances_sse2(
+    v: &[SparseVector; BEST_CANDIDATES],
+    q: &WideVector,
+) -> [u32; BEST_CANDIDATES] {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of the x86_64 baseline; the loads read the 16
+    // bytes of each vector (unaligned) and the 32 bytes of the 32-byte
+    // aligned query; the store writes 16 bytes of a local `[u32; 4]`.
+    unsafe {
+        let pq = q.0.as_ptr().cast::<__m128i>();
+        let (q_lo, q_hi) = (_mm_load_si128(pq), _mm_load_si128(pq.add(1)));
+        let zero = _mm_setzero_si128();
+        let squares = |bytes: &SparseVector| {
+            let x = _mm_loadu_si128(bytes.as_ptr().cast());
+            let lo = _mm_sub_epi16(_mm_unpacklo_epi8(x, zero), q_lo);
+            let hi = _mm_sub_epi16(_mm_unpackhi_epi8(x, zero), q_hi);
+            _mm_add_epi32(_mm_madd_epi16(lo, lo), _mm_madd_epi16(hi, hi))
+        };
+        let [a, b, c, d] = [0, 1, 2, 3].map(|i| squares(&v[i]));
+        // Transpose-and-add: lane i of the result sums vector i's lanes.
+        let ab = _mm_add_epi32(_mm_unpacklo_epi32(a, b), _mm_unpackhi_epi32(a, b));
+        let cd = _mm_add_epi32(_mm_unpacklo_epi32(c, d), _mm_unpackhi_epi32(c, d));
+        let sum = _mm_add_epi32(_mm_unpacklo_epi64(ab, cd), _mm_unpackhi_epi64(ab, cd));
+        let mut out = [0u32; BEST_CANDIDATES];
+        _mm_storeu_si128(out.as_mut_ptr().cast(), sum);
+        out
+    }
+}
+
+/// The sum of four lanes.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(unsafe_code)]
+unsafe fn horizontal_sum(v: std::arch::x86_64::__m128i) -> u32 {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of the x86_64 baseline.
+    unsafe {
+        let v = _mm_add_epi32(v, _mm_shuffle_epi32::<0b01_00_11_10>(v));
+        let v = _mm_add_epi32(v, _mm_shuffle_epi32::<0b10_11_00_01>(v));
+        _mm_cvtsi128_si32(v) as u32
+    }
+}
+
+/// The distances above without SIMD: what they are tested against, and
+/// what other CPUs run.
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+fn scalar_distance(a: &[i16; SPARSE_DIMS], q: &WideVector) -> u32 {
+    a.iter()
+        .zip(&q.0)
+        .map(|(&x, &y)| {
+            let e = x as i32 - y as i32;
+            (e * e) as u32
+        })
+        .sum()
 }
 
 #[cfg(test)]
@@ -274,23 +520,63 @@ mod tests {
                 let cands = level.candidates(p);
                 for px in 0..c.dims().len() as u32 {
                     let all = &cands.triples[cands.range(px)];
-                    let best = tables.best_triples(p, px);
-                    let vectors = tables.best_vectors(p, px);
+                    let best = &tables.best(p, px).triples;
+                    let vectors = &tables.best(p, px).vectors;
                     for i in 0..BEST_CANDIDATES {
                         // The best first, the last repeated.
                         assert_eq!(best[i], all[i.min(all.len() - 1)]);
-                        assert_eq!(vectors.0[i], tables.triple_vector(best[i]));
+                        let wide = tables.triple_vector(best[i]);
+                        assert_eq!(vectors[i], wide.0.map(|v| v.clamp(0, 255) as u8));
                     }
                 }
             }
             // The quantised vectors span the byte range without clipping
             // most of them.
             let clipped = (0..3)
-                .flat_map(|p| &tables.vectors[p])
-                .flat_map(|b| b.0.iter().flatten())
+                .flat_map(|p| &tables.best[p])
+                .flat_map(|b| b.vectors.iter().flatten())
                 .filter(|&&b| b == 0 || b == 255)
                 .count();
             assert!(clipped * 100 < c.dims().len() * BEST_CANDIDATES * SPARSE_DIMS * 3);
+        }
+    }
+
+    #[test]
+    fn distances_are_sums_of_squares_over_the_whole_range() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 33) as u32
+        };
+        let (lo, hi) = (WIDE_RANGE.0 as i32, WIDE_RANGE.1 as i32);
+        for round in 0..2000 {
+            let mut wide = |extreme: bool| {
+                WideVector(std::array::from_fn(|_| {
+                    let v = if extreme {
+                        [lo, hi][next() as usize % 2]
+                    } else {
+                        lo + (next() % (hi - lo + 1) as u32) as i32
+                    };
+                    v as i16
+                }))
+            };
+            let (a, q) = (wide(round % 3 == 0), wide(round % 5 == 0));
+            assert_eq!(wide_distance(&a, &q), scalar_distance(&a.0, &q));
+            let bytes: SparseVector = std::array::from_fn(|_| next() as u8);
+            assert_eq!(
+                sparse_distance(&bytes, &q),
+                scalar_distance(&bytes.map(|v| v as i16), &q)
+            );
+            let four: [SparseVector; BEST_CANDIDATES] =
+                std::array::from_fn(|_| std::array::from_fn(|_| next() as u8));
+            let expected = four.map(|v| scalar_distance(&v.map(|x| x as i16), &q));
+            assert_eq!(best_distances::<false>(&four, &q), expected);
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                assert_eq!(best_distances::<true>(&four, &q), expected);
+            }
         }
     }
 }

@@ -491,6 +491,9 @@ const DIRECT: [[i64; 3]; 19] = {
     out
 };
 
+/// How far along x [`gather_near`] prefetches, in voxels.
+const AHEAD: i64 = 16;
+
 /// The direct neighbours of `p`, each in the version its history window
 /// gives (`work` for offsets within `inside`, `start` beyond), and the
 /// coherent triples: each neighbour's triple moved back by its offset, in
@@ -510,6 +513,19 @@ fn gather_near<const BY_WALL: bool>(
         |d: [i64; 3]| !BY_WALL || (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
     let mut near = Near::default();
     let mut moved = [[u32::MAX; 3]; 27];
+    // Corrections walk along x: fetch the neighbour rows a few voxels
+    // ahead, so the next corrections find them in cache.
+    for dz in -1..=1 {
+        for dy in -1..=1 {
+            let ahead = centre + AHEAD + dy * strides[1] + dz * strides[2];
+            if let Ok(ahead) = usize::try_from(ahead)
+                && ahead < work.triples.data.len()
+            {
+                prefetch(&work.triples.data[ahead..]);
+                prefetch(&work.colours.data[ahead..]);
+            }
+        }
+    }
     for &d in &DIRECT {
         let k = near_slot(d);
         let idx = (centre + d[0] * strides[0] + d[1] * strides[1] + d[2] * strides[2]) as usize;

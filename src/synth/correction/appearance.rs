@@ -35,9 +35,12 @@
 //! them, as the colour correction gives, left upsampled blocks standing.
 //! The best by distance of the quantised 12-location vectors wins.
 
-use super::{Work, coherent_triples, disagreement, gather_near, in_plane_slot, prefetch};
+use super::{DIRECT, Work, disagreement, gather_near, in_plane_slot, near_slot, prefetch};
 use crate::candidates::geometry::{AXES, Dims};
-use crate::candidates::sparse::{DIAGONALS, SparseTables, sparse_distance};
+use crate::candidates::sparse::{
+    DIAGONALS, SPARSE_DIMS, SparseTables, WIDE_RANGE, WideVector, appearance_stride,
+    best_distances, wide_distance,
+};
 use crate::candidates::{Candidates, Level};
 use crate::params::SynthParams;
 use crate::stack::spacing;
@@ -48,6 +51,10 @@ const MAX_LOCATION_DIMS: usize = 16;
 /// Largest 2D similarity set (`similar_coarse`, `similar_fine` ≤ 8).
 const MAX_SIMILAR: usize = 8;
 
+/// Most proposed pixels: 9 in-plane neighbours in each of 3 planes, each
+/// with its similarity set.
+const MAX_PROPOSED: usize = 3 * 9 * MAX_SIMILAR;
+
 /// Everything the appearance-space correction of one level reads.
 pub struct AppearanceCorrector<'a> {
     level: &'a Level,
@@ -55,59 +62,121 @@ pub struct AppearanceCorrector<'a> {
     dims: Dims,
     /// The level's spacing.
     h: i64,
-    /// Appearance dimensions per location.
-    d: usize,
-    /// Each plane's appearance vectors.
-    app: [&'a [f32]; 3],
+    /// Values per fixed-point appearance vector.
+    stride: usize,
+    /// Each plane's appearance vectors, in fixed point.
+    app: [&'a [i16]; 3],
     /// Each plane's exemplar colours at this level.
     plane_colours: [&'a [[f32; 3]]; 3],
     /// Weight of a coherent triple's colour disagreement, in quantised
     /// distance units per squared colour difference.
     consistency: f32,
-    /// The texture's `contrast`.
-    gain: f32,
-    /// Per plane, how flat neighbourhoods look in appearance space.
-    flat: [Flat; 3],
+    /// The query as one linear map (see [`QueryMap`]).
+    map: QueryMap,
+    /// Whether the CPU has AVX2, which the same code compiles to in half
+    /// the instructions (the results are the same: every float operation
+    /// is done lane by lane in the same order, and none is fused).
+    avx2: bool,
 }
 
-/// Flat neighbourhoods in one plane's appearance space: a neighbourhood of
-/// one colour c everywhere has the appearance vector `uniform`·c −
-/// `offsets`, and an appearance vector a has the mean colour
-/// `mean_colour` + `uniform`ᵀ·a / pixels (exactly, for a vector of the
-/// PCA's span).
-struct Flat {
-    uniform: [[f32; 3]; MAX_LOCATION_DIMS],
-    offsets: [f32; MAX_LOCATION_DIMS],
-    mean_colour: [f32; 3],
-    inv_pixels: f32,
+/// A query, from the sums that each of its 12 locations reads to its
+/// quantised vector, folded into one linear map when the corrector is
+/// made: the average of the three predictions, their colour offset, the
+/// contrast stretch around the location's mean colour, the projection to
+/// [`SPARSE_DIMS`] and the quantisation scale are all linear (or affine)
+/// in the summed appearance vectors and the summed colour offsets.
+struct QueryMap {
+    /// Per location (plane-major, [`DIAGONALS`] order), a column for each
+    /// of the [`appearance_stride`] values of the summed appearance
+    /// vectors (zero beyond their dimensions), then 3 for the summed
+    /// colour offsets.
+    columns: Vec<[f32; SPARSE_DIMS]>,
+    /// The affine part, with the byte bias of the stored vectors.
+    constant: [f32; SPARSE_DIMS],
 }
 
-impl Flat {
-    fn new(pca: &crate::appearance::Pca) -> Flat {
-        let pixels = pca.input / 3;
-        let mut uniform = [[0f32; 3]; MAX_LOCATION_DIMS];
-        for (d, row) in uniform.iter_mut().enumerate().take(pca.dims) {
-            for rgb in pca.basis[d * pca.input..(d + 1) * pca.input].chunks_exact(3) {
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return std::arch::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+impl QueryMap {
+    /// Each location is the mean o = (S + U·s)/3 of its three
+    /// predictions: S the summed appearance vectors, s the summed colour
+    /// offsets, and U·c the appearance vector of a neighbourhood of one
+    /// colour c everywhere less the PCA's mean (`uniform`). Its mean
+    /// colour is m = m₀ + Uᵀ·o / pixels (exactly, for a vector of the
+    /// PCA's span), and the stretch by the gain g around the flat
+    /// neighbourhood of m is o' = g·o − (g − 1)·(U·m − offsets), so
+    /// o' = M·o + c with M = g·I − (g − 1)/pixels·U·Uᵀ and
+    /// c = −(g − 1)·(U·m₀ − offsets). The query is the projection of the
+    /// 12 o' less the projected mean, times the scale, plus the byte bias.
+    fn new(level: &Level, tables: &SparseTables, gain: f32) -> QueryMap {
+        let d = tables.location_dims();
+        let w = appearance_stride(d);
+        let pca = tables.pca();
+        let scale = tables.scale() as f64;
+        let g = gain as f64;
+        let mut columns = vec![[0f32; SPARSE_DIMS]; 12 * (w + 3)];
+        let mut constant = [0f64; SPARSE_DIMS];
+        for (k, m) in constant.iter_mut().zip(pca.mean_offsets()) {
+            *k = 128.0 - scale * m as f64;
+        }
+        for plane in 0..3 {
+            let local = &level.appearance[plane].pca;
+            let pixels = (local.input / 3) as f64;
+            // U: d rows of 3 (the sum of each basis row's channel weights).
+            let mut u = vec![[0f64; 3]; d];
+            for (row, out) in u.iter_mut().enumerate() {
+                for rgb in local.basis[row * local.input..(row + 1) * local.input].chunks_exact(3) {
+                    for ch in 0..3 {
+                        out[ch] += rgb[ch] as f64;
+                    }
+                }
+            }
+            let mut m0 = [0f64; 3];
+            for rgb in local.mean.chunks_exact(3) {
                 for ch in 0..3 {
-                    row[ch] += rgb[ch];
+                    m0[ch] += rgb[ch] as f64 / pixels;
+                }
+            }
+            let offsets = local.mean_offsets();
+            let m = |i: usize, j: usize| {
+                let uu: f64 = (0..3).map(|ch| u[i][ch] * u[j][ch]).sum();
+                (if i == j { g } else { 0.0 }) - (g - 1.0) / pixels * uu
+            };
+            let c: Vec<f64> = (0..d)
+                .map(|i| {
+                    let level: f64 = (0..3).map(|ch| u[i][ch] * m0[ch]).sum();
+                    -(g - 1.0) * (level - offsets[i] as f64)
+                })
+                .collect();
+            for l in 0..4 {
+                let block = (4 * plane + l) * d;
+                let p = |k: usize, i: usize| pca.basis[k * pca.input + block + i] as f64;
+                let out = &mut columns[(4 * plane + l) * (w + 3)..(4 * plane + l + 1) * (w + 3)];
+                // The summed vectors arrive in fixed point.
+                let fixed = tables.appearance_scale(plane) as f64;
+                for k in 0..pca.dims {
+                    for (j, column) in out[..d].iter_mut().enumerate() {
+                        let v: f64 = (0..d).map(|i| p(k, i) * m(i, j)).sum();
+                        column[k] = (scale * v / 3.0 / fixed) as f32;
+                    }
+                    for ch in 0..3 {
+                        let v: f64 = (0..d)
+                            .map(|i| p(k, i) * (0..d).map(|j| m(i, j) * u[j][ch]).sum::<f64>())
+                            .sum();
+                        out[w + ch][k] = (scale * v / 3.0) as f32;
+                    }
+                    constant[k] += scale * (0..d).map(|i| p(k, i) * c[i]).sum::<f64>();
                 }
             }
         }
-        let mut offsets = [0f32; MAX_LOCATION_DIMS];
-        for (o, m) in offsets.iter_mut().zip(pca.mean_offsets()) {
-            *o = m;
-        }
-        let mut mean_colour = [0f32; 3];
-        for rgb in pca.mean.chunks_exact(3) {
-            for ch in 0..3 {
-                mean_colour[ch] += rgb[ch] / pixels as f32;
-            }
-        }
-        Flat {
-            uniform,
-            offsets,
-            mean_colour,
-            inv_pixels: 1.0 / pixels as f32,
+        QueryMap {
+            columns,
+            constant: constant.map(|v| v as f32),
         }
     }
 }
@@ -123,13 +192,21 @@ impl<'a> AppearanceCorrector<'a> {
             tables,
             dims: cands.dims(),
             h: spacing(k) as i64,
-            d: tables.location_dims(),
-            app: [0, 1, 2].map(|p| level.appearance[p].vectors.as_slice()),
+            stride: appearance_stride(tables.location_dims()),
+            app: [0, 1, 2].map(|p| tables.appearance(p)),
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
             consistency: params.consistency * scale * scale,
-            gain: params.contrast,
-            flat: [0, 1, 2].map(|p| Flat::new(&level.appearance[p].pca)),
+            map: QueryMap::new(level, tables, params.contrast),
+            avx2: has_avx2(),
         }
+    }
+
+    /// The same corrector, made to run the portable code (to test that it
+    /// agrees with the AVX2 one).
+    #[cfg(test)]
+    pub fn portable(mut self) -> Self {
+        self.avx2 = false;
+        self
     }
 
     /// See [`super::Corrector::correct_with`].
@@ -141,16 +218,78 @@ impl<'a> AppearanceCorrector<'a> {
         inside: [(i64, i64); 3],
         p: [i64; 3],
     ) -> [u32; 3] {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is only set when the CPU has AVX2.
+            #[allow(unsafe_code)]
+            return unsafe { self.correct_avx2::<BY_WALL>(work, start, inside, p) };
+        }
+        self.correct_any::<BY_WALL, false>(work, start, inside, p)
+    }
+
+    /// The correction for the texture's appearance width.
+    #[inline(always)]
+    fn correct_any<const BY_WALL: bool, const AVX2: bool>(
+        &self,
+        work: &Work,
+        start: &Work,
+        inside: [(i64, i64); 3],
+        p: [i64; 3],
+    ) -> [u32; 3] {
+        if self.stride == 8 {
+            self.correct_portable::<BY_WALL, 8, AVX2>(work, start, inside, p)
+        } else {
+            self.correct_portable::<BY_WALL, 16, AVX2>(work, start, inside, p)
+        }
+    }
+
+    /// [`AppearanceCorrector::correct_any`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[allow(unsafe_code)]
+    fn correct_avx2<const BY_WALL: bool>(
+        &self,
+        work: &Work,
+        start: &Work,
+        inside: [(i64, i64); 3],
+        p: [i64; 3],
+    ) -> [u32; 3] {
+        self.correct_any::<BY_WALL, true>(work, start, inside, p)
+    }
+
+    /// The correction, for appearance vectors of `W` values (see
+    /// [`appearance_stride`]); `AVX2` when compiled for it.
+    #[inline(always)]
+    fn correct_portable<const BY_WALL: bool, const W: usize, const AVX2: bool>(
+        &self,
+        work: &Work,
+        start: &Work,
+        inside: [(i64, i64); 3],
+        p: [i64; 3],
+    ) -> [u32; 3] {
         let h = self.h;
-        let d = self.d;
         let (near, moved) = gather_near::<BY_WALL>(work, start, inside, p, self.dims, h);
+        // The exemplar pixel each of the 3 predictions of each location
+        // reads, by plane and location; their vectors are fetched while
+        // the candidates are proposed.
+        let mut predicted = [[[0u32; 3]; 4]; 3];
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
+                for (k, (du, dv)) in [(i, j), (i, 0), (0, j)].into_iter().enumerate() {
+                    let t = near.triples[in_plane_slot(a, du, b, dv)][plane];
+                    let c = self.dims.shift(t, (i - du) * h, (j - dv) * h);
+                    prefetch(&self.app[plane][c as usize * W..]);
+                    predicted[plane][l][k] = c;
+                }
+            }
+        }
         // The proposed pixels and the coherent triples are known from the
         // triples alone: prefetch what scoring them reads, so the cache
-        // misses overlap the query's arithmetic below.
-        let mut pixels = [[u32::MAX; 9 * MAX_SIMILAR]; 3];
-        let mut pixels_n = [0usize; 3];
+        // misses overlap the query's arithmetic below. A pixel proposed
+        // twice is scored twice.
+        let mut proposed = [(0u8, 0u32); MAX_PROPOSED];
+        let mut proposed_n = 0;
         for (plane, &(a, b)) in AXES.iter().enumerate() {
-            let (pixels, n) = (&mut pixels[plane], &mut pixels_n[plane]);
             let mut bases = [u32::MAX; 9];
             let mut bases_n = 0;
             for j in -1..=1i64 {
@@ -163,80 +302,143 @@ impl<'a> AppearanceCorrector<'a> {
                     bases[bases_n] = base;
                     bases_n += 1;
                     for &s in self.level.similar(plane, base) {
-                        if !pixels[..*n].contains(&s) {
-                            pixels[*n] = s;
-                            *n += 1;
-                            prefetch(std::slice::from_ref(self.tables.best_vectors(plane, s)));
-                            prefetch(std::slice::from_ref(self.tables.best_triples(plane, s)));
+                        let best = std::slice::from_ref(self.tables.best(plane, s));
+                        prefetch(best);
+                        // The triples' line, for the candidates that win.
+                        prefetch(&best[0].triples[2..]);
+                        proposed[proposed_n] = (plane as u8, s);
+                        proposed_n += 1;
+                    }
+                }
+            }
+        }
+        // The coherent triples: each direct neighbour's triple moved back.
+        // One proposed twice is scored twice, which is cheaper than
+        // finding out.
+        let coherent = DIRECT.map(|d| moved[near_slot(d)]);
+        for t in &coherent {
+            for (q, &c) in t.iter().enumerate() {
+                prefetch(std::slice::from_ref(self.tables.share(q, c)));
+            }
+        }
+
+        let mut q = self.map.constant;
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            let app = self.app[plane];
+            for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
+                // W appearance sums, then 3 colour offsets.
+                let mut sum = [0f32; MAX_LOCATION_DIMS + 3];
+                for (k, (du, dv)) in [(i, j), (i, 0), (0, j)].into_iter().enumerate() {
+                    let slot = in_plane_slot(a, du, b, dv);
+                    let t = near.triples[slot][plane];
+                    let c = predicted[plane][l][k] as usize;
+                    let row: &[i16; W] = app[c * W..(c + 1) * W].try_into().expect("W values");
+                    for (o, &v) in sum[..W].iter_mut().zip(row) {
+                        *o += v as f32;
+                    }
+                    let own = self.plane_colours[plane][t as usize];
+                    for ch in 0..3 {
+                        sum[W + ch] += near.colours[slot][ch] - own[ch];
+                    }
+                }
+                let columns = &self.map.columns[(4 * plane + l) * (W + 3)..][..W + 3];
+                for (column, &x) in columns.iter().zip(&sum) {
+                    for (o, w) in q.iter_mut().zip(column) {
+                        *o += w * x;
+                    }
+                }
+            }
+        }
+        // Rounds half up by truncating a non-negative value (no libm call).
+        let (lo, hi) = (WIDE_RANGE.0 as f32, WIDE_RANGE.1 as f32);
+        let query = WideVector(q.map(|v| ((v.clamp(lo, hi) - lo + 0.5) as i32 + lo as i32) as i16));
+
+        // The smallest (distance, triple); a penalty is only worth working
+        // out for a triple that could still win.
+        let mut best = (u32::MAX, [u32::MAX; 3]);
+        for &t in &coherent {
+            let dist = wide_distance(&self.tables.triple_vector(t), &query);
+            if dist <= best.0 {
+                // Saturating: a large `consistency` can push the penalty to u32::MAX.
+                let dist =
+                    dist.saturating_add(disagreement(&self.plane_colours, self.consistency, t));
+                if dist < best.0 || (dist == best.0 && t < best.1) {
+                    best = (dist, t);
+                }
+            }
+        }
+        for &(plane, px) in &proposed[..proposed_n] {
+            let plane = plane as usize;
+            let cands = self.tables.best(plane, px);
+            let dists = best_distances::<AVX2>(&cands.vectors, &query);
+            for (i, &dist) in dists.iter().enumerate() {
+                if dist <= best.0 {
+                    let t = cands.triples[i];
+                    if dist < best.0 || t < best.1 {
+                        best = (dist, t);
+                    }
+                }
+            }
+        }
+        best.1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::exemplar::{Exemplar, ExemplarSet};
+    use crate::synth::grid::{Box3, Grid};
+
+    /// The AVX2 build of the correction and the portable one choose the
+    /// same triple for every voxel, at every level and appearance width:
+    /// bytes must not depend on the CPU.
+    #[test]
+    fn every_cpu_chooses_the_same_triples() {
+        let rgb: Vec<u8> = (0..32 * 32 * 3u32)
+            .map(|i| {
+                ((i / 3 % 32) * 5 + (i / 96) * 3 + (i % 3) * 40) as u8
+                    ^ (i.wrapping_mul(2_654_435_761) >> 27) as u8
+            })
+            .collect();
+        let set = ExemplarSet::single(Exemplar::from_rgb(32, 32, &rgb).unwrap());
+        for pca_dims in [8, 12] {
+            let params = crate::AnalysisParams {
+                levels: 2,
+                pca_dims,
+                ..Default::default()
+            };
+            let cands = Candidates::compute(&set, &params, &|_, _| {}).unwrap();
+            let pixels = cands.dims().len() as u32;
+            for k in 0..2 {
+                let bounds = Box3::new([-3, 5, 2], [9, 8, 7]);
+                let mut triples = Grid::new(bounds);
+                for (i, t) in triples.data.iter_mut().enumerate() {
+                    let i = i as u32;
+                    *t = [
+                        i * 7919 % pixels,
+                        i * 104_729 % pixels,
+                        i * 1_299_709 % pixels,
+                    ];
+                }
+                let work = Work::new(&cands, k, triples);
+                let synth = SynthParams::default();
+                let fast = AppearanceCorrector::new(&cands, k, &synth);
+                let portable = AppearanceCorrector::new(&cands, k, &synth).portable();
+                let inside = [(i64::MIN, i64::MAX); 3];
+                for z in bounds.lo[2] + 1..bounds.hi[2] - 1 {
+                    for y in bounds.lo[1] + 1..bounds.hi[1] - 1 {
+                        for x in bounds.lo[0] + 1..bounds.hi[0] - 1 {
+                            let p = [x, y, z];
+                            assert_eq!(
+                                fast.correct_with::<false>(&work, &work, inside, p),
+                                portable.correct_with::<false>(&work, &work, inside, p),
+                                "level {k}, voxel {p:?}, {pca_dims} dimensions"
+                            );
                         }
                     }
                 }
             }
         }
-        let (coherent, coherent_n) = coherent_triples(&moved);
-        for t in &coherent[..coherent_n] {
-            for (q, &c) in t.iter().enumerate() {
-                prefetch(std::slice::from_ref(self.tables.share(q, c)));
-            }
-        }
-        let mut q = [0f32; 12 * MAX_LOCATION_DIMS];
-        for (plane, &(a, b)) in AXES.iter().enumerate() {
-            let app = self.app[plane];
-            for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
-                let out = &mut q[(4 * plane + l) * d..(4 * plane + l + 1) * d];
-                let mut shift = [0f32; 3];
-                for (du, dv) in [(i, j), (i, 0), (0, j)] {
-                    let slot = in_plane_slot(a, du, b, dv);
-                    let t = near.triples[slot][plane];
-                    let c = self.dims.shift(t, (i - du) * h, (j - dv) * h) as usize;
-                    for (o, v) in out.iter_mut().zip(&app[c * d..(c + 1) * d]) {
-                        *o += v;
-                    }
-                    let own = self.plane_colours[plane][t as usize];
-                    for ch in 0..3 {
-                        shift[ch] += near.colours[slot][ch] - own[ch];
-                    }
-                }
-                let flat = &self.flat[plane];
-                let mut mean = flat.mean_colour;
-                for (o, u) in out.iter_mut().zip(&flat.uniform) {
-                    let offset = u[0] * shift[0] + u[1] * shift[1] + u[2] * shift[2];
-                    *o = (*o + offset) * (1.0 / 3.0);
-                    for ch in 0..3 {
-                        mean[ch] += u[ch] * *o * flat.inv_pixels;
-                    }
-                }
-                for ((o, u), off) in out.iter_mut().zip(&flat.uniform).zip(&flat.offsets) {
-                    let level = u[0] * mean[0] + u[1] * mean[1] + u[2] * mean[2] - off;
-                    *o = self.gain * *o - (self.gain - 1.0) * level;
-                }
-            }
-        }
-        let query = self.tables.query(&q[..12 * d]);
-
-        let mut best = (u32::MAX, [u32::MAX; 3]);
-        let mut consider = |dist: u32, t: [u32; 3]| {
-            if dist < best.0 || (dist == best.0 && t < best.1) {
-                best = (dist, t);
-            }
-        };
-        for &t in &coherent[..coherent_n] {
-            let dist = sparse_distance(&self.tables.triple_vector(t), &query);
-            // Saturating: a large `consistency` can push the penalty to u32::MAX.
-            consider(
-                dist.saturating_add(disagreement(&self.plane_colours, self.consistency, t)),
-                t,
-            );
-        }
-        for plane in 0..3 {
-            for &px in &pixels[plane][..pixels_n[plane]] {
-                let vectors = self.tables.best_vectors(plane, px);
-                let triples = self.tables.best_triples(plane, px);
-                for (v, &t) in vectors.0.iter().zip(triples) {
-                    consider(sparse_distance(v, &query), t);
-                }
-            }
-        }
-        best.1
     }
 }
