@@ -270,7 +270,7 @@ pub fn run(opts: &Options) -> anyhow::Result<Results> {
             seconds: Some(m.seconds),
             runs: 1,
             peak_bytes: Some(m.peak_bytes),
-            target: None,
+            target: (size == "128×128").then_some("≤ 3 s"),
             paper: None,
             detail: format!(
                 ".stx {} KiB; candidates {} KiB compact, {} KiB in memory",
@@ -491,7 +491,7 @@ fn synthesis_rows(
         origin: [640, -320, 128],
         size: [b; 3],
     };
-    let target = (b == 64).then_some("≤ 300 ms");
+    let target = (b == 64).then_some("≤ 150 ms");
     rows.push(cold_row(
         format!("brick {b}³ cold"),
         Some(&tex.plan(&brick, 0)?),
@@ -517,7 +517,7 @@ fn synthesis_rows(
         };
         let (target, paper) = match n {
             64 => (None, Some(paper::VOLUME_64)),
-            128 => (Some("≤ 2 s"), Some(paper::VOLUME_128)),
+            128 => (Some("≤ 1.5 s"), Some(paper::VOLUME_128)),
             _ => (None, None),
         };
         rows.push(cold_row(
@@ -542,7 +542,7 @@ fn synthesis_rows(
             format!("axis slice {side}² cold"),
             Some(&plan),
             predictor,
-            is_256.then_some("≤ 300 ms"),
+            is_256.then_some("≤ 200 ms"),
             is_256.then_some(paper::CUT_256),
             || Ok(tex.slice(Axis::Z, 5, 0, 0, side, side, 0)?),
         )?;
@@ -552,7 +552,7 @@ fn synthesis_rows(
             rows.push(warm_row(
                 format!("axis slice {side}² warm"),
                 sizes.warm_runs,
-                is_256.then_some("≤ 50 ms"),
+                is_256.then_some("≤ 10 ms"),
                 || tex.slice(Axis::Z, 5, 0, 0, side, side, 0),
             )?);
         }
@@ -568,7 +568,7 @@ fn synthesis_rows(
                 format!("axis slice {side}² cold, {name} axis"),
                 Some(&tex.plan(&region, 0)?),
                 predictor,
-                is_256.then_some("≤ 300 ms"),
+                is_256.then_some("≤ 200 ms"),
                 None,
                 || Ok(tex.slice(axis, 5, 0, 0, side, side, 0)?),
             )?);
@@ -621,17 +621,17 @@ fn preview_rows(
         (
             format!("preview: axis slice {side}² cold"),
             Region::slice(Axis::Z, 5, 0, 0, side, side),
-            target(side == 256, "≤ 300 ms"),
+            target(side == 256, "≤ 200 ms"),
         ),
         (
             format!("preview: axis slice {side}² cold, x axis"),
             Region::slice(Axis::X, 5, 0, 0, side, side),
-            target(side == 256, "≤ 300 ms"),
+            target(side == 256, "≤ 200 ms"),
         ),
         (
             format!("preview: axis slice {side}² cold, y axis"),
             Region::slice(Axis::Y, 5, 0, 0, side, side),
-            target(side == 256, "≤ 300 ms"),
+            target(side == 256, "≤ 200 ms"),
         ),
         (
             format!("preview: brick {b}³ cold"),
@@ -639,7 +639,7 @@ fn preview_rows(
                 origin: [640, -320, 128],
                 size: [b; 3],
             },
-            target(b == 64, "≤ 300 ms"),
+            target(b == 64, "≤ 150 ms"),
         ),
         (
             format!("preview: full volume {n}³ cold"),
@@ -647,7 +647,7 @@ fn preview_rows(
                 origin: [0, 0, 0],
                 size: [n; 3],
             },
-            target(n == 128, "≤ 2 s"),
+            target(n == 128, "≤ 1.5 s"),
         ),
     ];
     for (name, region, target) in requests {

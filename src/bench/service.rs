@@ -132,7 +132,7 @@ pub fn measure(exemplar: &Path, levels: u32, o: &LoadOptions) -> anyhow::Result<
         bool,
         Option<&'static str>,
     );
-    let sweep_target = Some("≥ 20 cuts/s at 256², lod 0");
+    let sweep_target = Some("≥ 30 cuts/s at 256², lod 0");
     let runs: [Run; 5] = [
         (
             format!("1 client, mixed, {}², lod {}", o.side, o.lod),

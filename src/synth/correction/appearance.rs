@@ -356,6 +356,20 @@ impl<'a> AppearanceCorrector<'a> {
         // The smallest (distance, triple); a penalty is only worth working
         // out for a triple that could still win.
         let mut best = (u32::MAX, [u32::MAX; 3]);
+        for &(plane, px) in &proposed[..proposed_n] {
+            let cands = self.tables.best(plane as usize, px);
+            let dists = best_distances::<AVX2>(&cands.vectors, &query);
+            if dists.iter().all(|&dist| dist > best.0) {
+                continue;
+            }
+            for (&dist, &t) in dists.iter().zip(&cands.triples) {
+                if dist < best.0 || (dist == best.0 && t < best.1) {
+                    best = (dist, t);
+                }
+            }
+        }
+        // Coherent triples last: with the proposals' best known, few are
+        // close enough to need their penalty worked out.
         for &t in &coherent {
             let dist = wide_distance(&self.tables.triple_vector(t), &query);
             if dist <= best.0 {
@@ -364,19 +378,6 @@ impl<'a> AppearanceCorrector<'a> {
                     dist.saturating_add(disagreement(&self.plane_colours, self.consistency, t));
                 if dist < best.0 || (dist == best.0 && t < best.1) {
                     best = (dist, t);
-                }
-            }
-        }
-        for &(plane, px) in &proposed[..proposed_n] {
-            let plane = plane as usize;
-            let cands = self.tables.best(plane, px);
-            let dists = best_distances::<AVX2>(&cands.vectors, &query);
-            for (i, &dist) in dists.iter().enumerate() {
-                if dist <= best.0 {
-                    let t = cands.triples[i];
-                    if dist < best.0 || t < best.1 {
-                        best = (dist, t);
-                    }
                 }
             }
         }
