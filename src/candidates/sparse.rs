@@ -74,12 +74,14 @@ fn diagonals(app: &AppearanceLevel, dims: Dims, h: i64, c: u32, out: &mut [f32])
 
 impl SparseTables {
     /// Builds the tables of a level from its appearance vectors and
-    /// candidates (`h`: the level's spacing).
+    /// candidates (`h`: the level's spacing). Plane p's 4 locations are
+    /// scaled by `weights[p]` here and in every query.
     pub fn new(
         appearance: &[AppearanceLevel; 3],
         candidates: &[PlaneCandidates; 3],
         dims: Dims,
         h: i64,
+        weights: [f32; 3],
     ) -> SparseTables {
         let d = appearance[0].pca.dims;
         let input = 12 * d;
@@ -92,6 +94,9 @@ impl SparseTables {
                     t[p],
                     &mut out[4 * d * p..4 * d * (p + 1)],
                 );
+                out[4 * d * p..4 * d * (p + 1)]
+                    .iter_mut()
+                    .for_each(|v| *v *= weights[p]);
             }
         };
         // The basis is fitted to a fixed, evenly spaced sample of the
@@ -107,7 +112,7 @@ impl SparseTables {
             }
         }
         let pca = Pca::fit(&sample, input, SPARSE_DIMS);
-        let projector = Projector::new(&pca);
+        let projector = Projector::new(&for_unweighted(&pca, 4 * d, weights));
         let mut offsets = [0f32; SPARSE_DIMS];
         for (o, m) in offsets.iter_mut().zip(pca.mean_offsets()) {
             *o = m;
@@ -120,6 +125,7 @@ impl SparseTables {
                     || vec![0f32; 4 * d],
                     |buf, c| {
                         diagonals(&appearance[p], dims, h, c, buf);
+                        buf.iter_mut().for_each(|v| *v *= weights[p]);
                         let mut s = [0f32; SPARSE_DIMS];
                         for (j, o) in s.iter_mut().enumerate().take(pca.dims) {
                             let row =
@@ -238,6 +244,23 @@ impl SparseTables {
             })
             .sum()
     }
+}
+
+/// `pca`, fitted to inputs whose block p (`block` floats) was scaled by
+/// `weights[p]`, made to take unscaled inputs: queries are projected to
+/// what the weighted input gives, without being weighted first.
+fn for_unweighted(pca: &Pca, block: usize, weights: [f32; 3]) -> Pca {
+    let mut out = pca.clone();
+    for (i, m) in out.mean.iter_mut().enumerate() {
+        let w = weights[i / block];
+        *m = if w > 0.0 { *m / w } else { 0.0 };
+    }
+    for row in out.basis.chunks_exact_mut(pca.input) {
+        for (i, b) in row.iter_mut().enumerate() {
+            *b *= weights[i / block];
+        }
+    }
+    out
 }
 
 fn quantise_vector(v: &[f32; SPARSE_DIMS], scale: f32) -> SparseVector {
