@@ -9,6 +9,7 @@
 //! of the PNG and whichever defaults were spelled out.
 
 use super::error::ApiError;
+use crate::orientation::Layout;
 use crate::{AnalysisParams, Exemplar, ExemplarSet, SynthParams};
 use axum::http::StatusCode;
 use serde::{Deserialize, Serialize};
@@ -296,6 +297,16 @@ impl TextureSpec {
         self.hash_planes(&mut h);
         hash_json(&mut h, &self.params.analysis);
         hex(&h.finalize()[..16])
+    }
+
+    /// How the exemplars are laid on the planes (what the precompute will
+    /// use): refused when the orientation asks a quarter turn of a
+    /// non-square exemplar.
+    pub fn layout(&self) -> Result<Layout, ApiError> {
+        Ok(Layout::resolve(
+            &self.planes.to_set()?,
+            &self.params.analysis.orientation,
+        )?)
     }
 
     fn hash_planes(&self, h: &mut Sha256) {
