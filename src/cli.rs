@@ -317,6 +317,12 @@ struct PrecomputeArgs {
     /// Pyramid levels analysed.
     #[arg(long, default_value_t = 4)]
     levels: u32,
+    /// How the exemplar is laid on the planes: auto (turn one plane and
+    /// weight the third down when the exemplar is strongly oriented along
+    /// an axis), none, or an arrangement as JSON, e.g.
+    /// '{"rotate": [0, 270, 0], "weights": [1, 1, 0.25]}'.
+    #[arg(long, default_value = "auto")]
+    orientation: solidtex::Orientation,
     /// Also print each stage's time and each level's candidate statistics.
     #[arg(long)]
     verbose: bool,
@@ -596,6 +602,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             };
             let params = AnalysisParams {
                 levels: a.levels,
+                orientation: a.orientation,
                 ..AnalysisParams::default()
             };
             let t0 = Instant::now();
@@ -780,6 +787,7 @@ fn print_report(c: &Candidates, path: &Path, total: f64, file_bytes: usize, verb
         mib(file_bytes),
         mib(total_mem),
     );
+    println!("{}", describe_layout(c.params().orientation, c.layout()));
     if !verbose {
         return;
     }
@@ -802,6 +810,28 @@ fn print_report(c: &Candidates, path: &Path, total: f64, file_bytes: usize, verb
         println!("    candidates per pixel {}", hist.join(" "));
     }
     println!("  candidates compact {compact} bytes; in memory {total_mem} bytes");
+}
+
+/// One line on how the exemplar is laid on the planes.
+fn describe_layout(asked: solidtex::Orientation, l: &solidtex::orientation::Layout) -> String {
+    let a = l.arrangement;
+    let how = match asked {
+        solidtex::Orientation::Auto if l.detected => "auto: strongly oriented along an axis",
+        solidtex::Orientation::Auto => "auto: not strongly oriented along an axis",
+        solidtex::Orientation::None => "none",
+        solidtex::Orientation::Given(_) => "given",
+    };
+    format!(
+        "orientation ({how}; coherence {:.3}, grain {:.1}° from u): rotate xy {}°, yz {}°, zx {}°; weights {}, {}, {}",
+        l.grain.coherence,
+        l.grain.degrees,
+        a.rotate[0],
+        a.rotate[1],
+        a.rotate[2],
+        a.weights[0],
+        a.weights[1],
+        a.weights[2]
+    )
 }
 
 fn inspect(a: &InspectArgs) -> anyhow::Result<()> {

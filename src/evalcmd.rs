@@ -1,7 +1,8 @@
 //! `solidtex eval`: scores synthesized slices against their exemplar
 //! (nearest-patch coherence and completeness, colour histogram distance,
 //! and for axis slices the anisotropy against the exemplar's) in the xy,
-//! yz, zx and an oblique orientation, next to two baselines computed the
+//! yz, zx and an oblique orientation (an axis slice against its plane's
+//! exemplar, turned where the orientation turned it), next to two baselines computed the
 //! same way: the slab initialisation without correction, and a per-pixel
 //! shuffle of the exemplar.
 
@@ -71,6 +72,15 @@ pub fn evaluate(
         height: exemplar.height(),
         rgb: &ex_rgb,
     };
+    // Each plane's exemplar as the analysis turned it (an oriented exemplar
+    // is laid turned on one plane).
+    let analysed = cands.analysed();
+    let plane_rgb: Vec<Vec<u8>> = (0..3).map(|p| analysed.plane(p).to_rgb_bytes()).collect();
+    let plane_view = |p: usize| RgbView {
+        width: analysed.width(),
+        height: analysed.height(),
+        rgb: &plane_rgb[p],
+    };
     let mut methods = vec![
         (
             "dual-grid",
@@ -116,20 +126,21 @@ pub fn evaluate(
     };
     for (method, params) in methods {
         let tex = Texture::new(cands.clone(), params, Arc::new(TileCache::new(1 << 30)))?;
-        for (orientation, rgb) in slices(&tex, side)? {
+        for (p, (orientation, rgb)) in slices(&tex, side)?.into_iter().enumerate() {
             let view = RgbView {
                 width: side,
                 height: side,
                 rgb: &rgb,
             };
-            // An axis slice's (u, v) are its plane's exemplar axes (the
-            // eval uses one exemplar for all three planes).
-            let aniso = (orientation != "oblique").then(|| anisotropy(view, ex));
+            // An axis slice's (u, v) are its plane's exemplar axes.
+            let axis = orientation != "oblique";
+            let own = if axis { plane_view(p) } else { ex };
+            let aniso = axis.then(|| anisotropy(view, own));
             push(
                 &mut out,
                 orientation,
                 method,
-                score_slice(view, ex, 7),
+                score_slice(view, own, 7),
                 aniso,
             );
         }

@@ -119,10 +119,40 @@ impl Exemplar {
         &self.pixels
     }
 
+    /// The image turned clockwise as displayed (u right, v down) by
+    /// `degrees`: 0, 90, 180 or 270 (anything else is taken modulo 360 and
+    /// rounded down to a quarter turn). A quarter turn swaps width and
+    /// height.
+    pub fn rotated(&self, degrees: u32) -> Exemplar {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let at = |u: usize, v: usize| self.pixels[v * w + u];
+        let (width, height, pixels): (usize, usize, Vec<[u8; 3]>) = match degrees % 360 / 90 {
+            0 => return self.clone(),
+            // The left column, bottom to top, becomes the top row.
+            1 => (h, w, grid(h, w, |u, v| at(v, h - 1 - u))),
+            2 => (w, h, grid(w, h, |u, v| at(w - 1 - u, h - 1 - v))),
+            // The right column, top to bottom, becomes the top row.
+            _ => (h, w, grid(h, w, |u, v| at(w - 1 - v, u))),
+        };
+        Exemplar {
+            width: width as u32,
+            height: height as u32,
+            pixels,
+        }
+    }
+
     /// Packed RGB8 bytes, row-major.
     pub fn to_rgb_bytes(&self) -> Vec<u8> {
         self.pixels.iter().flatten().copied().collect()
     }
+}
+
+/// A `width`×`height` image, row-major, from a function of (u, v).
+fn grid(width: usize, height: usize, f: impl Fn(usize, usize) -> [u8; 3]) -> Vec<[u8; 3]> {
+    (0..height)
+        .flat_map(|v| (0..width).map(move |u| (u, v)))
+        .map(|(u, v)| f(u, v))
+        .collect()
 }
 
 /// The image's size from its header alone.
@@ -233,6 +263,34 @@ mod tests {
     fn png(w: u32, h: u32) -> Vec<u8> {
         let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i % 251) as u8).collect();
         crate::server::png::encode(w, h, &rgb).unwrap()
+    }
+
+    #[test]
+    fn rotations_turn_the_image_clockwise_and_compose() {
+        // 16 wide, 20 tall: pixel (u, v) holds [u, v, 0].
+        let (w, h) = (16u8, 20u8);
+        let rgb: Vec<u8> = (0..h)
+            .flat_map(|v| (0..w).flat_map(move |u| [u, v, 0]))
+            .collect();
+        let e = Exemplar::from_rgb(w as u32, h as u32, &rgb).unwrap();
+        let at = |e: &Exemplar, u: u32, v: u32| e.pixels()[(v * e.width() + u) as usize];
+        let cw = e.rotated(90);
+        assert_eq!((cw.width(), cw.height()), (20, 16));
+        // Clockwise: the bottom-left corner comes to the top left, the
+        // top-left corner to the top right.
+        assert_eq!(at(&cw, 0, 0), [0, h - 1, 0]);
+        assert_eq!(at(&cw, 19, 0), [0, 0, 0]);
+        assert_eq!(at(&cw, 0, 1), [1, h - 1, 0]);
+        // Counter-clockwise: the top-right corner comes to the top left.
+        let ccw = e.rotated(270);
+        assert_eq!(at(&ccw, 0, 0), [w - 1, 0, 0]);
+        assert_eq!(at(&e.rotated(180), 0, 0), [w - 1, h - 1, 0]);
+        assert_eq!(e.rotated(0), e);
+        assert_eq!(e.rotated(360), e);
+        assert_eq!(cw.rotated(90), e.rotated(180));
+        assert_eq!(cw.rotated(270), e);
+        assert_eq!(ccw.rotated(90), e);
+        assert_eq!(e.rotated(180).rotated(180), e);
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub mod error;
 pub mod eval;
 pub mod exemplar;
 pub mod loadtest;
+pub mod orientation;
 pub mod params;
 pub mod server;
 pub mod stack;
@@ -28,7 +29,9 @@ pub mod texture;
 pub use candidates::{Candidates, PrecomputeReport, Stage};
 pub use error::{CorruptKind, Error, Result};
 pub use exemplar::{Exemplar, ExemplarSet};
-pub use params::{AnalysisParams, Correction, Scheme, Slices, SynthParams};
+pub use params::{
+    AnalysisParams, Arrangement, Correction, Orientation, Scheme, Slices, SynthParams,
+};
 pub use synth::cache::{CacheStats, TileCache};
 pub use synth::cancel::{CancelFlag, Cancelled, run_cancellable};
 pub use texture::{Axis, CutPlane, Filter, Region, SynthStats, Texture};

@@ -28,6 +28,9 @@ pub struct AnalysisParams {
     pub similar_coarse: u32,
     /// 2D candidates per exemplar pixel at the finest level.
     pub similar_fine: u32,
+    /// How the exemplar is laid on the three planes, and how much each
+    /// plane counts in the matching (see [`Orientation`]).
+    pub orientation: Orientation,
 }
 
 impl Default for AnalysisParams {
@@ -41,6 +44,7 @@ impl Default for AnalysisParams {
             levels: 4,
             similar_coarse: 4,
             similar_fine: 2,
+            orientation: Orientation::Auto,
         }
     }
 }
@@ -59,7 +63,131 @@ impl AnalysisParams {
         range("levels", self.levels, 1, 6)?;
         range("similar_coarse", self.similar_coarse, 1, 8)?;
         range("similar_fine", self.similar_fine, 1, 8)?;
+        if let Orientation::Given(a) = &self.orientation {
+            a.validate()?;
+        }
         Ok(())
+    }
+}
+
+/// How one exemplar is laid on the three planes. A strongly oriented
+/// exemplar (grain, stripes) cannot show its orientation consistently in
+/// all three planes: turning it a quarter for one plane lets two planes
+/// agree, and the third, which cuts along the layers, counts less in the
+/// matching (Zhang et al. §6.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Orientation {
+    /// Measure the exemplar's orientation when the candidates are
+    /// precomputed and, when it is strongly oriented along one of its axes,
+    /// choose the arrangement [`crate::orientation`] describes; otherwise
+    /// as [`Orientation::None`].
+    #[default]
+    Auto,
+    /// Every plane shows the exemplar as it is, all weighted alike.
+    None,
+    /// The arrangement given.
+    Given(Arrangement),
+}
+
+/// Each plane's rotation of its exemplar and weight in the matching
+/// (planes in the order xy, yz, zx).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Arrangement {
+    /// Clockwise rotation of the plane's exemplar as displayed (u right, v
+    /// down), in degrees: 0, 90, 180 or 270. 90 and 270 need a square
+    /// exemplar (all planes share one size).
+    pub rotate: [u32; 3],
+    /// Weight of the plane's neighbourhood in the appearance correction's
+    /// matching, 0 to 1 (the colour correction weighs the planes alike).
+    #[serde(serialize_with = "shortest_f32s")]
+    pub weights: [f32; 3],
+}
+
+impl Default for Arrangement {
+    fn default() -> Self {
+        Arrangement {
+            rotate: [0; 3],
+            weights: [1.0; 3],
+        }
+    }
+}
+
+impl Arrangement {
+    /// Checks the rotations and weights.
+    pub fn validate(&self) -> Result<()> {
+        if let Some(r) = self
+            .rotate
+            .iter()
+            .find(|r| !matches!(r, 0 | 90 | 180 | 270))
+        {
+            return Err(Error::InvalidRequest(format!(
+                "orientation: rotate {r} is not 0, 90, 180 or 270 degrees"
+            )));
+        }
+        for &w in &self.weights {
+            range("orientation.weights", w, 0.0, 1.0)?;
+        }
+        if self.weights.iter().all(|&w| w == 0.0) {
+            return Err(Error::InvalidRequest(
+                "orientation: at least one plane weight must be above 0".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl Serialize for Orientation {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            Orientation::Auto => s.serialize_str("auto"),
+            Orientation::None => s.serialize_str("none"),
+            Orientation::Given(a) => a.serialize(s),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Orientation {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = Orientation;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str(r#""auto", "none" or {"rotate": [...], "weights": [...]}"#)
+            }
+            fn visit_str<E: serde::de::Error>(
+                self,
+                v: &str,
+            ) -> std::result::Result<Orientation, E> {
+                v.parse().map_err(E::custom)
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                m: A,
+            ) -> std::result::Result<Orientation, A::Error> {
+                let a = Arrangement::deserialize(serde::de::value::MapAccessDeserializer::new(m))?;
+                Ok(Orientation::Given(a))
+            }
+        }
+        d.deserialize_any(Visit)
+    }
+}
+
+impl std::str::FromStr for Orientation {
+    type Err = Error;
+    /// `auto`, `none`, or the JSON object of an [`Arrangement`] (so that a
+    /// query string or a command-line flag can carry one).
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim() {
+            "auto" => Ok(Orientation::Auto),
+            "none" => Ok(Orientation::None),
+            t if t.starts_with('{') => serde_json::from_str::<Arrangement>(t)
+                .map(Orientation::Given)
+                .map_err(|e| Error::InvalidRequest(format!("orientation: {e}"))),
+            _ => Err(Error::InvalidRequest(format!(
+                r#"unknown orientation `{s}` (expected auto, none or {{"rotate": [...], "weights": [...]}})"#
+            ))),
+        }
     }
 }
 
@@ -307,6 +435,15 @@ fn shortest_f32<S: serde::Serializer>(v: &f32, s: S) -> std::result::Result<S::O
     s.serialize_f64(v.to_string().parse().unwrap_or(*v as f64))
 }
 
+fn shortest_f32s<S: serde::Serializer>(v: &[f32; 3], s: S) -> std::result::Result<S::Ok, S::Error> {
+    use serde::ser::SerializeTuple;
+    let mut t = s.serialize_tuple(3)?;
+    for x in v {
+        t.serialize_element(&x.to_string().parse::<f64>().unwrap_or(*x as f64))?;
+    }
+    t.end()
+}
+
 /// Checks `min ≤ v ≤ max` (NaN fails the test and is refused too).
 fn range<T: PartialOrd + Into<f64> + Copy>(name: &'static str, v: T, min: T, max: T) -> Result<()> {
     if (min..=max).contains(&v) {
@@ -336,6 +473,85 @@ mod tests {
         assert!(json.contains(r#""contrast":1.6,"#), "{json}");
         assert!(json.contains(r#""jitter":0.3,"#), "{json}");
         assert_eq!(serde_json::from_str::<SynthParams>(&json).unwrap(), p);
+    }
+
+    #[test]
+    fn orientations_read_as_written_and_bad_ones_are_refused() {
+        let given = |rotate, weights| Orientation::Given(Arrangement { rotate, weights });
+        let quarter = given([0, 270, 0], [1.0, 1.0, 0.25]);
+        for (text, want) in [
+            (r#""auto""#, Orientation::Auto),
+            (r#""none""#, Orientation::None),
+            (
+                r#"{"rotate": [0, 270, 0], "weights": [1, 1, 0.25]}"#,
+                quarter,
+            ),
+            // Either key may be left out.
+            (r#"{"rotate": [90, 0, 0]}"#, given([90, 0, 0], [1.0; 3])),
+            (
+                r#"{"weights": [1, 0.5, 1]}"#,
+                given([0; 3], [1.0, 0.5, 1.0]),
+            ),
+            // A query string or a flag carries the object as text.
+            (
+                r#""{\"rotate\": [0, 270, 0], \"weights\": [1, 1, 0.25]}""#,
+                quarter,
+            ),
+        ] {
+            let o: Orientation = serde_json::from_str(text).unwrap();
+            assert_eq!(o, want, "{text}");
+            let p = AnalysisParams {
+                orientation: o,
+                ..AnalysisParams::default()
+            };
+            p.validate().unwrap();
+            let json = serde_json::to_string(&p).unwrap();
+            assert_eq!(serde_json::from_str::<AnalysisParams>(&json).unwrap(), p);
+        }
+        let json = serde_json::to_string(&quarter).unwrap();
+        assert_eq!(json, r#"{"rotate":[0,270,0],"weights":[1.0,1.0,0.25]}"#);
+        assert_eq!("auto".parse::<Orientation>().unwrap(), Orientation::Auto);
+        assert_eq!(AnalysisParams::default().orientation, Orientation::Auto);
+
+        // Not JSON that names an orientation: refused when read.
+        for text in [
+            r#""sideways""#,
+            r#"{"turn": [0, 0, 0]}"#,
+            r#"{"rotate": [0, 90]}"#,
+            r#"{"weights": "1,1,1"}"#,
+            "3",
+        ] {
+            assert!(serde_json::from_str::<Orientation>(text).is_err(), "{text}");
+        }
+        // Read, but out of range: refused by validation.
+        let invalid = |o: Orientation| {
+            AnalysisParams {
+                orientation: o,
+                ..AnalysisParams::default()
+            }
+            .validate()
+            .unwrap_err()
+        };
+        assert!(matches!(
+            invalid(given([0, 45, 0], [1.0; 3])),
+            Error::InvalidRequest(_)
+        ));
+        for weights in [[1.0, 2.0, 1.0], [1.0, 1.0, -0.1], [f32::NAN, 1.0, 1.0]] {
+            assert!(
+                matches!(
+                    invalid(given([0; 3], weights)),
+                    Error::InvalidRange {
+                        name: "orientation.weights",
+                        ..
+                    }
+                ),
+                "{weights:?}"
+            );
+        }
+        assert!(matches!(
+            invalid(given([0; 3], [0.0; 3])),
+            Error::InvalidRequest(_)
+        ));
     }
 
     #[test]

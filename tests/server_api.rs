@@ -414,6 +414,124 @@ async fn a_preset_upload_is_the_texture_it_spells_out() {
     assert_eq!(v["error"]["code"], "invalid_params", "{v}");
 }
 
+/// Horizontal stripes with a little noise: grain along u.
+fn grain_png(w: u32, h: u32) -> Vec<u8> {
+    let rgb: Vec<u8> = (0..w * h)
+        .flat_map(|i| {
+            let (u, v) = (i % w, i / w);
+            let l = ((v % 6) * 35 + (u * 7 + v * 3) % 11) as u8;
+            [l, l / 2 + 60, 90]
+        })
+        .collect();
+    encode_png(w, h, &rgb)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn oriented_exemplars_are_turned_and_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let (st, auto) = upload(&c, &s, grain_png(32, 32), "levels=3").await;
+    assert_eq!(st, 202, "{auto}");
+    assert_eq!(auto["params"]["orientation"], "auto");
+    let o = &auto["orientation"];
+    assert_eq!(o["detected"], true, "{auto}");
+    assert_eq!(o["rotate"], serde_json::json!([0, 270, 0]), "{auto}");
+    assert_eq!(o["weights"], serde_json::json!([1.0, 1.0, 0.25]), "{auto}");
+    assert!(o["coherence"].as_f64().unwrap() > 0.6, "{auto}");
+    assert!(o["grain_degrees"].as_f64().unwrap().abs() < 15.0, "{auto}");
+    let id = auto["id"].as_str().unwrap().to_string();
+    let ready = wait_ready(&c, &s, &id).await;
+    assert_eq!(ready["orientation"], auto["orientation"]);
+    let (st, _, b) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/x/0.png?w=8&h=8")),
+    )
+    .await;
+    assert_eq!((st, decode_png(&b).0), (200, 8));
+
+    // Asked not to, it leaves the planes as they are: another texture.
+    let (_, none) = upload(&c, &s, grain_png(32, 32), "levels=3&orientation=none").await;
+    assert_ne!(none["id"], auto["id"]);
+    assert_eq!(none["orientation"]["detected"], true, "{none}");
+    assert_eq!(none["orientation"]["rotate"], serde_json::json!([0, 0, 0]));
+    // An arrangement as JSON text in the query, or as an object in a form.
+    let given = r#"{"rotate":[0,270,0],"weights":[1,1,0.5]}"#;
+    let (_, q) = upload(
+        &c,
+        &s,
+        grain_png(32, 32),
+        &format!("levels=3&orientation={}", urlencode(given)),
+    )
+    .await;
+    assert_eq!(
+        q["orientation"]["weights"],
+        serde_json::json!([1.0, 1.0, 0.5])
+    );
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "image",
+            reqwest::multipart::Part::bytes(grain_png(32, 32))
+                .file_name("g.png")
+                .mime_str("image/png")
+                .unwrap(),
+        )
+        .text(
+            "params",
+            format!(r#"{{"levels": 3, "orientation": {given}}}"#),
+        );
+    let (_, f) = upload_form(&c, &s, form).await;
+    assert_eq!(f["id"], q["id"], "{f}");
+    // Without grain, `auto` changes nothing.
+    let (_, plain) = upload(&c, &s, exemplar_png(32, 1), "levels=3").await;
+    assert_eq!(plain["orientation"]["detected"], false, "{plain}");
+    assert_eq!(
+        plain["orientation"]["weights"],
+        serde_json::json!([1.0, 1.0, 1.0])
+    );
+
+    for (png, query, code) in [
+        (
+            grain_png(32, 32),
+            "orientation=sideways".to_string(),
+            "invalid_params",
+        ),
+        (
+            grain_png(32, 32),
+            format!("orientation={}", urlencode(r#"{"weights":[1,2,1]}"#)),
+            "out_of_range",
+        ),
+        (
+            grain_png(32, 32),
+            format!("orientation={}", urlencode(r#"{"rotate":[0,45,0]}"#)),
+            "invalid_request",
+        ),
+        (
+            grain_png(32, 16),
+            format!("orientation={}", urlencode(r#"{"rotate":[90,0,0]}"#)),
+            "invalid_request",
+        ),
+    ] {
+        let (st, v) = upload(&c, &s, png, &query).await;
+        assert_eq!(
+            (st, v["error"]["code"].as_str()),
+            (400, Some(code)),
+            "{query}: {v}"
+        );
+    }
+    s.stop().await;
+}
+
+/// Percent-encodes a query value.
+fn urlencode(s: &str) -> String {
+    s.bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'_' | b'.' => (b as char).to_string(),
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn multipart_uploads() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,6 +1,9 @@
 //! The `.stx` file: magic, format version, payload length, CRC-32 of the
-//! payload, then the payload (parameters as JSON, exemplar pixels, and per
-//! level the PCA bases, similarity sets and candidate triples). Derived data
+//! payload, then the payload (parameters as JSON, exemplar pixels as given,
+//! the layout of the planes (version 2), and per level the PCA bases,
+//! similarity sets and candidate triples of the planes as analysed).
+//! Version 1 files, written before the layout, are read with every plane
+//! as given. Derived data
 //! (stacks, appearance vectors, quantised neighbourhoods) is recomputed on
 //! load, deterministically. Every read is bounds-checked: a truncated or
 //! corrupt file is an error, never a panic or a wrong result.
@@ -9,10 +12,11 @@ use super::{Candidates, PlaneCandidates, PrecomputeReport, StoredLevel};
 use crate::appearance::Pca;
 use crate::error::{CorruptKind, Error, Result};
 use crate::exemplar::{Exemplar, ExemplarSet};
-use crate::params::AnalysisParams;
+use crate::orientation::{Grain, Layout};
+use crate::params::{AnalysisParams, Arrangement, Orientation};
 
 const MAGIC: &[u8; 8] = b"SOLIDTEX";
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 struct Writer(Vec<u8>);
@@ -120,7 +124,7 @@ impl<'a> Reader<'a> {
 
 pub(super) fn encode(c: &Candidates) -> Vec<u8> {
     let single = c.exemplars.is_single();
-    let planes = if single { 1 } else { 3 };
+    let planes = if c.analysed.is_single() { 1 } else { 3 };
     let npx = c.dims.len() as u32;
     let wide = npx > u16::MAX as u32 + 1;
     let mut w = Writer(Vec::new());
@@ -128,9 +132,19 @@ pub(super) fn encode(c: &Candidates) -> Vec<u8> {
     w.u8(single as u8);
     w.u32(c.dims.w);
     w.u32(c.dims.h);
-    for p in 0..planes {
+    for p in 0..if single { 1 } else { 3 } {
         w.0.extend_from_slice(&c.exemplars.plane(p).to_rgb_bytes());
     }
+    let layout = &c.layout;
+    for r in layout.arrangement.rotate {
+        w.u8((r / 90) as u8);
+    }
+    for v in layout.arrangement.weights {
+        w.f32(v);
+    }
+    w.u8(layout.detected as u8);
+    w.f32(layout.grain.coherence);
+    w.f32(layout.grain.degrees);
     for l in c.stored_levels() {
         for p in 0..planes {
             w.pca(&l.appearance_pca[p]);
@@ -176,7 +190,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
         return Err(Error::CorruptFile(CorruptKind::Truncated));
     }
     let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
-    if version != VERSION {
+    if version != 1 && version != VERSION {
         return Err(Error::CorruptFile(CorruptKind::Version(version)));
     }
     let len = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
@@ -195,8 +209,14 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
         buf: payload,
         pos: 0,
     };
-    let params: AnalysisParams =
+    let mut params: serde_json::Map<String, serde_json::Value> =
         serde_json::from_slice(r.bytes()?).map_err(|e| invalid(&format!("params: {e}")))?;
+    // Written before orientations: every plane as given.
+    params
+        .entry("orientation")
+        .or_insert_with(|| serde_json::json!("none"));
+    let params: AnalysisParams =
+        serde_json::from_value(params.into()).map_err(|e| invalid(&format!("params: {e}")))?;
     params.validate().map_err(|e| invalid(&e.to_string()))?;
     let single = match r.u8()? {
         0 => false,
@@ -205,9 +225,8 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     };
     let width = r.u32()?;
     let height = r.u32()?;
-    let planes = if single { 1 } else { 3 };
     let mut exemplars = Vec::new();
-    for _ in 0..planes {
+    for _ in 0..if single { 1 } else { 3 } {
         let n = (width as usize)
             .checked_mul(height as usize)
             .and_then(|n| n.checked_mul(3))
@@ -227,6 +246,14 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     if !single && set.is_single() {
         return Err(invalid("plane flag"));
     }
+    let layout = if version == 1 {
+        Layout::resolve(&set, &Orientation::None).map_err(|e| invalid(&e.to_string()))?
+    } else {
+        read_layout(&mut r, &params)?
+    };
+    let analysed = layout.apply(&set).map_err(|_| invalid("layout"))?;
+    let single = analysed.is_single();
+    let planes = if single { 1 } else { 3 };
     let npx = width * height;
     let wide = npx > u16::MAX as u32 + 1;
     let app_input = (params.neighbourhood * params.neighbourhood * 3) as usize;
@@ -310,5 +337,141 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     if r.pos != payload.len() {
         return Err(invalid("trailing bytes"));
     }
-    Candidates::from_stored(set, params, levels, PrecomputeReport::default())
+    Candidates::from_stored(set, params, layout, levels, PrecomputeReport::default())
+}
+
+/// The layout record, which must agree with an orientation that was given.
+fn read_layout(r: &mut Reader, params: &AnalysisParams) -> Result<Layout> {
+    let mut rotate = [0u32; 3];
+    for q in &mut rotate {
+        *q = match r.u8()? {
+            turns @ 0..=3 => turns as u32 * 90,
+            _ => return Err(invalid("rotation")),
+        };
+    }
+    let mut weights = [0f32; 3];
+    for w in &mut weights {
+        *w = r.f32()?;
+    }
+    let arrangement = Arrangement { rotate, weights };
+    arrangement
+        .validate()
+        .map_err(|e| invalid(&e.to_string()))?;
+    let detected = match r.u8()? {
+        0 => false,
+        1 => true,
+        _ => return Err(invalid("detection flag")),
+    };
+    let grain = Grain {
+        coherence: r.f32()?,
+        degrees: r.f32()?,
+    };
+    let expected = match params.orientation {
+        Orientation::Auto => arrangement,
+        Orientation::None => Arrangement::default(),
+        Orientation::Given(a) => a,
+    };
+    if arrangement != expected {
+        return Err(invalid("layout differs from the orientation parameter"));
+    }
+    Ok(Layout {
+        arrangement,
+        grain,
+        detected,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Horizontal stripes with a little noise: strongly oriented along u.
+    fn grain(side: u32) -> Exemplar {
+        let rgb: Vec<u8> = (0..side * side)
+            .flat_map(|i| {
+                let (u, v) = (i % side, i / side);
+                let l = ((v % 6) * 35 + (u * 7 + v * 3) % 11) as u8;
+                [l, l / 2 + 60, 90]
+            })
+            .collect();
+        Exemplar::from_rgb(side, side, &rgb).unwrap()
+    }
+
+    fn compute(e: Exemplar, orientation: Orientation) -> Candidates {
+        let params = AnalysisParams {
+            levels: 2,
+            orientation,
+            ..AnalysisParams::default()
+        };
+        Candidates::compute(&ExemplarSet::single(e), &params, &|_, _| {}).unwrap()
+    }
+
+    /// A payload's header: magic, `version`, length and checksum.
+    fn with_header(version: u32, payload: &[u8]) -> Vec<u8> {
+        let mut out = MAGIC.to_vec();
+        out.extend_from_slice(&version.to_le_bytes());
+        out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        out.extend_from_slice(&crc32fast::hash(payload).to_le_bytes());
+        out.extend_from_slice(payload);
+        out
+    }
+
+    /// Where the layout record starts in the payload of `c`'s file.
+    fn layout_at(c: &Candidates, payload: &[u8]) -> usize {
+        let json = u32::from_le_bytes(payload[..4].try_into().unwrap()) as usize;
+        let planes = if c.exemplars.is_single() { 1 } else { 3 };
+        4 + json + 1 + 8 + planes * c.dims.len() * 3
+    }
+
+    const LAYOUT_BYTES: usize = 3 + 3 * 4 + 1 + 2 * 4;
+
+    #[test]
+    fn files_written_before_orientations_load_with_every_plane_as_given() {
+        let c = compute(grain(16), Orientation::None);
+        let v2 = encode(&c);
+        // As version 1 wrote it: no orientation among the parameters, no
+        // layout record.
+        let payload = &v2[HEADER..];
+        let at = layout_at(&c, payload);
+        let json = std::str::from_utf8(&payload[4..at - 9 - c.dims.len() * 3]).unwrap();
+        let old_json = json.replace(r#","orientation":"none""#, "");
+        assert_ne!(old_json, json);
+        let mut old = (old_json.len() as u32).to_le_bytes().to_vec();
+        old.extend_from_slice(old_json.as_bytes());
+        old.extend_from_slice(&payload[4 + json.len()..at]);
+        old.extend_from_slice(&payload[at + LAYOUT_BYTES..]);
+        let loaded = decode(&with_header(1, &old)).unwrap();
+        // Oriented as it is, although `auto` would turn this exemplar.
+        assert_eq!(loaded.params().orientation, Orientation::None);
+        assert!(loaded.layout().detected);
+        assert_eq!(loaded.layout().arrangement, Arrangement::default());
+        assert_eq!(encode(&loaded), v2);
+    }
+
+    #[test]
+    fn a_layout_round_trips_and_must_agree_with_a_given_orientation() {
+        let given = Orientation::Given(Arrangement {
+            rotate: [0, 270, 0],
+            weights: [1.0, 1.0, 0.5],
+        });
+        for orientation in [Orientation::Auto, given] {
+            let c = compute(grain(16), orientation);
+            assert!(!c.analysed().is_single());
+            assert!(c.exemplars().is_single());
+            let bytes = encode(&c);
+            let back = decode(&bytes).unwrap();
+            assert_eq!(back.layout(), c.layout());
+            assert_eq!(back.analysed(), c.analysed());
+            assert_eq!(encode(&back), bytes);
+        }
+        let c = compute(grain(16), given);
+        let mut payload = encode(&c)[HEADER..].to_vec();
+        let at = layout_at(&c, &payload);
+        assert_eq!(payload[at + 1], 3);
+        payload[at + 1] = 1;
+        assert!(matches!(
+            decode(&with_header(VERSION, &payload)),
+            Err(Error::CorruptFile(CorruptKind::Invalid(_)))
+        ));
+    }
 }

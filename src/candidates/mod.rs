@@ -14,6 +14,7 @@ pub mod sparse;
 use crate::appearance::{self, AppearanceLevel, Pca, Projector};
 use crate::error::{Error, Result};
 use crate::exemplar::ExemplarSet;
+use crate::orientation::Layout;
 use crate::params::AnalysisParams;
 use crate::stack::{GaussianStack, spacing};
 use geometry::Dims;
@@ -161,6 +162,8 @@ pub struct Level {
     /// equal, and reading one copy keeps it in cache where three would not
     /// stay.
     alias: [usize; 3],
+    /// Each plane's weight in the sparse neighbourhoods' matching.
+    weights: [f32; 3],
     /// Sparse appearance-space neighbourhoods, built when a correction
     /// first needs them.
     sparse: std::sync::OnceLock<sparse::SparseTables>,
@@ -224,6 +227,7 @@ impl Level {
                 &self.stored.candidates,
                 dims,
                 spacing(k) as i64,
+                self.weights,
             )
         })
     }
@@ -232,6 +236,9 @@ impl Level {
 /// Precomputed candidate data of one texture.
 pub struct Candidates {
     exemplars: ExemplarSet,
+    /// The exemplars as analysed: each plane's turned by the layout.
+    analysed: ExemplarSet,
+    layout: Layout,
     params: AnalysisParams,
     dims: Dims,
     stacks: [GaussianStack; 3],
@@ -298,6 +305,12 @@ impl Candidates {
         progress: &(dyn Fn(Stage, f32) + Sync),
     ) -> Result<Candidates> {
         params.validate()?;
+        let layout = Layout::resolve(exemplars, &params.orientation)?;
+        let given = exemplars;
+        // Turned planes differ from each other: the search takes the
+        // general path, one plane at a time.
+        let analysed = layout.apply(given)?;
+        let exemplars = &analysed;
         let dims = Dims::new(exemplars.width(), exemplars.height());
         let single = exemplars.is_single();
         let levels_n = params.levels as usize;
@@ -433,10 +446,12 @@ impl Candidates {
             });
             progress(Stage::Finish, (k + 1) as f32 / levels_n as f32);
         }
-        let levels = derive_levels(&stacks, stored, n, single);
+        let levels = derive_levels(&stacks, stored, n, single, layout.arrangement.weights);
         lap(&mut report, "finish");
         Ok(Candidates {
-            exemplars: exemplars.clone(),
+            exemplars: given.clone(),
+            analysed,
+            layout,
             params: params.clone(),
             dims,
             stacks,
@@ -449,20 +464,30 @@ impl Candidates {
     pub(crate) fn from_stored(
         exemplars: ExemplarSet,
         params: AnalysisParams,
+        layout: Layout,
         stored: Vec<StoredLevel>,
         report: PrecomputeReport,
     ) -> Result<Candidates> {
         params.validate()?;
-        let dims = Dims::new(exemplars.width(), exemplars.height());
+        let analysed = layout.apply(&exemplars)?;
+        let dims = Dims::new(analysed.width(), analysed.height());
         if stored.len() != params.levels as usize {
             return Err(Error::CorruptFile(crate::error::CorruptKind::Invalid(
                 "level count".into(),
             )));
         }
-        let stacks = build_stacks(&exemplars, stored.len());
-        let levels = derive_levels(&stacks, stored, params.neighbourhood, exemplars.is_single());
+        let stacks = build_stacks(&analysed, stored.len());
+        let levels = derive_levels(
+            &stacks,
+            stored,
+            params.neighbourhood,
+            analysed.is_single(),
+            layout.arrangement.weights,
+        );
         Ok(Candidates {
             exemplars,
+            analysed,
+            layout,
             params,
             dims,
             stacks,
@@ -489,9 +514,21 @@ impl Candidates {
         format::decode(bytes)
     }
 
-    /// The exemplars.
+    /// The exemplars as given.
     pub fn exemplars(&self) -> &ExemplarSet {
         &self.exemplars
+    }
+
+    /// The exemplars as analysed and synthesized from: each plane's turned
+    /// by [`Candidates::layout`].
+    pub fn analysed(&self) -> &ExemplarSet {
+        &self.analysed
+    }
+
+    /// How the exemplar is laid on the planes, and what was measured to
+    /// choose it.
+    pub fn layout(&self) -> &Layout {
+        &self.layout
     }
 
     /// The analysis parameters.
@@ -542,7 +579,7 @@ impl Candidates {
         let mut compact = 0usize;
         let mut total = 0usize;
         for l in &self.levels {
-            let planes = if self.exemplars.is_single() { 1 } else { 3 };
+            let planes = if self.analysed.is_single() { 1 } else { 3 };
             for p in 0..planes {
                 let c = &l.stored.candidates[p];
                 compact += (c.triples.len() * 2 * coord_bits).div_ceil(8) + self.dims.len();
@@ -666,6 +703,7 @@ fn derive_levels(
     stored: Vec<StoredLevel>,
     n: u32,
     single: bool,
+    weights: [f32; 3],
 ) -> Vec<Level> {
     let alias = if single { [0, 0, 0] } else { [0, 1, 2] };
     stored
@@ -733,6 +771,7 @@ fn derive_levels(
                 similar_scale,
                 joint_shares,
                 alias,
+                weights,
                 sparse: std::sync::OnceLock::new(),
             }
         })
@@ -843,6 +882,50 @@ mod tests {
             ..AnalysisParams::default()
         };
         Candidates::compute(set, &params, &|_, _| {}).unwrap()
+    }
+
+    /// A query is projected unweighted and the tables hold weighted
+    /// vectors: a triple's own 12 locations, as a query, must land on the
+    /// triple's vector, and the weights must change what is compared.
+    #[test]
+    fn weighted_planes_are_weighted_alike_in_tables_and_queries() {
+        let e = pattern(16, 4);
+        let tables_for = |weights: [f32; 3]| {
+            let params = AnalysisParams {
+                levels: 1,
+                orientation: crate::params::Orientation::Given(crate::params::Arrangement {
+                    rotate: [0, 270, 0],
+                    weights,
+                }),
+                ..AnalysisParams::default()
+            };
+            Candidates::compute(&ExemplarSet::single(e.clone()), &params, &|_, _| {}).unwrap()
+        };
+        let weighted = tables_for([1.0, 0.5, 0.1]);
+        let even = tables_for([1.0; 3]);
+        let (level, dims) = (weighted.level(0), weighted.dims());
+        let tables = level.sparse_tables(dims, 0);
+        let d = tables.location_dims();
+        let mut worst = 0;
+        for px in 0..dims.len() as u32 {
+            let t = tables.best(1, px).triples[0];
+            let mut q = Vec::with_capacity(12 * d);
+            for (p, &c) in t.iter().enumerate() {
+                for &(i, j) in &sparse::DIAGONALS {
+                    let at = dims.shift(c, i, j) as usize;
+                    q.extend_from_slice(level.appearance[p].vector(at));
+                }
+            }
+            let got = tables.project(&q);
+            worst = worst.max(sparse::wide_distance(&got, &tables.triple_vector(t)));
+        }
+        // Shares are rounded one by one (three and the bias), so a triple's
+        // vector is within 2 units per dimension of the direct projection;
+        // an unweighted query side would be thousands away.
+        assert!(worst <= 4 * sparse::SPARSE_DIMS as u32, "{worst}");
+        let other = even.level(0).sparse_tables(dims, 0);
+        assert_ne!(other.best(1, 0).vectors, tables.best(1, 0).vectors);
+        assert_eq!(other.best(1, 0).triples, tables.best(1, 0).triples);
     }
 
     /// Planes 1 and 2 of a single exemplar read plane 0's 2D tables, which

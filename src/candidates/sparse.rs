@@ -106,12 +106,14 @@ fn diagonals(app: &AppearanceLevel, dims: Dims, h: i64, c: u32, out: &mut [f32])
 
 impl SparseTables {
     /// Builds the tables of a level from its appearance vectors and
-    /// candidates (`h`: the level's spacing).
+    /// candidates (`h`: the level's spacing). Plane p's 4 locations are
+    /// scaled by `weights[p]` here and in every query.
     pub fn new(
         appearance: &[AppearanceLevel; 3],
         candidates: &[PlaneCandidates; 3],
         dims: Dims,
         h: i64,
+        weights: [f32; 3],
     ) -> SparseTables {
         let d = appearance[0].pca.dims;
         let input = 12 * d;
@@ -124,6 +126,9 @@ impl SparseTables {
                     t[p],
                     &mut out[4 * d * p..4 * d * (p + 1)],
                 );
+                out[4 * d * p..4 * d * (p + 1)]
+                    .iter_mut()
+                    .for_each(|v| *v *= weights[p]);
             }
         };
         // The basis is fitted to a fixed, evenly spaced sample of the
@@ -138,7 +143,9 @@ impl SparseTables {
                 sample.extend_from_slice(&buf);
             }
         }
-        let pca = Pca::fit(&sample, input, SPARSE_DIMS);
+        // Fitted to weighted locations, kept for unweighted ones: shares
+        // and queries are projected from the locations as they are.
+        let pca = for_unweighted(&Pca::fit(&sample, input, SPARSE_DIMS), 4 * d, weights);
         let offsets = pca.mean_offsets();
         let pixels = dims.len();
         let shares = [0, 1, 2].map(|p| {
@@ -290,6 +297,20 @@ impl SparseTables {
         }))
     }
 
+    /// The vector of 12 concatenated locations (xy, yz, zx; [`DIAGONALS`]
+    /// order), projected directly: what [`SparseTables::triple_vector`]
+    /// gives from shares.
+    #[cfg(test)]
+    pub fn project(&self, locations: &[f32]) -> WideVector {
+        let mut out = [0f32; SPARSE_DIMS];
+        self.pca.project(locations, &mut out[..self.pca.dims]);
+        let units = |v: f32| {
+            ((v * self.scale).round() as i32 + 128).clamp(WIDE_RANGE.0 as i32, WIDE_RANGE.1 as i32)
+                as i16
+        };
+        WideVector(out.map(units))
+    }
+
     /// [`SparseTables::triple_vector`] clamped to bytes, as stored.
     pub fn stored_vector(&self, t: [u32; 3]) -> SparseVector {
         self.triple_vector(t).0.map(|v| v.clamp(0, 255) as u8)
@@ -324,6 +345,23 @@ impl SparseTables {
             .sum::<usize>()
             + self.appearance.iter().map(|a| a.len() * 2).sum::<usize>()
     }
+}
+
+/// `pca`, fitted to inputs whose block p (`block` floats) was scaled by
+/// `weights[p]`, made to take unscaled inputs: queries are projected to
+/// what the weighted input gives, without being weighted first.
+fn for_unweighted(pca: &Pca, block: usize, weights: [f32; 3]) -> Pca {
+    let mut out = pca.clone();
+    for (i, m) in out.mean.iter_mut().enumerate() {
+        let w = weights[i / block];
+        *m = if w > 0.0 { *m / w } else { 0.0 };
+    }
+    for row in out.basis.chunks_exact_mut(pca.input) {
+        for (i, b) in row.iter_mut().enumerate() {
+            *b *= weights[i / block];
+        }
+    }
+    out
 }
 
 /// Squared distance between a vector and a query.

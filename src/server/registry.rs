@@ -13,6 +13,7 @@ use super::error::{ApiError, panic_message};
 use super::metrics::{Metrics, OutcomeLabels};
 use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
 use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
+use crate::orientation::Layout;
 use crate::{Candidates, Stage, Texture, TileCache};
 use axum::http::StatusCode;
 use std::collections::HashMap;
@@ -49,6 +50,9 @@ pub struct Entry {
     pub exemplar: ExemplarInfo,
     /// Parameters.
     pub params: TextureParams,
+    /// How the exemplars are laid on the planes (`None` where the
+    /// parameters cannot apply to the exemplars, which an upload refuses).
+    pub layout: Option<Layout>,
     analysis_hash: String,
     candidates: Mutex<Option<Arc<Candidates>>>,
     planes: Planes,
@@ -77,6 +81,7 @@ impl Entry {
             Planes::Triple(_) => 3,
         };
         let analysis_hash = spec.analysis_hash();
+        let layout = spec.layout().ok();
         Entry {
             id,
             name: None,
@@ -90,6 +95,7 @@ impl Entry {
                 planes: planes_n,
             },
             params: spec.params,
+            layout,
             planes: spec.planes,
             status: RwLock::new(Status::Pending),
             progress: AtomicU32::new(0f32.to_bits()),
@@ -873,6 +879,11 @@ impl Registry {
         let set = entry.planes.to_set().map_err(|e| e.message)?;
         if c.exemplars() != &set {
             return Err("stored candidates were made from other exemplars".into());
+        }
+        if Some(c.layout().arrangement) != entry.layout.map(|l| l.arrangement) {
+            return Err(
+                "stored candidates were made with another arrangement of the planes".into(),
+            );
         }
         let c = Arc::new(c);
         let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())

@@ -9,6 +9,7 @@
 //! of the PNG and whichever defaults were spelled out.
 
 use super::error::ApiError;
+use crate::orientation::Layout;
 use crate::{AnalysisParams, Exemplar, ExemplarSet, SynthParams};
 use axum::http::StatusCode;
 use serde::{Deserialize, Serialize};
@@ -166,6 +167,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("consistency", "0"),
     ("fine_levels", "1"),
     ("correction", r#""colour""#),
+    ("orientation", r#""none""#),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
@@ -295,6 +297,16 @@ impl TextureSpec {
         self.hash_planes(&mut h);
         hash_json(&mut h, &self.params.analysis);
         hex(&h.finalize()[..16])
+    }
+
+    /// How the exemplars are laid on the planes (what the precompute will
+    /// use): refused when the orientation asks a quarter turn of a
+    /// non-square exemplar.
+    pub fn layout(&self) -> Result<Layout, ApiError> {
+        Ok(Layout::resolve(
+            &self.planes.to_set()?,
+            &self.params.analysis.orientation,
+        )?)
     }
 
     fn hash_planes(&self, h: &mut Sha256) {
@@ -501,6 +513,19 @@ mod tests {
             TextureParams::from_flat(&old).unwrap().synth.slab_thickness,
             crate::params::DEFAULT_SLAB_THICKNESS
         );
+        // Nor did it turn any plane, whatever its exemplar.
+        old.remove("orientation");
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .analysis
+                .orientation,
+            crate::Orientation::None
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().analysis.orientation,
+            crate::Orientation::Auto
+        );
     }
 
     #[test]
@@ -670,6 +695,52 @@ mod tests {
             params: TextureParams::from_stored(&other).unwrap(),
         };
         assert_ne!(loaded.content_hash_as_stored(&other), id_then);
+    }
+
+    /// The analysis parameters before orientations, in their order then.
+    #[derive(Serialize)]
+    struct AnalysisParamsBeforeOrientation {
+        neighbourhood: u32,
+        pca_dims: u32,
+        strips: u32,
+        triples: u32,
+        max_candidates: u32,
+        levels: u32,
+        similar_coarse: u32,
+        similar_fine: u32,
+    }
+
+    #[test]
+    fn ids_of_textures_stored_before_orientations_are_kept() {
+        let now = TextureSpec {
+            planes: Planes::Single(img(3)),
+            params: TextureParams::default(),
+        };
+        let mut old = now.params.to_flat();
+        old.remove("orientation");
+        let a = AnalysisParams::default();
+        let then = AnalysisParamsBeforeOrientation {
+            neighbourhood: a.neighbourhood,
+            pca_dims: a.pca_dims,
+            strips: a.strips,
+            triples: a.triples,
+            max_candidates: a.max_candidates,
+            levels: a.levels,
+            similar_coarse: a.similar_coarse,
+            similar_fine: a.similar_fine,
+        };
+        let mut h = Sha256::new();
+        h.update(b"solidtex texture v1\0");
+        now.hash_planes(&mut h);
+        hash_json(&mut h, &then);
+        hash_json(&mut h, &now.params.synth);
+        let id_then = hex(&h.finalize()[..16]);
+        let loaded = TextureSpec {
+            planes: now.planes.clone(),
+            params: TextureParams::from_stored(&old).unwrap(),
+        };
+        assert_eq!(loaded.content_hash_as_stored(&old), id_then);
+        assert_ne!(now.content_hash(), id_then);
     }
 
     #[test]

@@ -3,6 +3,7 @@
 use super::AppState;
 use super::voxels::{body_response, etag, not_modified, not_modified_response};
 use crate::Exemplar;
+use crate::orientation::Layout;
 use crate::server::error::ApiError;
 use crate::server::query::Query;
 use crate::server::registry::{Entry, Status, Submitted};
@@ -28,6 +29,9 @@ pub fn view(e: &Entry, brick_size: u32) -> Value {
         "params": Value::Object(e.params.to_flat()),
         "brick_size": brick_size,
     });
+    if let Some(l) = &e.layout {
+        v["orientation"] = layout_view(l);
+    }
     match e.status() {
         Status::Pending => {}
         Status::Ready(_) | Status::Stored => {
@@ -43,6 +47,22 @@ pub fn view(e: &Entry, brick_size: u32) -> Value {
         v["precompute_seconds"] = s.into();
     }
     v
+}
+
+/// What the `orientation` parameter resolved to, and what was measured.
+fn layout_view(l: &Layout) -> Value {
+    let round = |x: f32, places: i32| {
+        let s = 10f64.powi(places);
+        (x as f64 * s).round() / s
+    };
+    let a = &l.arrangement;
+    json!({
+        "rotate": a.rotate,
+        "weights": a.weights.map(|w| round(w, 3)),
+        "detected": l.detected,
+        "coherence": round(l.grain.coherence, 3),
+        "grain_degrees": round(l.grain.degrees, 1),
+    })
 }
 
 /// `GET /v1/textures`.
@@ -351,7 +371,9 @@ fn decode(raw: RawPlanes, params: TextureParams) -> Result<(TextureSpec, Vec<Str
             p
         }
     };
-    Ok((TextureSpec { planes, params }, notes))
+    let spec = TextureSpec { planes, params };
+    spec.layout()?;
+    Ok((spec, notes))
 }
 
 /// `GET /v1/textures/{id}/exemplar.png`: the texture's xy exemplar, for a
