@@ -31,4 +31,4 @@ pub use exemplar::{Exemplar, ExemplarSet};
 pub use params::{AnalysisParams, Correction, Scheme, Slices, SynthParams};
 pub use synth::cache::{CacheStats, TileCache};
 pub use synth::cancel::{CancelFlag, Cancelled, run_cancellable};
-pub use texture::{Axis, CutPlane, Filter, Region, SynthStats, Texture};
+pub use texture::{Axis, CutPlane, Filter, Region, SynthStats, Texture, WorkEstimate};

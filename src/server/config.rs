@@ -83,13 +83,13 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_REQUEST_VOXELS", default_value_t = 16 << 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_request_voxels: u64,
 
-    /// Most voxels one request may synthesize, all pyramid levels together
-    /// (voxels found in the cache are free). A request whose own voxels
-    /// exceed it is refused at once, one whose dependencies need more is
-    /// stopped as soon as it goes over; both are answered 400
-    /// `over_budget`. The default keeps any request
-    /// on a 128² exemplar to about ten seconds on two cores (a cold 256²
-    /// slice synthesizes about 0.4 Mi voxels, a 128³ region 3.2 Mi).
+    /// Most voxels one request may synthesize, all pyramid levels together.
+    /// Before any work a request's synthesis from a cold cache is bounded
+    /// from above in microseconds; over this it is refused with 400
+    /// `over_budget`, and a running one that goes over anyway is stopped.
+    /// The default keeps any request on a 128² exemplar to about ten
+    /// seconds on two cores and admits 256² slices and cuts at lod 0 and 1,
+    /// 128² at every lod, and regions up to 128³.
     #[arg(long, env = "SOLIDTEX_MAX_REQUEST_WORK", default_value_t = 4 << 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_request_work: u64,
 

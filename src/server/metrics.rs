@@ -48,6 +48,13 @@ pub struct OutcomeLabels {
     pub outcome: String,
 }
 
+/// Labels of the over-budget counter.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct StageLabels {
+    /// `predicted` (refused before any work) or `running` (stopped).
+    pub stage: String,
+}
+
 /// Labels of the texture gauge.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct StatusLabels {
@@ -91,6 +98,8 @@ pub struct Metrics {
     pub jobs_cancelled: Counter,
     /// Time admitted jobs waited for a running slot, seconds.
     pub job_wait: Histogram,
+    /// Requests answered 400 `over_budget`, by when.
+    pub over_budget: Family<StageLabels, Counter>,
     /// Precomputations finished, by outcome.
     pub precomputes: Family<OutcomeLabels, Counter>,
     /// Precomputation duration, seconds.
@@ -191,6 +200,13 @@ impl Metrics {
             prometheus_client::registry::Unit::Seconds,
             job_wait.clone(),
         );
+        let over_budget = Family::<StageLabels, Counter>::default();
+        registry.register(
+            "requests_over_budget",
+            "Voxel requests answered 400 over_budget: predicted over it before any work, \
+             or stopped while running",
+            over_budget.clone(),
+        );
         let precomputes = Family::<OutcomeLabels, Counter>::default();
         registry.register(
             "precomputes",
@@ -258,6 +274,7 @@ impl Metrics {
             jobs_timed_out,
             jobs_cancelled,
             job_wait,
+            over_budget,
             precomputes,
             precompute_seconds,
             precomputes_pending,
@@ -308,6 +325,15 @@ impl Metrics {
         }
         self.tiles_computed.inc_by(stats.tiles_computed);
         self.tiles_from_cache.inc_by(stats.tiles_from_cache);
+    }
+
+    /// Counts a request answered `over_budget` at `stage`.
+    pub fn over_budget(&self, stage: &str) {
+        self.over_budget
+            .get_or_create(&StageLabels {
+                stage: stage.to_string(),
+            })
+            .inc();
     }
 
     /// Sets the texture gauge.
