@@ -20,6 +20,7 @@ pub mod eval;
 pub mod exemplar;
 pub mod loadtest;
 pub mod params;
+pub mod peak_alloc;
 pub mod server;
 pub mod stack;
 pub mod synth;

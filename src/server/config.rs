@@ -111,6 +111,16 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_RESIDENT_BYTES", default_value_t = 2 << 30, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_resident_bytes: u64,
 
+    /// Memory the precomputes running at once may take, by their
+    /// estimated peaks (from the exemplar's size and the analysis
+    /// parameters: a 128² exemplar with the defaults about 0.15 GB, a 512²
+    /// one about 2.5 GB, three 512² exemplars about 6 GB; resident memory
+    /// runs 1.2–1.4 times higher). An upload whose own estimate is over it
+    /// is refused with 413 `precompute_too_large`; others wait in the
+    /// precompute queue until the running ones leave room.
+    #[arg(long, env = "SOLIDTEX_MAX_PRECOMPUTE_BYTES", default_value = "6G", value_parser = parse_bytes)]
+    pub max_precompute_bytes: u64,
+
     /// Register the bundled exemplar under the id `default` at start.
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
     pub default_texture: bool,
@@ -203,6 +213,7 @@ impl ServeArgs {
             max_textures: 256,
             max_stored_bytes: 4 << 30,
             max_resident_bytes: 2 << 30,
+            max_precompute_bytes: 6 << 30,
             default_texture: false,
             token: None,
             cors_origins: Vec::new(),

@@ -99,6 +99,23 @@ impl ApiError {
         )
     }
 
+    /// 413: the upload's precompute is expected to need more memory than
+    /// the server lets precomputes take.
+    pub fn precompute_too_large(estimated: u64, bound: u64) -> Self {
+        let mib = |b: u64| b.div_ceil(1 << 20);
+        Self::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "precompute_too_large",
+            format!(
+                "precomputing this texture is estimated to take {} MiB of memory at its peak, \
+                 more than the {} MiB this server allows (--max-precompute-bytes); send a \
+                 smaller exemplar, one image for all planes, or fewer levels or triples",
+                mib(estimated),
+                mib(bound)
+            ),
+        )
+    }
+
     /// 404: no texture has this id.
     pub fn unknown_texture(id: &str) -> Self {
         Self::new(

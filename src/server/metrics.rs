@@ -106,6 +106,10 @@ pub struct Metrics {
     pub precompute_seconds: Histogram,
     /// Precomputations queued or running.
     pub precomputes_pending: Gauge,
+    /// Heap bytes each precomputation peaked at.
+    pub precompute_peak_bytes: Histogram,
+    /// Estimated peak bytes of the precomputations running.
+    pub precompute_reserved_bytes: Gauge,
     /// Open client connections.
     pub connections_open: Gauge,
     /// Idle connections closed to make room for new ones.
@@ -226,6 +230,22 @@ impl Metrics {
             "Precomputations queued or running",
             precomputes_pending.clone(),
         );
+        let precompute_peak_bytes = Histogram::new(exponential_buckets(4.0 * 1048576.0, 2.0, 14));
+        registry.register_with_unit(
+            "precompute_peak",
+            "Heap bytes each candidate precomputation peaked at (counted by the server's \
+             allocator on the precompute threads)",
+            prometheus_client::registry::Unit::Bytes,
+            precompute_peak_bytes.clone(),
+        );
+        let precompute_reserved_bytes = Gauge::default();
+        registry.register_with_unit(
+            "precompute_reserved",
+            "Estimated peak bytes of the precomputations running (bounded by \
+             --max-precompute-bytes)",
+            prometheus_client::registry::Unit::Bytes,
+            precompute_reserved_bytes.clone(),
+        );
         let connections_open = Gauge::default();
         registry.register(
             "connections_open",
@@ -278,6 +298,8 @@ impl Metrics {
             precomputes,
             precompute_seconds,
             precomputes_pending,
+            precompute_peak_bytes,
+            precompute_reserved_bytes,
             connections_open,
             connections_evicted,
             connections_refused,

@@ -97,9 +97,13 @@ impl Server {
             usize::try_from(args.cache_bytes).unwrap_or(usize::MAX),
         ));
         let metrics = Arc::new(metrics::Metrics::new(cache.clone()));
+        // Every allocation of the precompute threads is counted, so that
+        // each precompute's peak is measured.
+        let meter = crate::peak_alloc::Meter::leaked();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(args.resolved_precompute_threads())
             .thread_name(|i| format!("precompute-{i}"))
+            .start_handler(move |_| meter.attach())
             .build()
             .context("starting the precompute pool")?;
         let registry = Arc::new(
@@ -112,7 +116,8 @@ impl Server {
                 pool,
             )
             .with_storage_limits(args.max_textures as usize, args.max_stored_bytes)
-            .with_memory_limit(args.max_resident_bytes),
+            .with_memory_limit(args.max_resident_bytes)
+            .with_precompute_memory(args.max_precompute_bytes, meter),
         );
         let todo = {
             let r = registry.clone();
