@@ -9,6 +9,7 @@
 //! clients (health checks first) get through; when every connection has a
 //! request in flight, the newcomer is answered 503 with `Retry-After`.
 
+use super::conn_io::ConnIo;
 use super::error::error_body;
 use super::metrics::Metrics;
 use axum::Router;
@@ -229,7 +230,7 @@ pub async fn serve(
                 res
             }
         });
-        let conn = http.serve_connection(TokioIo::new(stream), service);
+        let conn = http.serve_connection(TokioIo::new(ConnIo::new(stream)), service);
         let conns = conns.clone();
         let metrics = metrics.clone();
         let done = done_rx.clone();

@@ -10,7 +10,8 @@
 //! - [`store`]: the data directory, written atomically and durably.
 //! - [`registry`]: textures, their status and background precomputes.
 //! - [`jobs`]: the bounded synthesis queue (backpressure → 503).
-//! - [`listen`]: connections: header timeout and a connection cap.
+//! - [`listen`]: connections: header timeout and a connection cap;
+//!   [`conn_io`]: their sockets as hyper sees them.
 //! - [`routes`]: the router, handlers and middleware.
 //! - [`host`]: the `Host` allow-list.
 //! - [`metrics`], [`process`], [`error`], [`query`], [`png`]: the supporting
@@ -22,6 +23,7 @@
 //! requests in flight have been answered.
 
 pub mod config;
+pub mod conn_io;
 pub mod error;
 pub mod host;
 pub mod jobs;
