@@ -143,10 +143,15 @@ pub struct ServeArgs {
     pub cors_origins: Vec<String>,
 
     /// Seconds a client has to send a complete request head, counted from
-    /// when its connection opens or its previous response ends; a
-    /// keep-alive connection idle that long is closed too.
+    /// its first byte (from when the connection opens, for its first
+    /// request); a slower client is disconnected without an answer.
     #[arg(long, env = "SOLIDTEX_HEADER_TIMEOUT", default_value_t = 10.0, value_parser = parse_wait)]
     pub header_timeout: f64,
+
+    /// Seconds a keep-alive connection may rest between requests (from the
+    /// end of its last answer) before it is closed.
+    #[arg(long, env = "SOLIDTEX_IDLE_TIMEOUT", default_value_t = 60.0, value_parser = parse_wait)]
+    pub idle_timeout: f64,
 
     /// Seconds a client has to send a whole request body (an upload)
     /// once its head has arrived; a slower one is answered 408.
@@ -219,6 +224,7 @@ impl ServeArgs {
             cors_origins: Vec::new(),
             pending_wait: 0.0,
             header_timeout: 10.0,
+            idle_timeout: 60.0,
             body_timeout: 60.0,
             max_connections: 1024,
             allowed_hosts: Vec::new(),
@@ -405,9 +411,11 @@ mod tests {
         assert!(Cli::try_parse_from(["x", "--max-jobs", "0"]).is_err());
         let c = Cli::try_parse_from(["x"]).unwrap().serve;
         assert_eq!(
-            (c.header_timeout, c.body_timeout, c.max_connections),
-            (10.0, 60.0, 1024)
+            (c.header_timeout, c.idle_timeout, c.body_timeout),
+            (10.0, 60.0, 60.0)
         );
+        assert_eq!(c.max_connections, 1024);
+        assert!(Cli::try_parse_from(["x", "--idle-timeout", "0"]).is_err());
         assert!(Cli::try_parse_from(["x", "--max-connections", "0"]).is_err());
         assert!(Cli::try_parse_from(["x", "--header-timeout", "0"]).is_err());
         assert!(c.allowed_hosts.is_empty());

@@ -1,32 +1,138 @@
-//! A client connection's socket as hyper sees it: the socket, giving
-//! hyper's own error answers a JSON body.
+//! A client connection's socket as hyper sees it: the socket, plus the
+//! two things the server needs from below hyper.
 //!
-//! A request hyper cannot parse (a malformed request line or header, a
-//! head over its buffer) is answered by hyper itself, before any service
-//! sees it, with an empty 400, 414 or 431. Every other error answer is
-//! JSON with a `content-type`, so an error head without one can only be
-//! hyper's: it is replaced, as it is written, by the same status with a
-//! JSON body.
+//! - **When the connection was last active** ([`Clock`]), for the idle
+//!   and header timeouts that [`super::listen`] enforces: hyper's own
+//!   header timeout starts as soon as a connection waits for a request,
+//!   so it cannot tell a keep-alive connection at rest from a client
+//!   trickling a request head.
+//! - **A JSON body for hyper's own error answers.** A request hyper cannot
+//!   parse (a malformed request line or header, a head over its buffer) is
+//!   answered by hyper itself, before any service sees it, with an empty
+//!   400, 414 or 431. Every other error answer is JSON with a
+//!   `content-type`, so an error head without one can only be hyper's:
+//!   it is replaced, as it is written, by the same status with a JSON body.
 
 use super::error::error_body;
 use std::io;
 use std::pin::Pin;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::task::{Context, Poll, ready};
+use std::time::{Duration, Instant};
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
+use tokio::sync::Notify;
 
-/// A socket that gives hyper's own error answers a JSON body.
+/// What a connection did lately, shared by its socket, its requests and
+/// the task that closes it when it has been quiet too long.
+#[derive(Debug)]
+pub struct Clock {
+    opened: Instant,
+    /// Milliseconds after `opened` of its last read or write.
+    last_active: AtomicU64,
+    /// Milliseconds after `opened`, plus one, at which the first byte of a
+    /// request head arrived with no request in flight; 0: none since.
+    head_started: AtomicU64,
+    /// Requests answered so far.
+    answered: AtomicU64,
+    /// Requests being answered.
+    pub in_flight: AtomicUsize,
+    /// Woken when the deadline may have moved earlier.
+    pub changed: Notify,
+}
+
+impl Clock {
+    /// The clock of a connection opened now.
+    pub fn new() -> Clock {
+        Clock {
+            opened: Instant::now(),
+            last_active: AtomicU64::new(0),
+            head_started: AtomicU64::new(0),
+            answered: AtomicU64::new(0),
+            in_flight: AtomicUsize::new(0),
+            changed: Notify::new(),
+        }
+    }
+
+    fn now_ms(&self) -> u64 {
+        self.opened.elapsed().as_millis() as u64
+    }
+
+    fn at(&self, ms: u64) -> Instant {
+        self.opened + Duration::from_millis(ms)
+    }
+
+    fn touch(&self) {
+        self.last_active.store(self.now_ms(), Ordering::Relaxed);
+    }
+
+    /// Bytes arrived: with no request in flight they begin a request head.
+    fn read_some(&self) {
+        self.touch();
+        if self.in_flight.load(Ordering::SeqCst) == 0
+            && self.head_started.load(Ordering::SeqCst) == 0
+        {
+            self.head_started.store(self.now_ms() + 1, Ordering::SeqCst);
+            self.changed.notify_one();
+        }
+    }
+
+    /// A request head was read in full and its answer begins.
+    pub fn request_started(&self) {
+        self.in_flight.fetch_add(1, Ordering::SeqCst);
+        self.head_started.store(0, Ordering::SeqCst);
+    }
+
+    /// A request's answer was handed to hyper.
+    pub fn request_ended(&self) {
+        self.touch();
+        self.answered.fetch_add(1, Ordering::SeqCst);
+        self.in_flight.fetch_sub(1, Ordering::SeqCst);
+        self.changed.notify_one();
+    }
+
+    /// When the connection is to be closed if nothing happens before:
+    /// `header` after the first byte of a request head (or after opening,
+    /// for a connection that never sent one), `idle` after the last
+    /// activity of a connection at rest between requests; `None` while a
+    /// request is in flight.
+    pub fn deadline(&self, header: Duration, idle: Duration) -> Option<Instant> {
+        if self.in_flight.load(Ordering::SeqCst) > 0 {
+            return None;
+        }
+        let head = self.head_started.load(Ordering::SeqCst);
+        Some(if head > 0 {
+            self.at(head - 1) + header
+        } else if self.answered.load(Ordering::SeqCst) == 0 {
+            self.opened + header
+        } else {
+            self.at(self.last_active.load(Ordering::Relaxed)) + idle
+        })
+    }
+}
+
+impl Default for Clock {
+    fn default() -> Clock {
+        Clock::new()
+    }
+}
+
+/// A socket that keeps a connection's [`Clock`] and gives hyper's own
+/// error answers a JSON body.
 pub struct ConnIo<S> {
     inner: S,
+    clock: Arc<Clock>,
     /// The answer written in place of hyper's, and how much of it is out.
     replacement: Vec<u8>,
     sent: usize,
 }
 
 impl<S> ConnIo<S> {
-    /// Wraps `inner`.
-    pub fn new(inner: S) -> ConnIo<S> {
+    /// Wraps `inner`, reporting its activity to `clock`.
+    pub fn new(inner: S, clock: Arc<Clock>) -> ConnIo<S> {
         ConnIo {
             inner,
+            clock,
             replacement: Vec::new(),
             sent: 0,
         }
@@ -43,6 +149,7 @@ impl<S: AsyncWrite + Unpin> ConnIo<S> {
                 return Poll::Ready(Err(io::ErrorKind::WriteZero.into()));
             }
             self.sent += n;
+            self.clock.touch();
         }
         Poll::Ready(Ok(()))
     }
@@ -63,7 +170,13 @@ impl<S: AsyncRead + Unpin> AsyncRead for ConnIo<S> {
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.get_mut().inner).poll_read(cx, buf)
+        let this = self.get_mut();
+        let before = buf.filled().len();
+        ready!(Pin::new(&mut this.inner).poll_read(cx, buf))?;
+        if buf.filled().len() > before {
+            this.clock.read_some();
+        }
+        Poll::Ready(Ok(()))
     }
 }
 
@@ -78,7 +191,9 @@ impl<S: AsyncWrite + Unpin> AsyncWrite for ConnIo<S> {
         if let Some(n) = this.take_automatic(buf) {
             return Poll::Ready(Ok(n));
         }
-        Pin::new(&mut this.inner).poll_write(cx, buf)
+        let n = ready!(Pin::new(&mut this.inner).poll_write(cx, buf))?;
+        this.clock.touch();
+        Poll::Ready(Ok(n))
     }
 
     fn poll_write_vectored(
@@ -94,7 +209,9 @@ impl<S: AsyncWrite + Unpin> AsyncWrite for ConnIo<S> {
         {
             return Poll::Ready(Ok(n));
         }
-        Pin::new(&mut this.inner).poll_write_vectored(cx, bufs)
+        let n = ready!(Pin::new(&mut this.inner).poll_write_vectored(cx, bufs))?;
+        this.clock.touch();
+        Poll::Ready(Ok(n))
     }
 
     fn is_write_vectored(&self) -> bool {
@@ -200,5 +317,25 @@ mod tests {
         ] {
             assert!(json_answer(other).is_none(), "{}", String::from_utf8_lossy(other));
         }
+    }
+
+    #[test]
+    fn deadlines_follow_what_the_connection_does() {
+        let (header, idle) = (Duration::from_secs(10), Duration::from_secs(60));
+        let c = Clock::new();
+        // A fresh connection has the header timeout to send a request.
+        assert_eq!(c.deadline(header, idle), Some(c.opened + header));
+        c.read_some();
+        let head = c.deadline(header, idle).unwrap();
+        assert!(head <= Instant::now() + header);
+        c.request_started();
+        assert_eq!(c.deadline(header, idle), None);
+        c.request_ended();
+        // At rest between requests: the idle timeout.
+        let rest = c.deadline(header, idle).unwrap();
+        assert!(rest > Instant::now() + header && rest <= Instant::now() + idle);
+        // The next request's first byte brings the header timeout back.
+        c.read_some();
+        assert!(c.deadline(header, idle).unwrap() <= Instant::now() + header);
     }
 }

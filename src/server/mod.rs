@@ -10,7 +10,7 @@
 //! - [`store`]: the data directory, written atomically and durably.
 //! - [`registry`]: textures, their status and background precomputes.
 //! - [`jobs`]: the bounded synthesis queue (backpressure → 503).
-//! - [`listen`]: connections: header timeout and a connection cap;
+//! - [`listen`]: connections: header and idle timeouts, a connection cap;
 //!   [`conn_io`]: their sockets as hyper sees them.
 //! - [`routes`]: the router, handlers and middleware.
 //! - [`host`]: the `Host` allow-list.
@@ -169,6 +169,7 @@ impl Server {
         );
         let limits = listen::Limits {
             header_timeout: Duration::from_secs_f64(args.header_timeout),
+            idle_timeout: Duration::from_secs_f64(args.idle_timeout),
             max_connections: listen::fit_descriptor_limit(
                 usize::try_from(args.max_connections).unwrap_or(usize::MAX),
             ),
