@@ -864,10 +864,17 @@ impl Registry {
                     entry.set_ready(c, t);
                 } else {
                     entry.on_disk.store(true, Ordering::Relaxed);
-                    entry.set_ready(c, t);
-                    if let Err(e) = self.store.write_meta(&entry.meta()) {
+                    // Durable as ready before anyone sees it ready: a
+                    // restart right after must not compute it again.
+                    let meta = StoredMeta {
+                        status: StoredStatus::Ready,
+                        reason: None,
+                        ..entry.meta()
+                    };
+                    if let Err(e) = self.store.write_meta(&meta) {
                         tracing::error!(error = %e, "could not store texture metadata");
                     }
+                    entry.set_ready(c, t);
                 }
                 self.keep_within_memory(&entry.id);
             }
