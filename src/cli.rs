@@ -605,12 +605,24 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 orientation: a.orientation,
                 ..AnalysisParams::default()
             };
+            let (w, h) = (set.width(), set.height());
+            let estimate =
+                solidtex::candidates::estimated_peak_bytes(w, h, !set.is_single(), &params);
+            solidtex::peak_alloc::start();
+            let baseline = solidtex::peak_alloc::reset();
             let t0 = Instant::now();
             let c = precompute(&set, &params, false)?;
             let total = t0.elapsed().as_secs_f64();
+            let peak = solidtex::peak_alloc::peak_above(baseline);
             let bytes = c.to_bytes();
             write_atomically(&a.output, &bytes)?;
             print_report(&c, &a.output, total, bytes.len(), a.verbose);
+            let mib = |b: u64| b as f64 / (1 << 20) as f64;
+            println!(
+                "peak heap while computing {:.0} MiB (estimated {:.0} MiB)",
+                mib(peak),
+                mib(estimate)
+            );
         }
         Command::Inspect(a) => inspect(&a)?,
         Command::Plan(a) => plan(&a)?,

@@ -21,6 +21,7 @@ pub mod exemplar;
 pub mod loadtest;
 pub mod orientation;
 pub mod params;
+pub mod peak_alloc;
 pub mod server;
 pub mod stack;
 pub mod synth;
@@ -34,4 +35,4 @@ pub use params::{
 };
 pub use synth::cache::{CacheStats, TileCache};
 pub use synth::cancel::{CancelFlag, Cancelled, run_cancellable};
-pub use texture::{Axis, CutPlane, Filter, Region, SynthStats, Texture};
+pub use texture::{Axis, CutPlane, Filter, Region, SynthStats, Texture, WorkEstimate};

@@ -1,35 +1,25 @@
 //! A global allocator that counts heap bytes in use and their high-water
-//! mark, so `solidtex bench` can report the peak memory of one request.
-//! Counting is off until [`start`] is called, leaving every other command
-//! (the server included) with nothing but one relaxed load per call.
+//! mark: over the whole process once [`start`] is called (`solidtex bench`
+//! reports the peak memory of one request), and at any time per group of
+//! threads that [`Meter::attach`] tied to a [`Meter`] (the server measures
+//! each precompute on its pool). Without either, every call costs two
+//! relaxed loads and a thread-local read. The binary installs it; a library
+//! user that does not gets no counts ([`installed`] is false).
 //!
 //! The allocator underneath is jemalloc: under 32 concurrent clients the
 //! server's peak resident memory was 673 MiB with it against 747 MiB with
 //! glibc's (same 60 s load, 444–449 MiB of cached tiles), whose per-thread
-//! arenas fragment as jobs come and go.
-//!
-//! jemalloc is told to advise its memory for transparent huge pages
-//! ([`JEMALLOC_CONF`]): a correction reads its candidate tables (tens of
-//! MB per texture) at random, and with 4 KiB pages its loads miss the TLB.
-//! On a cold 256² slice on one thread that took 5–7 % of the time (min and
-//! median of 10 interleaved runs); the price is about 10 % more resident
-//! memory under load (whole huge pages are zeroed and kept). Where the
-//! system disables transparent huge pages the advice does nothing;
-//! `_RJEM_MALLOC_CONF` overrides it.
+//! arenas fragment as jobs come and go. Its options (transparent huge
+//! pages) are set by the binary.
 //!
 //! Unsafe code here, because `GlobalAlloc` is an unsafe trait; every method
-//! forwards to jemalloc unchanged. The only other unsafe block
-//! is the cache prefetch hint in `synth::correction`.
+//! forwards to jemalloc unchanged.
+#![allow(unsafe_code)]
 
 use std::alloc::{GlobalAlloc, Layout};
+use std::cell::Cell;
 use std::sync::atomic::{AtomicBool, AtomicIsize, Ordering};
 use tikv_jemallocator::Jemalloc;
-
-/// jemalloc's options, read once before its first allocation: it looks up
-/// this symbol by name (a NUL-terminated C string, the `malloc_conf` of
-/// jemalloc's manual under the prefix of the `tikv-jemalloc-sys` build).
-#[unsafe(export_name = "_rjem_malloc_conf")]
-pub static JEMALLOC_CONF: &[u8; 11] = b"thp:always\0";
 
 /// jemalloc plus byte counters.
 pub struct PeakAlloc;
@@ -40,16 +30,39 @@ static ENABLED: AtomicBool = AtomicBool::new(false);
 static CURRENT: AtomicIsize = AtomicIsize::new(0);
 static PEAK: AtomicIsize = AtomicIsize::new(0);
 
+/// Set by the first allocation through [`PeakAlloc`].
+static INSTALLED: AtomicBool = AtomicBool::new(false);
+
+thread_local! {
+    /// The meter this thread's allocations count on, if any. A plain
+    /// reference, so that the slot needs no destructor (registering one
+    /// could allocate from inside the allocator).
+    static THREAD_METER: Cell<Option<&'static Meter>> = const { Cell::new(None) };
+}
+
+fn thread_meter() -> Option<&'static Meter> {
+    THREAD_METER.try_with(Cell::get).ok().flatten()
+}
+
 fn grow(bytes: usize) {
+    if !INSTALLED.load(Ordering::Relaxed) {
+        INSTALLED.store(true, Ordering::Relaxed);
+    }
     if ENABLED.load(Ordering::Relaxed) {
         let now = CURRENT.fetch_add(bytes as isize, Ordering::Relaxed) + bytes as isize;
         PEAK.fetch_max(now, Ordering::Relaxed);
+    }
+    if let Some(m) = thread_meter() {
+        m.grow(bytes);
     }
 }
 
 fn shrink(bytes: usize) {
     if ENABLED.load(Ordering::Relaxed) {
         CURRENT.fetch_sub(bytes as isize, Ordering::Relaxed);
+    }
+    if let Some(m) = thread_meter() {
+        m.shrink(bytes);
     }
 }
 
@@ -108,4 +121,55 @@ pub fn reset() -> isize {
 /// `baseline` (0 when counting is off).
 pub fn peak_above(baseline: isize) -> u64 {
     (PEAK.load(Ordering::Relaxed) - baseline).max(0) as u64
+}
+
+/// Whether [`PeakAlloc`] is the process's allocator (its counts are real).
+pub fn installed() -> bool {
+    INSTALLED.load(Ordering::Relaxed)
+}
+
+/// Heap bytes allocated minus freed by the threads attached to it, and
+/// their high-water mark. Memory allocated on one of them and freed on
+/// another thread stays counted, and the other way round is subtracted.
+#[derive(Debug, Default)]
+pub struct Meter {
+    current: AtomicIsize,
+    peak: AtomicIsize,
+}
+
+impl Meter {
+    /// A meter that lives as long as the process, as threads that point
+    /// at it may.
+    pub fn leaked() -> &'static Meter {
+        Box::leak(Box::default())
+    }
+
+    /// Counts the calling thread's allocations on this meter from now on
+    /// (a pool's start handler calls it on each of its threads).
+    pub fn attach(&'static self) {
+        let _ = THREAD_METER.try_with(|m| m.set(Some(self)));
+    }
+
+    fn grow(&self, bytes: usize) {
+        let now = self.current.fetch_add(bytes as isize, Ordering::Relaxed) + bytes as isize;
+        self.peak.fetch_max(now, Ordering::Relaxed);
+    }
+
+    fn shrink(&self, bytes: usize) {
+        self.current.fetch_sub(bytes as isize, Ordering::Relaxed);
+    }
+
+    /// Forgets the high-water mark and returns the bytes counted now: the
+    /// baseline of [`Meter::peak_above`].
+    pub fn reset(&self) -> isize {
+        let now = self.current.load(Ordering::Relaxed);
+        self.peak.store(now, Ordering::Relaxed);
+        now
+    }
+
+    /// The most bytes counted at once since the last [`Meter::reset`],
+    /// above its `baseline`.
+    pub fn peak_above(&self, baseline: isize) -> u64 {
+        (self.peak.load(Ordering::Relaxed) - baseline).max(0) as u64
+    }
 }

@@ -7,6 +7,7 @@ use crate::error::{Error, Result};
 use crate::params::SynthParams;
 use crate::synth::Engine;
 use crate::synth::cache::TileCache;
+pub use crate::synth::estimate::WorkEstimate;
 use std::sync::Arc;
 
 /// Largest side of a slice or cut, in pixels.
@@ -258,6 +259,35 @@ impl Texture {
         self.check_lod(lod)?;
         check_side(plane.width, plane.height)?;
         Ok(self.engine.plan_cut(plane, lod, filter))
+    }
+
+    /// An upper bound of the voxels a cold-cache synthesis of `region`
+    /// computes over all levels (what [`Texture::plan`] counts), found in
+    /// time that depends on the request's size in tile groups rather than
+    /// voxels. Counting stops once the bound passes `limit`.
+    pub fn estimate(&self, region: &Region, lod: u32, limit: u64) -> Result<WorkEstimate> {
+        self.check_lod(lod)?;
+        check_region(region)?;
+        Ok(self.engine.estimate_region(region, lod, limit))
+    }
+
+    /// [`Texture::estimate`] for the cut `plane` (what
+    /// [`Texture::plan_cut`] counts).
+    pub fn estimate_cut(
+        &self,
+        plane: &CutPlane,
+        lod: u32,
+        filter: Filter,
+        limit: u64,
+    ) -> Result<WorkEstimate> {
+        self.check_lod(lod)?;
+        check_side(plane.width, plane.height)?;
+        for c in plane.origin.iter().chain(&plane.u).chain(&plane.v) {
+            if !c.is_finite() {
+                return Err(Error::InvalidRequest("cut plane must be finite".into()));
+            }
+        }
+        Ok(self.engine.estimate_cut(plane, lod, filter, limit))
     }
 
     /// RGB8 colours of arbitrary voxels at level of detail `lod`.

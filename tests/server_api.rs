@@ -1063,11 +1063,13 @@ async fn request_budget_is_enforced() {
     assert!(err.to_string().contains("chunks"), "{err}");
 }
 
-/// What a request may synthesize is bounded, whatever its shape: a small
-/// image whose pixels land far apart costs many chains, and is stopped
-/// like a large slice and a large region; cheap requests still pass.
+/// What a request may synthesize is bounded, whatever its shape, and a
+/// request over the bound is refused before any work: a small image whose
+/// pixels land far apart, a thin column, a slice at a coarse level and a
+/// region whose chains cost more than its own voxels synthesize nothing,
+/// like a large slice; cheap requests still pass.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn synthesis_work_per_request_is_bounded() {
+async fn synthesis_work_per_request_is_bounded_before_any_work() {
     let dir = tempfile::tempdir().unwrap();
     let mut args = test_args(dir.path());
     args.max_request_work = 60_000;
@@ -1077,31 +1079,46 @@ async fn synthesis_work_per_request_is_bounded() {
     let t = |p: &str| s.url(&format!("/v1/textures/{id}{p}"));
     let (st, _, small) = get(&c, &t("/slices/z/0.png?w=8&h=8")).await;
     assert_eq!(st, 200);
-    for path in [
-        "/slices/z/0.png?w=256&h=256",
-        "/cut.png?w=16&h=16&u=1000,0,0&v=0,0,1000",
-        "/region.raw?w=32&h=32&d=32",
-    ] {
-        let (st, h, b) = get(&c, &t(path)).await;
-        assert_error(st, &h, &b, 400, "over_budget");
-    }
-    // A request whose own voxels exceed the budget is refused before any
-    // work: nothing is synthesized for it.
-    let voxels = |text: &str| {
+    let scrape = |text: &str, name: &str| {
         text.lines()
-            .filter(|l| l.starts_with("solidtex_synth_voxels_total"))
+            .filter(|l| l.starts_with(name))
             .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
             .sum::<f64>()
     };
-    let before = voxels(&metrics(&c, &s).await);
-    assert!(before > 0.0, "the requests above synthesized voxels");
-    for path in ["/slices/x/5.png?w=300&h=300", "/region.raw?w=40&h=40&d=40"] {
+    let before = metrics(&c, &s).await;
+    let voxels = scrape(&before, "solidtex_synth_voxels_total");
+    assert!(voxels > 0.0, "the small slice synthesized voxels");
+    let refused = [
+        "/slices/z/0.png?w=256&h=256",
+        "/slices/x/5.png?w=300&h=300",
+        "/cut.png?w=16&h=16&u=1000,0,0&v=0,0,1000",
+        "/cut.png?w=64&h=2&u=300,0,0&v=0,0,1",
+        "/region.raw?w=32&h=32&d=32",
+        "/region.raw?w=1&h=1&d=4000",
+        "/slices/y/0.png?w=160&h=160&lod=2",
+    ];
+    for path in refused {
+        // Each of these has fewer own voxels than the budget but one.
         let (st, h, b) = get(&c, &t(path)).await;
         assert_error(st, &h, &b, 400, "over_budget");
+        let message = serde_json::from_slice::<serde_json::Value>(&b).unwrap()["error"]["message"]
+            .to_string();
+        assert!(
+            message.contains("predicted") && message.contains("60000"),
+            "{message}"
+        );
     }
-    assert_eq!(voxels(&metrics(&c, &s).await), before);
-    // Stopped requests leave the cache consistent: the small slice is the
-    // same bytes again.
+    let after = metrics(&c, &s).await;
+    assert_eq!(scrape(&after, "solidtex_synth_voxels_total"), voxels);
+    assert_eq!(scrape(&after, "solidtex_jobs_running"), 0.0);
+    assert_eq!(
+        scrape(
+            &after,
+            "solidtex_requests_over_budget_total{stage=\"predicted\"}"
+        ),
+        refused.len() as f64
+    );
+    // The cache is as it was: the small slice is the same bytes again.
     let (st, _, again) = get(&c, &t("/slices/z/0.png?w=8&h=8")).await;
     assert_eq!((st, again), (200, small));
     s.stop().await;

@@ -139,6 +139,8 @@ async fn a_client_that_hangs_up_stops_its_synthesis() {
     let dir = tempfile::tempdir().unwrap();
     let mut args = test_args(dir.path());
     args.max_jobs = 1;
+    // Over the default budget: this test is about hanging up.
+    args.max_request_work = 64 << 20;
     let s = TestServer::start(args).await;
     let c = client();
     let id = ready_texture(&c, &s, 22).await;

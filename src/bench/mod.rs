@@ -16,9 +16,9 @@ pub mod machine;
 pub mod markdown;
 pub mod service;
 
-use crate::peak_alloc;
 use anyhow::Context;
 use serde::Serialize;
+use solidtex::peak_alloc;
 use solidtex::{
     AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Region, Scheme,
     SynthParams, SynthStats, Texture, TileCache,

@@ -53,6 +53,36 @@ pub struct LevelReport {
     pub mean_random_error: f64,
 }
 
+/// Heap bytes that [`Candidates::compute`] is expected to peak at for
+/// exemplars of `width`×`height` pixels (`distinct_planes`: three
+/// different exemplars, searched one by one), an upper bound fitted to
+/// measurements (docs/server.md). Most of it is the search's lists: for
+/// every level, searched plane and pixel its best `triples` candidates (16
+/// bytes each), all kept until the coherence filter reads them.
+pub fn estimated_peak_bytes(
+    width: u32,
+    height: u32,
+    distinct_planes: bool,
+    params: &AnalysisParams,
+) -> u64 {
+    let pixels = f64::from(width) * f64::from(height);
+    let searched = if distinct_planes { 3.0 } else { 1.0 };
+    let levels = f64::from(params.levels);
+    let list = 16.0 * (f64::from(params.triples) + 1.0) + 54.0;
+    // The lists of every level, and the filter's working copy of about
+    // two thirds of one more.
+    let search = (searched * levels + 1.7) * list;
+    // With few triples the peak comes later, in the coherence filter and
+    // the final tables.
+    let later = 1000.0 * searched * levels;
+    let n = f64::from(params.neighbourhood);
+    let wider = 11.0 * (n * n - 25.0).max(0.0);
+    let kept = 40.0 * (f64::from(params.max_candidates) - 12.0).max(0.0);
+    let per_pixel = search.max(later) + wider + kept;
+    // Small exemplars peak at fixed costs (samples of set sizes, trees).
+    ((pixels * per_pixel) as u64 + (4 << 20)).max(10 << 20)
+}
+
 /// Summary of a precomputation: time per stage and candidate statistics.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PrecomputeReport {

@@ -83,13 +83,13 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_REQUEST_VOXELS", default_value_t = 16 << 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_request_voxels: u64,
 
-    /// Most voxels one request may synthesize, all pyramid levels together
-    /// (voxels found in the cache are free). A request whose own voxels
-    /// exceed it is refused at once, one whose dependencies need more is
-    /// stopped as soon as it goes over; both are answered 400
-    /// `over_budget`. The default keeps any request
-    /// on a 128² exemplar to about ten seconds on two cores (a cold 256²
-    /// slice synthesizes about 0.4 Mi voxels, a 128³ region 3.2 Mi).
+    /// Most voxels one request may synthesize, all pyramid levels together.
+    /// Before any work a request's synthesis from a cold cache is bounded
+    /// from above in microseconds; over this it is refused with 400
+    /// `over_budget`, and a running one that goes over anyway is stopped.
+    /// The default keeps any request on a 128² exemplar to about ten
+    /// seconds on two cores and admits 256² slices and cuts at lod 0 and 1,
+    /// 128² at every lod, and regions up to 128³.
     #[arg(long, env = "SOLIDTEX_MAX_REQUEST_WORK", default_value_t = 4 << 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_request_work: u64,
 
@@ -110,6 +110,16 @@ pub struct ServeArgs {
     /// asked for.
     #[arg(long, env = "SOLIDTEX_MAX_RESIDENT_BYTES", default_value_t = 2 << 30, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_resident_bytes: u64,
+
+    /// Memory the precomputes running at once may take, by their
+    /// estimated peaks (from the exemplar's size and the analysis
+    /// parameters: a 128² exemplar with the defaults about 0.15 GB, a 512²
+    /// one about 2.5 GB, three 512² exemplars about 6 GB; resident memory
+    /// runs 1.2–1.4 times higher). An upload whose own estimate is over it
+    /// is refused with 413 `precompute_too_large`; others wait in the
+    /// precompute queue until the running ones leave room.
+    #[arg(long, env = "SOLIDTEX_MAX_PRECOMPUTE_BYTES", default_value = "6G", value_parser = parse_bytes)]
+    pub max_precompute_bytes: u64,
 
     /// Register the bundled exemplar under the id `default` at start.
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
@@ -133,10 +143,15 @@ pub struct ServeArgs {
     pub cors_origins: Vec<String>,
 
     /// Seconds a client has to send a complete request head, counted from
-    /// when its connection opens or its previous response ends; a
-    /// keep-alive connection idle that long is closed too.
+    /// its first byte (from when the connection opens, for its first
+    /// request); a slower client is disconnected without an answer.
     #[arg(long, env = "SOLIDTEX_HEADER_TIMEOUT", default_value_t = 10.0, value_parser = parse_wait)]
     pub header_timeout: f64,
+
+    /// Seconds a keep-alive connection may rest between requests (from the
+    /// end of its last answer) before it is closed.
+    #[arg(long, env = "SOLIDTEX_IDLE_TIMEOUT", default_value_t = 60.0, value_parser = parse_wait)]
+    pub idle_timeout: f64,
 
     /// Seconds a client has to send a whole request body (an upload)
     /// once its head has arrived; a slower one is answered 408.
@@ -203,11 +218,13 @@ impl ServeArgs {
             max_textures: 256,
             max_stored_bytes: 4 << 30,
             max_resident_bytes: 2 << 30,
+            max_precompute_bytes: 6 << 30,
             default_texture: false,
             token: None,
             cors_origins: Vec::new(),
             pending_wait: 0.0,
             header_timeout: 10.0,
+            idle_timeout: 60.0,
             body_timeout: 60.0,
             max_connections: 1024,
             allowed_hosts: Vec::new(),
@@ -394,9 +411,11 @@ mod tests {
         assert!(Cli::try_parse_from(["x", "--max-jobs", "0"]).is_err());
         let c = Cli::try_parse_from(["x"]).unwrap().serve;
         assert_eq!(
-            (c.header_timeout, c.body_timeout, c.max_connections),
-            (10.0, 60.0, 1024)
+            (c.header_timeout, c.idle_timeout, c.body_timeout),
+            (10.0, 60.0, 60.0)
         );
+        assert_eq!(c.max_connections, 1024);
+        assert!(Cli::try_parse_from(["x", "--idle-timeout", "0"]).is_err());
         assert!(Cli::try_parse_from(["x", "--max-connections", "0"]).is_err());
         assert!(Cli::try_parse_from(["x", "--header-timeout", "0"]).is_err());
         assert!(c.allowed_hosts.is_empty());

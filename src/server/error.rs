@@ -82,6 +82,40 @@ impl ApiError {
         )
     }
 
+    /// 400: the request is predicted, before any work, to need more
+    /// synthesis than one request may do (`predicted` is an upper bound;
+    /// `complete` false when counting stopped once past the budget).
+    pub fn predicted_over_budget(predicted: u64, complete: bool, budget: u64) -> Self {
+        let more = if complete { "" } else { "more than " };
+        Self::new(
+            StatusCode::BAD_REQUEST,
+            "over_budget",
+            format!(
+                "this request is predicted to synthesize up to {more}{predicted} voxels from a \
+                 cold cache, over the server's budget of {budget} voxels per request \
+                 (--max-request-work); ask for fewer pixels, pixels closer together or a \
+                 smaller box"
+            ),
+        )
+    }
+
+    /// 413: the upload's precompute is expected to need more memory than
+    /// the server lets precomputes take.
+    pub fn precompute_too_large(estimated: u64, bound: u64) -> Self {
+        let mib = |b: u64| b.div_ceil(1 << 20);
+        Self::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "precompute_too_large",
+            format!(
+                "precomputing this texture is estimated to take {} MiB of memory at its peak, \
+                 more than the {} MiB this server allows (--max-precompute-bytes); send a \
+                 smaller exemplar, one image for all planes, or fewer levels or triples",
+                mib(estimated),
+                mib(bound)
+            ),
+        )
+    }
+
     /// 404: no texture has this id.
     pub fn unknown_texture(id: &str) -> Self {
         Self::new(

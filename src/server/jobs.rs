@@ -164,6 +164,7 @@ impl Jobs {
         match handle.await {
             Ok(Ok(v)) => Ok(v),
             Ok(Err(Cancelled)) if budget_flag.is_over_budget() => {
+                self.metrics.over_budget("running");
                 Err(ApiError::over_budget(self.work_budget.unwrap_or_default()))
             }
             Ok(Err(Cancelled)) => Err(ApiError::internal("job cancelled")),

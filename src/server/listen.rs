@@ -1,14 +1,18 @@
-//! Accepting connections: HTTP/1.1 through hyper with a header-read
-//! timeout, and a cap on open connections.
+//! Accepting connections: HTTP/1.1 through hyper with a header timeout, an
+//! idle timeout, and a cap on open connections.
 //!
 //! Without limits, idle sockets pile up until the process runs out of file
 //! descriptors and health checks time out. Here every connection must send
-//! a complete request head within the header timeout (which also ends idle
-//! keep-alive connections), and at most `max_connections` are open: a new
-//! connection over the cap closes the oldest idle one, so that fresh
-//! clients (health checks first) get through; when every connection has a
-//! request in flight, the newcomer is answered 503 with `Retry-After`.
+//! a complete request head within the header timeout of its first byte (or
+//! of opening, for its first request), a keep-alive connection at rest
+//! between requests is closed after the idle timeout, and at most
+//! `max_connections` are open: a new connection over the cap closes the
+//! oldest idle one, so that fresh clients (health checks first) get
+//! through; when every connection has a request in flight, the newcomer is
+//! answered 503 with `Retry-After`. Requests hyper cannot parse get its
+//! own answer with a JSON body (see [`super::conn_io`]).
 
+use super::conn_io::{Clock, ConnIo};
 use super::error::error_body;
 use super::metrics::Metrics;
 use axum::Router;
@@ -17,7 +21,7 @@ use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use std::collections::BTreeMap;
 use std::future::Future;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::net::{TcpListener, TcpStream};
@@ -27,9 +31,11 @@ use tower::ServiceExt;
 /// Per-connection limits.
 #[derive(Clone, Copy, Debug)]
 pub struct Limits {
-    /// Time to receive a complete request head (also the keep-alive idle
-    /// limit: hyper starts it when a connection waits for its next request).
+    /// Time to receive a complete request head, from its first byte (from
+    /// opening, for a connection's first request).
     pub header_timeout: Duration,
+    /// Time a keep-alive connection may rest between requests.
+    pub idle_timeout: Duration,
     /// Open connections at most.
     pub max_connections: usize,
     /// Largest request head hyper buffers, bytes.
@@ -87,8 +93,8 @@ pub fn fit_descriptor_limit(max_connections: usize) -> usize {
 
 /// One open connection.
 struct Conn {
-    /// Requests being answered on it.
-    in_flight: Arc<AtomicUsize>,
+    /// What it is doing (requests in flight among it).
+    clock: Arc<Clock>,
     /// Asks its task to close it gracefully.
     close: Arc<Notify>,
     /// Already asked to close.
@@ -102,7 +108,7 @@ struct Conns {
 }
 
 enum Admission {
-    Admitted(u64, Arc<AtomicUsize>, Arc<Notify>),
+    Admitted(u64, Arc<Clock>, Arc<Notify>),
     Refused,
 }
 
@@ -120,7 +126,7 @@ impl Conns {
         if open >= max {
             let oldest_idle = map
                 .values_mut()
-                .find(|c| !c.closing && c.in_flight.load(Ordering::SeqCst) == 0);
+                .find(|c| !c.closing && c.clock.in_flight.load(Ordering::SeqCst) == 0);
             match oldest_idle {
                 Some(c) => {
                     c.closing = true;
@@ -130,17 +136,17 @@ impl Conns {
                 None => return Admission::Refused,
             }
         }
-        let in_flight = Arc::new(AtomicUsize::new(0));
+        let clock = Arc::new(Clock::new());
         let close = Arc::new(Notify::new());
         map.insert(
             id,
             Conn {
-                in_flight: in_flight.clone(),
+                clock: clock.clone(),
                 close: close.clone(),
                 closing: false,
             },
         );
-        Admission::Admitted(id, in_flight, close)
+        Admission::Admitted(id, clock, close)
     }
 
     fn remove(&self, id: u64) {
@@ -156,18 +162,18 @@ impl Conns {
 }
 
 /// Counts a request in flight on its connection while it lives.
-struct Busy(Arc<AtomicUsize>);
+struct Busy(Arc<Clock>);
 
 impl Busy {
-    fn new(n: &Arc<AtomicUsize>) -> Busy {
-        n.fetch_add(1, Ordering::SeqCst);
-        Busy(n.clone())
+    fn new(clock: &Arc<Clock>) -> Busy {
+        clock.request_started();
+        Busy(clock.clone())
     }
 }
 
 impl Drop for Busy {
     fn drop(&mut self) {
-        self.0.fetch_sub(1, Ordering::SeqCst);
+        self.0.request_ended();
     }
 }
 
@@ -183,8 +189,10 @@ pub async fn serve(
 ) {
     let conns = Arc::new(Conns::default());
     let mut http = hyper::server::conn::http1::Builder::new();
+    // hyper's header timeout would also end connections at rest; both
+    // timeouts are kept below instead.
     http.timer(TokioTimer::new())
-        .header_read_timeout(limits.header_timeout)
+        .header_read_timeout(None)
         .max_buf_size(limits.max_head_bytes)
         .max_headers(limits.max_headers);
     // Every connection task holds a receiver; `closed` resolves once all
@@ -210,7 +218,7 @@ pub async fn serve(
             },
         };
         next_id += 1;
-        let (id, in_flight, close) = match conns.admit(next_id, limits.max_connections, &metrics) {
+        let (id, clock, close) = match conns.admit(next_id, limits.max_connections, &metrics) {
             Admission::Admitted(id, n, c) => (id, n, c),
             Admission::Refused => {
                 metrics.connections_refused.inc();
@@ -220,6 +228,7 @@ pub async fn serve(
         };
         metrics.connections_open.inc();
         let app = app.clone();
+        let in_flight = clock.clone();
         let service = hyper::service::service_fn(move |req: hyper::Request<Incoming>| {
             let busy = Busy::new(&in_flight);
             let answer = app.clone().oneshot(req.map(Body::new));
@@ -229,7 +238,8 @@ pub async fn serve(
                 res
             }
         });
-        let conn = http.serve_connection(TokioIo::new(stream), service);
+        let io = ConnIo::new(stream, clock.clone());
+        let conn = http.serve_connection(TokioIo::new(io), service);
         let conns = conns.clone();
         let metrics = metrics.clone();
         let done = done_rx.clone();
@@ -241,6 +251,10 @@ pub async fn serve(
                 let mut conn = std::pin::pin!(conn);
                 let mut closing = false;
                 loop {
+                    let deadline = clock.deadline(limits.header_timeout, limits.idle_timeout);
+                    let expiry = tokio::time::sleep_until(
+                        deadline.map_or_else(far_future, tokio::time::Instant::from_std),
+                    );
                     tokio::select! {
                         r = conn.as_mut() => {
                             if let Err(e) = r {
@@ -251,6 +265,17 @@ pub async fn serve(
                         _ = close.notified(), if !closing => {
                             closing = true;
                             conn.as_mut().graceful_shutdown();
+                        }
+                        // Activity may have moved the deadline earlier.
+                        _ = clock.changed.notified() => {}
+                        _ = expiry, if deadline.is_some() => {
+                            // Later activity moves it later: look again.
+                            let now = std::time::Instant::now();
+                            let due = clock.deadline(limits.header_timeout, limits.idle_timeout);
+                            if due.is_some_and(|d| d <= now) {
+                                tracing::debug!("connection closed after its header or idle timeout");
+                                break;
+                            }
                         }
                     }
                 }
@@ -264,6 +289,11 @@ pub async fn serve(
     conns.close_all();
     drop(done_rx);
     done_tx.closed().await;
+}
+
+/// A time no connection waits for.
+fn far_future() -> tokio::time::Instant {
+    tokio::time::Instant::now() + Duration::from_secs(86400 * 365)
 }
 
 /// Refused connections still being closed gracefully at most.

@@ -48,6 +48,13 @@ pub struct OutcomeLabels {
     pub outcome: String,
 }
 
+/// Labels of the over-budget counter.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct StageLabels {
+    /// `predicted` (refused before any work) or `running` (stopped).
+    pub stage: String,
+}
+
 /// Labels of the texture gauge.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct StatusLabels {
@@ -91,12 +98,18 @@ pub struct Metrics {
     pub jobs_cancelled: Counter,
     /// Time admitted jobs waited for a running slot, seconds.
     pub job_wait: Histogram,
+    /// Requests answered 400 `over_budget`, by when.
+    pub over_budget: Family<StageLabels, Counter>,
     /// Precomputations finished, by outcome.
     pub precomputes: Family<OutcomeLabels, Counter>,
     /// Precomputation duration, seconds.
     pub precompute_seconds: Histogram,
     /// Precomputations queued or running.
     pub precomputes_pending: Gauge,
+    /// Heap bytes each precomputation peaked at.
+    pub precompute_peak_bytes: Histogram,
+    /// Estimated peak bytes of the precomputations running.
+    pub precompute_reserved_bytes: Gauge,
     /// Open client connections.
     pub connections_open: Gauge,
     /// Idle connections closed to make room for new ones.
@@ -191,6 +204,13 @@ impl Metrics {
             prometheus_client::registry::Unit::Seconds,
             job_wait.clone(),
         );
+        let over_budget = Family::<StageLabels, Counter>::default();
+        registry.register(
+            "requests_over_budget",
+            "Voxel requests answered 400 over_budget: predicted over it before any work, \
+             or stopped while running",
+            over_budget.clone(),
+        );
         let precomputes = Family::<OutcomeLabels, Counter>::default();
         registry.register(
             "precomputes",
@@ -209,6 +229,22 @@ impl Metrics {
             "precomputes_pending",
             "Precomputations queued or running",
             precomputes_pending.clone(),
+        );
+        let precompute_peak_bytes = Histogram::new(exponential_buckets(4.0 * 1048576.0, 2.0, 14));
+        registry.register_with_unit(
+            "precompute_peak",
+            "Heap bytes each candidate precomputation peaked at (counted by the server's \
+             allocator on the precompute threads)",
+            prometheus_client::registry::Unit::Bytes,
+            precompute_peak_bytes.clone(),
+        );
+        let precompute_reserved_bytes = Gauge::default();
+        registry.register_with_unit(
+            "precompute_reserved",
+            "Estimated peak bytes of the precomputations running (bounded by \
+             --max-precompute-bytes)",
+            prometheus_client::registry::Unit::Bytes,
+            precompute_reserved_bytes.clone(),
         );
         let connections_open = Gauge::default();
         registry.register(
@@ -258,9 +294,12 @@ impl Metrics {
             jobs_timed_out,
             jobs_cancelled,
             job_wait,
+            over_budget,
             precomputes,
             precompute_seconds,
             precomputes_pending,
+            precompute_peak_bytes,
+            precompute_reserved_bytes,
             connections_open,
             connections_evicted,
             connections_refused,
@@ -308,6 +347,15 @@ impl Metrics {
         }
         self.tiles_computed.inc_by(stats.tiles_computed);
         self.tiles_from_cache.inc_by(stats.tiles_from_cache);
+    }
+
+    /// Counts a request answered `over_budget` at `stage`.
+    pub fn over_budget(&self, stage: &str) {
+        self.over_budget
+            .get_or_create(&StageLabels {
+                stage: stage.to_string(),
+            })
+            .inc();
     }
 
     /// Sets the texture gauge.

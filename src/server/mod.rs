@@ -10,7 +10,8 @@
 //! - [`store`]: the data directory, written atomically and durably.
 //! - [`registry`]: textures, their status and background precomputes.
 //! - [`jobs`]: the bounded synthesis queue (backpressure → 503).
-//! - [`listen`]: connections: header timeout and a connection cap.
+//! - [`listen`]: connections: header and idle timeouts, a connection cap;
+//!   [`conn_io`]: their sockets as hyper sees them.
 //! - [`routes`]: the router, handlers and middleware.
 //! - [`host`]: the `Host` allow-list.
 //! - [`metrics`], [`process`], [`error`], [`query`], [`png`]: the supporting
@@ -22,6 +23,7 @@
 //! requests in flight have been answered.
 
 pub mod config;
+pub mod conn_io;
 pub mod error;
 pub mod host;
 pub mod jobs;
@@ -97,9 +99,13 @@ impl Server {
             usize::try_from(args.cache_bytes).unwrap_or(usize::MAX),
         ));
         let metrics = Arc::new(metrics::Metrics::new(cache.clone()));
+        // Every allocation of the precompute threads is counted, so that
+        // each precompute's peak is measured.
+        let meter = crate::peak_alloc::Meter::leaked();
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(args.resolved_precompute_threads())
             .thread_name(|i| format!("precompute-{i}"))
+            .start_handler(move |_| meter.attach())
             .build()
             .context("starting the precompute pool")?;
         let registry = Arc::new(
@@ -112,7 +118,8 @@ impl Server {
                 pool,
             )
             .with_storage_limits(args.max_textures as usize, args.max_stored_bytes)
-            .with_memory_limit(args.max_resident_bytes),
+            .with_memory_limit(args.max_resident_bytes)
+            .with_precompute_memory(args.max_precompute_bytes, meter),
         );
         let todo = {
             let r = registry.clone();
@@ -162,6 +169,7 @@ impl Server {
         );
         let limits = listen::Limits {
             header_timeout: Duration::from_secs_f64(args.header_timeout),
+            idle_timeout: Duration::from_secs_f64(args.idle_timeout),
             max_connections: listen::fit_descriptor_limit(
                 usize::try_from(args.max_connections).unwrap_or(usize::MAX),
             ),

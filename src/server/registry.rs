@@ -14,6 +14,7 @@ use super::metrics::{Metrics, OutcomeLabels};
 use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
 use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
 use crate::orientation::Layout;
+use crate::peak_alloc::{self, Meter};
 use crate::{Candidates, Stage, Texture, TileCache};
 use axum::http::StatusCode;
 use std::collections::HashMap;
@@ -60,6 +61,10 @@ pub struct Entry {
     progress: AtomicU32,
     stage: Mutex<&'static str>,
     precompute_seconds: Mutex<Option<f64>>,
+    /// Heap bytes its precompute is expected to peak at.
+    pub precompute_estimate: u64,
+    /// Heap bytes its precompute peaked at, when measured.
+    precompute_peak: Mutex<Option<u64>>,
     deleted: AtomicBool,
     /// Woken whenever the status changes.
     settled: tokio::sync::Notify,
@@ -82,6 +87,17 @@ impl Entry {
         };
         let analysis_hash = spec.analysis_hash();
         let layout = spec.layout().ok();
+        // Turned planes differ from each other, so the search runs per
+        // plane, as for three exemplars.
+        let turned = layout
+            .as_ref()
+            .is_some_and(|l| l.arrangement.rotate != [0; 3]);
+        let precompute_estimate = crate::candidates::estimated_peak_bytes(
+            width,
+            height,
+            planes_n == 3 || turned,
+            &spec.params.analysis,
+        );
         Entry {
             id,
             name: None,
@@ -101,6 +117,8 @@ impl Entry {
             progress: AtomicU32::new(0f32.to_bits()),
             stage: Mutex::new("queued"),
             precompute_seconds: Mutex::new(None),
+            precompute_estimate,
+            precompute_peak: Mutex::new(None),
             deleted: AtomicBool::new(false),
             settled: tokio::sync::Notify::new(),
             last_used: AtomicU64::new(0),
@@ -194,6 +212,15 @@ impl Entry {
             .unwrap_or_else(|e| e.into_inner())
     }
 
+    /// Heap bytes the precompute peaked at, when it ran in this process
+    /// under the counting allocator or was recorded by an earlier one.
+    pub fn precompute_peak(&self) -> Option<u64> {
+        *self
+            .precompute_peak
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+    }
+
     fn set_progress(&self, stage: &'static str, fraction: f32) {
         *self.stage.lock().unwrap_or_else(|e| e.into_inner()) = stage;
         // Never goes back (stages report their own fractions).
@@ -222,6 +249,7 @@ impl Entry {
             status,
             reason,
             precompute_seconds: self.precompute_seconds(),
+            precompute_peak_bytes: self.precompute_peak(),
         }
     }
 }
@@ -265,12 +293,48 @@ pub struct Registry {
     uses: AtomicU64,
     /// Bytes the textures may take on disk.
     max_stored_bytes: u64,
+    /// Estimated peak bytes of the precomputes running at once, at most.
+    max_precompute_bytes: u64,
+    /// Units of [`MEMORY_UNIT`] bytes of that bound not taken by a running
+    /// precompute.
+    precompute_memory: Arc<Semaphore>,
+    /// Bytes taken from it now, and the most ever.
+    precompute_reserved: AtomicU64,
+    precompute_reserved_peak: AtomicU64,
+    /// Counts the allocations of the precompute pool's threads.
+    meter: Option<&'static Meter>,
+}
+
+/// Granularity of the precompute memory bound.
+const MEMORY_UNIT: u64 = 1 << 20;
+
+/// Units of [`MEMORY_UNIT`] in a bound of `bytes`, as many as a semaphore
+/// and one acquisition can hold.
+fn memory_units(bytes: u64) -> u64 {
+    (bytes / MEMORY_UNIT).clamp(1, u64::from(u32::MAX))
 }
 
 /// Disk bytes a texture takes per exemplar pixel and plane once its
 /// candidates are written (a 128² exemplar: about 6 MB), for admitting an
 /// upload before its candidates exist.
 const STORED_BYTES_PER_PIXEL: u64 = 400;
+
+/// Precompute memory counted as reserved while it lives.
+struct Reserved<'a> {
+    registry: &'a Registry,
+    bytes: u64,
+}
+
+impl Drop for Reserved<'_> {
+    fn drop(&mut self) {
+        let r = self.registry;
+        let now = r
+            .precompute_reserved
+            .fetch_sub(self.bytes, Ordering::SeqCst)
+            - self.bytes;
+        r.metrics.precompute_reserved_bytes.set(now as i64);
+    }
+}
 
 fn now() -> u64 {
     SystemTime::now()
@@ -302,7 +366,33 @@ impl Registry {
             max_stored_bytes: u64::MAX,
             max_resident_bytes: u64::MAX,
             uses: AtomicU64::new(0),
+            max_precompute_bytes: u64::MAX,
+            precompute_memory: Arc::new(Semaphore::new(memory_units(u64::MAX) as usize)),
+            precompute_reserved: AtomicU64::new(0),
+            precompute_reserved_peak: AtomicU64::new(0),
+            meter: None,
         }
+    }
+
+    /// The same registry, running precomputes only while their estimated
+    /// peaks (see [`crate::candidates::estimated_peak_bytes`]) add up to at
+    /// most `bytes`, refusing uploads whose own estimate is over it, and
+    /// measuring each precompute's peak with `meter` (the precompute
+    /// pool's threads must be attached to it).
+    pub fn with_precompute_memory(mut self, bytes: u64, meter: &'static Meter) -> Registry {
+        self.max_precompute_bytes = bytes;
+        self.precompute_memory = Arc::new(Semaphore::new(memory_units(bytes) as usize));
+        self.meter = Some(meter);
+        self
+    }
+
+    /// Estimated peak bytes of the precomputes running now, and the most
+    /// at any time.
+    pub fn precompute_reserved(&self) -> (u64, u64) {
+        (
+            self.precompute_reserved.load(Ordering::SeqCst),
+            self.precompute_reserved_peak.load(Ordering::SeqCst),
+        )
     }
 
     /// The same registry, keeping at most `bytes` of candidates in memory:
@@ -508,6 +598,18 @@ impl Registry {
                 return Err(ApiError::overloaded("precompute queue is full"));
             }
             if !fixed_id {
+                let need = crate::candidates::estimated_peak_bytes(
+                    w,
+                    h,
+                    planes == 3,
+                    &spec.params.analysis,
+                );
+                if need > self.max_precompute_bytes {
+                    return Err(ApiError::precompute_too_large(
+                        need,
+                        self.max_precompute_bytes,
+                    ));
+                }
                 let uploaded = map.values().filter(|e| e.id == e.content_hash).count();
                 if uploaded >= self.max_textures {
                     return Err(ApiError::storage_full(format!(
@@ -623,10 +725,23 @@ impl Registry {
         let this = self.clone();
         tokio::spawn(async move {
             let permit = this.slots.clone().acquire_owned().await;
+            // Whatever its estimate, a precompute takes at most the whole
+            // bound (a texture found at start may predate a lower one).
+            let units = entry
+                .precompute_estimate
+                .div_ceil(MEMORY_UNIT)
+                .clamp(1, memory_units(this.max_precompute_bytes));
+            let units = u32::try_from(units).unwrap_or(u32::MAX);
+            let memory = this
+                .precompute_memory
+                .clone()
+                .acquire_many_owned(units)
+                .await;
             let worker = this.clone();
             let e = entry.clone();
             let done = tokio::task::spawn_blocking(move || {
-                let _permit = permit;
+                let _permits = (permit, memory);
+                let _reserved = worker.reserve_memory(e.precompute_estimate);
                 worker.precompute(&e);
             })
             .await;
@@ -636,6 +751,19 @@ impl Registry {
             this.release_precompute();
             this.update_gauges();
         });
+    }
+
+    /// Counts `bytes` as reserved by a running precompute until the guard
+    /// is dropped.
+    fn reserve_memory(&self, bytes: u64) -> Reserved<'_> {
+        let now = self.precompute_reserved.fetch_add(bytes, Ordering::SeqCst) + bytes;
+        self.precompute_reserved_peak
+            .fetch_max(now, Ordering::SeqCst);
+        self.metrics.precompute_reserved_bytes.set(now as i64);
+        Reserved {
+            registry: self,
+            bytes,
+        }
     }
 
     /// Candidates already in memory for the same pixels and analysis
@@ -665,6 +793,8 @@ impl Registry {
         let t0 = Instant::now();
         let shared = self.shared_candidates(entry);
         let reused = shared.is_some();
+        let mut computed = false;
+        let baseline = self.meter.map(Meter::reset);
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             if let Some(c) = shared {
                 let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
@@ -678,10 +808,12 @@ impl Registry {
             };
             let c = match crate::bundled::candidates_for(&set, &entry.params.analysis) {
                 Some(c) => c,
-                None => self
-                    .pool
-                    .install(|| Candidates::compute(&set, &entry.params.analysis, &progress))
-                    .map_err(|e| e.to_string())?,
+                None => {
+                    computed = true;
+                    self.pool
+                        .install(|| Candidates::compute(&set, &entry.params.analysis, &progress))
+                        .map_err(|e| e.to_string())?
+                }
             };
             let c = Arc::new(c);
             let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
@@ -702,6 +834,19 @@ impl Registry {
         if !reused {
             self.metrics.precompute_seconds.observe(seconds);
         }
+        // Only counts of the counting allocator, and only of a real
+        // computation (not the bundled or shared candidates), are kept.
+        let peak = match (self.meter, baseline) {
+            (Some(m), Some(b)) if computed && peak_alloc::installed() => Some(m.peak_above(b)),
+            _ => None,
+        };
+        if let Some(bytes) = peak {
+            *entry
+                .precompute_peak
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = Some(bytes);
+            self.metrics.precompute_peak_bytes.observe(bytes as f64);
+        }
         let _g = self.store.lock();
         if entry.deleted.load(Ordering::SeqCst) {
             tracing::info!("texture deleted during its precompute; result dropped");
@@ -717,7 +862,12 @@ impl Registry {
                     tracing::info!("candidates shared with a texture of the same exemplars");
                 } else {
                     self.count_precompute("ok");
-                    tracing::info!(seconds, "precompute finished");
+                    tracing::info!(
+                        seconds,
+                        peak_bytes = peak,
+                        estimated_bytes = entry.precompute_estimate,
+                        "precompute finished"
+                    );
                 }
                 if let Err(e) = self.store.write_candidates(&entry.id, &c) {
                     // Still served from memory; the next start recomputes.
@@ -725,10 +875,17 @@ impl Registry {
                     entry.set_ready(c, t);
                 } else {
                     entry.on_disk.store(true, Ordering::Relaxed);
-                    entry.set_ready(c, t);
-                    if let Err(e) = self.store.write_meta(&entry.meta()) {
+                    // Durable as ready before anyone sees it ready: a
+                    // restart right after must not compute it again.
+                    let meta = StoredMeta {
+                        status: StoredStatus::Ready,
+                        reason: None,
+                        ..entry.meta()
+                    };
+                    if let Err(e) = self.store.write_meta(&meta) {
                         tracing::error!(error = %e, "could not store texture metadata");
                     }
+                    entry.set_ready(c, t);
                 }
                 self.keep_within_memory(&entry.id);
             }
@@ -827,6 +984,10 @@ impl Registry {
                 .precompute_seconds
                 .lock()
                 .unwrap_or_else(|e| e.into_inner()) = meta.precompute_seconds;
+            *entry
+                .precompute_peak
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = meta.precompute_peak_bytes;
             match meta.status {
                 StoredStatus::Ready => match self.load_ready(&entry) {
                     Ok((c, t)) => {

@@ -88,6 +88,9 @@ pub struct StoredMeta {
     /// Seconds the precompute took.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub precompute_seconds: Option<f64>,
+    /// Heap bytes the precompute peaked at, when measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub precompute_peak_bytes: Option<u64>,
 }
 
 /// A texture found in the data directory at start.
@@ -432,6 +435,7 @@ mod tests {
             status,
             reason: None,
             precompute_seconds: None,
+            precompute_peak_bytes: None,
         }
     }
 

@@ -26,6 +26,7 @@
 pub mod cache;
 pub mod cancel;
 pub mod correction;
+pub mod estimate;
 pub mod grid;
 pub mod hash;
 pub mod init;
@@ -60,7 +61,7 @@ const MAX_GROUP_TILES: usize = 4096;
 
 /// One correction step of a level: cells of side M shifted by `offset`,
 /// corrected `passes` times.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct Step {
     /// Grid shift (0 for the primary grid, M/2 for the dual grid).
     pub offset: i64,
@@ -123,6 +124,8 @@ pub(crate) struct Engine {
     /// Steps of the finest levels (see [`SynthParams::finest_passes`] and
     /// [`SynthParams::fine_levels`]).
     finest_steps: Vec<Step>,
+    /// How far each level's chain reaches, finest first.
+    reach: Vec<plan::Reach>,
 }
 
 /// Correction steps for `passes` passes under the texture's scheme.
@@ -170,7 +173,7 @@ impl Engine {
                 .into_par_iter()
                 .for_each(|k| _ = cands.level(k).sparse_tables(cands.dims(), k));
         }
-        Engine {
+        let mut engine = Engine {
             init_level: cands.level_count() - 1,
             radius: correction::reach(&params, cands.params().neighbourhood),
             cell: params.grid as i64,
@@ -180,6 +183,26 @@ impl Engine {
             key,
             steps,
             finest_steps,
+            reach: Vec::new(),
+        };
+        engine.reach = (0..=engine.init_level)
+            .map(|k| {
+                known_reach(
+                    engine.steps_at(k),
+                    engine.radius,
+                    engine.params.subpass_side as i64,
+                    engine.barrier_cell(),
+                )
+            })
+            .collect();
+        engine
+    }
+
+    /// The dual grid's cell side, or `None` under the standard scheme.
+    fn barrier_cell(&self) -> Option<i64> {
+        match self.params.scheme {
+            Scheme::DualGrid => Some(self.cell),
+            Scheme::Standard => None,
         }
     }
 
@@ -670,7 +693,39 @@ impl Engine {
             cell: self.cell,
             steps: self.steps.clone(),
             finest_steps: self.finest_steps.clone(),
+            reach: self.reach.clone(),
         }
+    }
+
+    /// An upper bound of what [`Engine::plan_region`] counts, found without
+    /// walking voxels (see [`estimate`]); counting stops past `limit`.
+    pub(crate) fn estimate_region(
+        &self,
+        r: &Region,
+        lod: u32,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
+        let piece = estimate::Piece::region(r.origin, r.size);
+        estimate::estimate(piece, &self.reach[lod as usize..], MAX_GROUP_TILES, limit)
+    }
+
+    /// An upper bound of what [`Engine::plan_cut`] counts.
+    pub(crate) fn estimate_cut(
+        &self,
+        plane: &CutPlane,
+        lod: u32,
+        filter: Filter,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
+        let piece = estimate::Piece::cut(
+            plane.origin,
+            plane.u,
+            plane.v,
+            plane.width,
+            plane.height,
+            filter == Filter::Trilinear,
+        );
+        estimate::estimate(piece, &self.reach[lod as usize..], MAX_GROUP_TILES, limit)
     }
 
     /// Exact voxel-level dependency chain of a few voxels (see
@@ -800,6 +855,22 @@ impl Engine {
         };
         Ok((rgb, acc.stats()))
     }
+}
+
+/// [`plan::reach`] of a level's steps, computed once per process for each
+/// set of steps: textures with the same synthesis parameters share it.
+fn known_reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> plan::Reach {
+    type Key = (Vec<Step>, i64, i64, Option<i64>);
+    static KNOWN: std::sync::LazyLock<std::sync::Mutex<HashMap<Key, plan::Reach>>> =
+        std::sync::LazyLock::new(Default::default);
+    let key = (steps.to_vec(), radius, side, cell);
+    let lock = || KNOWN.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(r) = lock().get(&key) {
+        return *r;
+    }
+    let r = plan::reach(steps, radius, side, cell);
+    lock().insert(key, r);
+    r
 }
 
 /// A voxel whose value at some version is known, with that value.

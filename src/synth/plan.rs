@@ -368,6 +368,89 @@ pub fn exact_chain(
     out
 }
 
+/// How far the dependency chain of one level reaches from the voxels it
+/// starts from: every voxel it needs lies within `lo` below and `hi` above
+/// some starting voxel, per axis.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Reach {
+    /// Voxels below, per axis.
+    pub lo: [i64; 3],
+    /// Voxels above, per axis.
+    pub hi: [i64; 3],
+}
+
+/// Most voxels the walks of [`reach`] may cover before it settles for the
+/// looser bound that needs no walk.
+const REACH_WALK_VOXELS: i64 = 1 << 25;
+
+/// The [`Reach`] of one level corrected by `steps` (see [`backward`]).
+///
+/// The chains are periodic (the subpass classes repeat every `side`
+/// voxels, the cells every `cell`), so the largest reach below and above
+/// along axis `a` is found by walking back from one layer `a = c` of a
+/// period in the other two axes, for every `c` in a period: the need of a
+/// layer is the union of its voxels' needs. Where those walks would be
+/// large (long periods, many passes) the bound is taken from the scheme
+/// instead: a subpass reads `radius` further, and under the dual grid a
+/// step's chain stays within its cell and a ring of `radius` around it.
+pub fn reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> Reach {
+    if steps.is_empty() {
+        return Reach::default();
+    }
+    let classes = side * side * side;
+    let growth: i64 = steps
+        .iter()
+        .map(|s| s.passes as i64 * classes * radius + radius)
+        .sum();
+    let period = cell.map_or(side, |m| lcm(side, m));
+    let walk = period + 2 * growth;
+    if 3 * period * walk * walk * (1 + 2 * growth) > REACH_WALK_VOXELS {
+        let r: i64 = steps
+            .iter()
+            .map(|s| {
+                let chain = s.passes as i64 * classes * radius;
+                cell.map_or(chain, |m| chain.min(m - 1)) + radius
+            })
+            .sum();
+        return Reach {
+            lo: [r; 3],
+            hi: [r; 3],
+        };
+    }
+    let mut out = Reach::default();
+    for a in 0..3 {
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        for at in 0..period {
+            let mut layer = Vec::with_capacity((period * period) as usize);
+            for j in 0..period {
+                for i in 0..period {
+                    let mut p = [0i64; 3];
+                    p[a] = at;
+                    p[b] = i;
+                    p[c] = j;
+                    layer.push(p);
+                }
+            }
+            let need = backward(&layer, steps, radius, side, cell, |_, _, _| Vec::new())
+                .need
+                .bounds();
+            out.lo[a] = out.lo[a].max(at - need.lo[a]);
+            out.hi[a] = out.hi[a].max(need.hi[a] - 1 - at);
+        }
+    }
+    out
+}
+
+fn lcm(a: i64, b: i64) -> i64 {
+    let gcd = |mut x: i64, mut y: i64| {
+        while y != 0 {
+            (x, y) = (y, x % y);
+        }
+        x
+    };
+    a / gcd(a, b) * b
+}
+
 /// Order of the 2³ subpasses when corrections read only their direct
 /// neighbours, as phases x + 2y + 4z: each z layer of the 2×2×2 block in
 /// Gray-code order (000, 100, 110, 010, then 101, 001, 011, 111). Within a
@@ -445,6 +528,44 @@ mod tests {
         let standard = exact_chain(&[[5, 5, 5]], 3, &standard_steps, 2, 2, None);
         let total = |v: &[LevelPlan]| v.iter().map(|l| l.voxels).sum::<u64>();
         assert!(total(&dual) < total(&standard), "{dual:?} vs {standard:?}");
+    }
+
+    #[test]
+    fn reach_bounds_every_voxel_chain_and_is_met() {
+        let one = |passes| Step { offset: 0, passes };
+        let dual = vec![
+            one(1),
+            Step {
+                offset: 3,
+                passes: 1,
+            },
+        ];
+        for (steps, radius, side, cell) in [
+            (vec![one(1)], 1, 2, None),
+            (vec![one(2)], 1, 2, None),
+            (dual.clone(), 1, 2, Some(6)),
+            (dual, 2, 2, Some(6)),
+        ] {
+            let r = reach(&steps, radius, side, cell);
+            let period = cell.map_or(side, |m| lcm(side, m));
+            let mut met = Reach::default();
+            for z in 0..period {
+                for y in 0..period {
+                    for x in 0..period {
+                        let p = [x, y, z];
+                        let b = backward(&[p], &steps, radius, side, cell, |_, _, _| Vec::new())
+                            .need
+                            .bounds();
+                        for (a, c) in p.into_iter().enumerate() {
+                            met.lo[a] = met.lo[a].max(c - b.lo[a]);
+                            met.hi[a] = met.hi[a].max(b.hi[a] - 1 - c);
+                        }
+                    }
+                }
+            }
+            assert_eq!(r, met, "{steps:?} radius {radius} cell {cell:?}");
+        }
+        assert_eq!(reach(&[], 1, 2, Some(12)), Reach::default());
     }
 
     #[test]

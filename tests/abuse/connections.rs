@@ -1,4 +1,4 @@
-//! Connection limits: the cap, the header and body timeouts.
+//! Connection limits: the cap, the header, idle and body timeouts.
 
 use crate::raw::read_until_closed;
 use crate::server_support::*;
@@ -110,23 +110,50 @@ async fn a_partial_request_head_is_closed_after_the_header_timeout() {
     s.stop().await;
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn an_idle_keep_alive_connection_is_closed_after_the_header_timeout() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut args = test_args(dir.path());
-    args.header_timeout = 0.5;
-    let s = TestServer::start(args).await;
-    let mut c = TcpStream::connect(s.addr).await.unwrap();
+/// Sends a GET of /healthz on `c` and reads its answer, keeping the
+/// connection open.
+async fn healthz(c: &mut TcpStream) {
     c.write_all(b"GET /healthz HTTP/1.1\r\nHost: localhost\r\n\r\n")
         .await
         .unwrap();
     let mut buf = [0u8; 1024];
     let n = c.read(&mut buf).await.unwrap();
-    assert!(buf[..n].starts_with(b"HTTP/1.1 200"));
+    assert!(buf[..n].starts_with(b"HTTP/1.1 200"), "{:?}", &buf[..n]);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_idle_keep_alive_connection_is_closed_after_the_idle_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.header_timeout = 60.0;
+    args.idle_timeout = 0.5;
+    let s = TestServer::start(args).await;
+    let mut c = TcpStream::connect(s.addr).await.unwrap();
+    healthz(&mut c).await;
     let t0 = Instant::now();
     let (_, closed) = read_until_closed(&mut c, Duration::from_secs(5)).await;
     assert!(closed, "an idle keep-alive connection stays open");
     assert!(t0.elapsed() < Duration::from_secs(3), "{:?}", t0.elapsed());
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_keep_alive_connection_rests_longer_than_the_header_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.header_timeout = 0.3;
+    args.idle_timeout = 60.0;
+    let s = TestServer::start(args).await;
+    let mut c = TcpStream::connect(s.addr).await.unwrap();
+    healthz(&mut c).await;
+    // At rest for several header timeouts, it still takes a request.
+    tokio::time::sleep(Duration::from_millis(1200)).await;
+    healthz(&mut c).await;
+    // A request head started on it must still arrive within the header
+    // timeout.
+    c.write_all(b"GET /healthz HTTP/1.1\r\n").await.unwrap();
+    let (_, closed) = read_until_closed(&mut c, Duration::from_secs(5)).await;
+    assert!(closed, "a slow head keeps its connection");
     s.stop().await;
 }
 

@@ -37,15 +37,15 @@ async fn oversized_targets_and_heads_get_json_errors() {
     .await;
     a.assert_error(431, "headers_too_large");
 
-    // Beyond what hyper buffers (64 KiB) it answers by itself, with no
-    // body: documented.
+    // Beyond what hyper buffers (64 KiB) it answers by itself, in JSON
+    // too.
     let huge = "c".repeat(100 << 10);
     let a = send(
         s.addr,
         format!("GET /healthz HTTP/1.1\r\nhost: localhost\r\nx-huge: {huge}\r\n\r\n").as_bytes(),
     )
     .await;
-    assert_eq!(a.status, 431);
+    a.assert_error(431, "headers_too_large");
 
     // Within the limits all is well.
     let a = send(
@@ -54,6 +54,38 @@ async fn oversized_targets_and_heads_get_json_errors() {
     )
     .await;
     assert_eq!(a.status, 200);
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn requests_hyper_cannot_parse_get_json_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    for request in [
+        &b"GARBAGE\r\n\r\n"[..],
+        b"GET /healthz HTTP/1.1\r\nhost: localhost\r\nno colon here\r\n\r\n",
+        b"GET /hea lthz HTTP/1.1\r\nhost: localhost\r\n\r\n",
+        b"GET /healthz HTTP/9.9\r\nhost: localhost\r\n\r\n",
+        b"GET /healthz HTTP/1.1\r\nho\x01st: localhost\r\n\r\n",
+    ] {
+        let a = send(s.addr, request).await;
+        a.assert_error(400, "malformed_request");
+        assert!(a.head.contains("connection: close"), "{}", a.head);
+    }
+    // On a kept-alive connection, after a good answer, too.
+    let mut c = tokio::net::TcpStream::connect(s.addr).await.unwrap();
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    c.write_all(b"GET /healthz HTTP/1.1\r\nhost: localhost\r\n\r\n")
+        .await
+        .unwrap();
+    let mut buf = vec![0u8; 4096];
+    let n = c.read(&mut buf).await.unwrap();
+    assert!(buf[..n].starts_with(b"HTTP/1.1 200"));
+    c.write_all(b"BROKEN REQUEST\r\n\r\n").await.unwrap();
+    let (bytes, closed) =
+        crate::raw::read_until_closed(&mut c, std::time::Duration::from_secs(10)).await;
+    assert!(closed);
+    crate::raw::parse(&bytes).assert_error(400, "malformed_request");
     s.stop().await;
 }
 

@@ -46,6 +46,10 @@ pub fn view(e: &Entry, brick_size: u32) -> Value {
     if let Some(s) = e.precompute_seconds() {
         v["precompute_seconds"] = s.into();
     }
+    v["precompute_estimated_bytes"] = e.precompute_estimate.into();
+    if let Some(b) = e.precompute_peak() {
+        v["precompute_peak_bytes"] = b.into();
+    }
     v
 }
 

@@ -17,8 +17,8 @@
 
 use super::AppState;
 use super::voxels::{
-    body_response, check_budget, check_work_floor, etag, not_modified, not_modified_response,
-    raw_job, texture,
+    body_response, check_budget, check_work, etag, not_modified, not_modified_response, raw_job,
+    texture,
 };
 use crate::Region;
 use crate::server::error::ApiError;
@@ -89,11 +89,11 @@ async fn chunk_rgb(
 ) -> Result<Vec<u8>, ApiError> {
     let edge = s.chunk_size;
     check_budget(s, "chunk", u64::from(edge).pow(3))?;
-    check_work_floor(s, u64::from(edge).pow(3))?;
     let region = Region {
         origin,
         size: [edge; 3],
     };
+    check_work(s, tex.estimate(&region, lod, s.max_request_work))?;
     raw_job(s, move || tex.region(&region, lod)).await
 }
 

@@ -15,7 +15,7 @@ use crate::server::query::{Query, parse_int};
 use crate::server::registry::Entry;
 use crate::server::spec::{hex, valid_id};
 use crate::texture::{COORD_LIMIT, MAX_REGION_VOXELS, MAX_SLICE_SIDE};
-use crate::{Axis, CutPlane, Filter, Region, SynthStats, Texture};
+use crate::{Axis, CutPlane, Filter, Region, SynthStats, Texture, WorkEstimate};
 use axum::body::Body;
 use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
@@ -53,13 +53,24 @@ fn coord(q: &Query, name: &str) -> Result<i64, ApiError> {
     q.int(name, 0i64, -COORD_LIMIT, COORD_LIMIT)
 }
 
-/// Refuses before any work a request whose own voxels, each of which is
-/// synthesized unless cached, already exceed the synthesis budget.
-pub(super) fn check_work_floor(s: &AppState, voxels: u64) -> Result<(), ApiError> {
-    if voxels > s.max_request_work {
-        return Err(ApiError::over_budget(s.max_request_work));
+/// Refuses before any work a request predicted to synthesize more than the
+/// budget. The prediction bounds a cold-cache synthesis from above, so a
+/// request is refused or admitted the same whatever the cache holds; the
+/// job's own count stays as a backstop.
+pub(super) fn check_work(
+    s: &AppState,
+    predicted: crate::Result<WorkEstimate>,
+) -> Result<(), ApiError> {
+    let e = predicted?;
+    if e.complete && e.total <= s.max_request_work {
+        return Ok(());
     }
-    Ok(())
+    s.metrics.over_budget("predicted");
+    Err(ApiError::predicted_over_budget(
+        e.total,
+        e.complete,
+        s.max_request_work,
+    ))
 }
 
 /// Checks a request's work against the server's budget.
@@ -212,7 +223,8 @@ pub async fn slice(
     check_extent("u0", u0, w)?;
     check_extent("v0", v0, h)?;
     check_budget(&s, "slice", w as u64 * h as u64)?;
-    check_work_floor(&s, w as u64 * h as u64)?;
+    let region = Region::slice(axis, at, u0, v0, w, h);
+    check_work(&s, tex.estimate(&region, lod, s.max_request_work))?;
     let name = match axis {
         Axis::X => "x",
         Axis::Y => "y",
@@ -285,6 +297,10 @@ pub async fn cut(
         width: w,
         height: h,
     };
+    check_work(
+        &s,
+        tex.estimate_cut(&plane, lod, filter, s.max_request_work),
+    )?;
     // Bit patterns make the key exact for any float spelling.
     let bits = |a: [f64; 3]| a.map(|x| format!("{:x}", (x + 0.0).to_bits())).join(",");
     let key = format!(
@@ -401,7 +417,7 @@ pub async fn region(
         check_extent(name, origin[a], size[a])?;
     }
     check_budget(&s, "region", voxels)?;
-    check_work_floor(&s, voxels)?;
+    check_work(&s, tex.estimate(&region, lod, s.max_request_work))?;
     region_response(&s, &entry, tex, region, lod, &headers).await
 }
 
@@ -433,8 +449,12 @@ pub async fn brick(
     for (a, (p, n)) in parts.iter().zip(["bx", "by", "bz"]).enumerate() {
         origin[a] = parse_int(n, p, lo, hi)? * e;
     }
-    let size = [s.brick_size; 3];
-    region_response(&s, &entry, tex, Region { origin, size }, lod, &headers).await
+    let region = Region {
+        origin,
+        size: [s.brick_size; 3],
+    };
+    check_work(&s, tex.estimate(&region, lod, s.max_request_work))?;
+    region_response(&s, &entry, tex, region, lod, &headers).await
 }
 
 #[cfg(test)]

@@ -1,0 +1,149 @@
+//! Precompute memory: the estimate bounds what a precompute allocates,
+//! the server refuses uploads whose estimate is over its bound, runs
+//! precomputes only while their estimates fit in it together, and reports
+//! each one's measured peak. This binary counts its allocations as the
+//! server binary does.
+
+mod server_support;
+
+use serde_json::Value;
+use server_support::*;
+use solidtex::candidates::estimated_peak_bytes;
+use solidtex::peak_alloc::{Meter, PeakAlloc};
+use solidtex::{AnalysisParams, Candidates, Exemplar, ExemplarSet};
+
+#[global_allocator]
+static ALLOC: PeakAlloc = PeakAlloc;
+
+fn exemplar(side: u32, seed: u32) -> Exemplar {
+    Exemplar::decode(&exemplar_png(side, seed)).unwrap()
+}
+
+#[test]
+fn the_estimate_bounds_the_measured_peak() {
+    // Measured as the server does: on the threads of a pool of their own,
+    // apart from the other tests of this binary.
+    let meter = Meter::leaked();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .start_handler(move |_| meter.attach())
+        .build()
+        .unwrap();
+    let three = ExemplarSet::triple(exemplar(40, 1), exemplar(40, 2), exemplar(40, 3)).unwrap();
+    let cases = [
+        (
+            ExemplarSet::single(exemplar(48, 4)),
+            AnalysisParams::default(),
+        ),
+        (
+            ExemplarSet::single(exemplar(40, 5)),
+            AnalysisParams {
+                triples: 300,
+                ..AnalysisParams::default()
+            },
+        ),
+        (
+            ExemplarSet::single(exemplar(40, 6)),
+            AnalysisParams {
+                triples: 8,
+                levels: 2,
+                ..AnalysisParams::default()
+            },
+        ),
+        (
+            ExemplarSet::single(exemplar(40, 7)),
+            AnalysisParams {
+                neighbourhood: 9,
+                max_candidates: 32,
+                levels: 5,
+                ..AnalysisParams::default()
+            },
+        ),
+        (three, AnalysisParams::default()),
+    ];
+    for (set, params) in cases {
+        let estimate = estimated_peak_bytes(set.width(), set.height(), !set.is_single(), &params);
+        let baseline = meter.reset();
+        pool.install(|| Candidates::compute(&set, &params, &|_, _| {}).unwrap());
+        let peak = meter.peak_above(baseline);
+        assert!(peak > 0);
+        assert!(
+            estimate >= peak && estimate <= 3 * peak,
+            "{params:?}: estimated {estimate}, measured {peak}"
+        );
+    }
+}
+
+fn scrape(text: &str, name: &str) -> f64 {
+    text.lines()
+        .filter(|l| l.starts_with(name))
+        .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+        .sum()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn uploads_over_the_bound_are_refused_and_peaks_are_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    let small = estimated_peak_bytes(32, 32, false, &AnalysisParams::default());
+    args.max_precompute_bytes = small + (small >> 1);
+    let s = TestServer::start(args).await;
+    let c = client();
+    // 64² needs about four times what 32² does: refused before anything
+    // is stored.
+    let (st, v) = upload(&c, &s, exemplar_png(64, 1), "").await;
+    assert_eq!(st, 413, "{v}");
+    assert_eq!(v["error"]["code"], "precompute_too_large");
+    let listed: Value = c
+        .get(s.url("/v1/textures"))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(listed["textures"].as_array().unwrap().len(), 0);
+    // A 32² fits; its peak is measured and reported, below the estimate.
+    let (st, v) = upload(&c, &s, exemplar_png(32, 2), "").await;
+    assert_eq!(st, 202, "{v}");
+    assert_eq!(v["precompute_estimated_bytes"].as_u64(), Some(small));
+    let id = v["id"].as_str().unwrap().to_string();
+    let v = wait_ready(&c, &s, &id).await;
+    let peak = v["precompute_peak_bytes"]
+        .as_u64()
+        .expect("a measured peak");
+    assert!(peak > 0 && peak <= small, "{v}");
+    let text = metrics(&c, &s).await;
+    assert_eq!(scrape(&text, "solidtex_precompute_peak_bytes_count"), 1.0);
+    assert_eq!(scrape(&text, "solidtex_precompute_reserved_bytes"), 0.0);
+    s.stop().await;
+    // The peak is kept with the texture.
+    let s = TestServer::start(test_args(dir.path())).await;
+    let v = wait_ready(&c, &s, &id).await;
+    assert_eq!(v["precompute_peak_bytes"].as_u64(), Some(peak));
+    s.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn precomputes_run_together_only_within_the_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    let one = estimated_peak_bytes(32, 32, false, &AnalysisParams::default());
+    args.max_precomputes = 3;
+    args.max_precompute_bytes = one + (one >> 1);
+    let s = TestServer::start(args).await;
+    let c = client();
+    let mut ids = Vec::new();
+    for seed in 10..13 {
+        let (st, v) = upload(&c, &s, exemplar_png(32, seed), "").await;
+        assert_eq!(st, 202, "{v}");
+        ids.push(v["id"].as_str().unwrap().to_string());
+    }
+    for id in &ids {
+        wait_ready(&c, &s, id).await;
+    }
+    // Three slots, room for one: they ran one after another.
+    let (now, most) = s.state.registry.precompute_reserved();
+    assert_eq!((now, most), (0, one));
+    s.stop().await;
+}
