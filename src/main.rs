@@ -12,17 +12,20 @@ static ALLOC: solidtex::peak_alloc::PeakAlloc = solidtex::peak_alloc::PeakAlloc;
 
 /// jemalloc's options, read once before its first allocation: it looks up
 /// this symbol by name (a NUL-terminated C string, the `malloc_conf` of
-/// jemalloc's manual under the prefix of the `tikv-jemalloc-sys` build).
+/// jemalloc's manual under the prefix of the `tikv-jemalloc-sys` build);
+/// `_RJEM_MALLOC_CONF` overrides them.
 ///
-/// Memory is advised for transparent huge pages: a correction reads its
-/// candidate tables (tens of MB per texture) at random, and with 4 KiB
-/// pages its loads miss the TLB. On a cold 256² slice on one thread that
-/// took 5–7 % of the time (min and median of 10 interleaved runs); the
-/// price is about 10 % more resident memory under load (whole huge pages
-/// are zeroed and kept). Where the system disables transparent huge pages
-/// the advice does nothing; `_RJEM_MALLOC_CONF` overrides it.
+/// - `thp:always`: memory is advised for transparent huge pages. A
+///   correction reads its candidate tables (tens of MB per texture) at
+///   random, and with 4 KiB pages its loads miss the TLB. Where the system
+///   disables transparent huge pages the advice does nothing.
+/// - `background_thread:true,dirty_decay_ms:1000`: pages freed by a job or
+///   a precompute go back to the system within about a second, from a
+///   thread of jemalloc's own, instead of staying resident for ten seconds
+///   or until the next allocation in their arena. The server's memory bound
+///   (`server::memory`) counts on it. Measured numbers: docs/server.md.
 #[unsafe(export_name = "_rjem_malloc_conf")]
-pub static JEMALLOC_CONF: &[u8; 11] = b"thp:always\0";
+pub static JEMALLOC_CONF: &[u8; 54] = b"thp:always,background_thread:true,dirty_decay_ms:1000\0";
 
 use clap::Parser;
 

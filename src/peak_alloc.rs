@@ -123,6 +123,13 @@ pub fn peak_above(baseline: isize) -> u64 {
     (PEAK.load(Ordering::Relaxed) - baseline).max(0) as u64
 }
 
+/// Heap bytes in use now, counted since [`start`] (`None` before it, or
+/// when [`PeakAlloc`] is not the process's allocator).
+pub fn in_use() -> Option<u64> {
+    (installed() && ENABLED.load(Ordering::Relaxed))
+        .then(|| CURRENT.load(Ordering::Relaxed).max(0) as u64)
+}
+
 /// Whether [`PeakAlloc`] is the process's allocator (its counts are real).
 pub fn installed() -> bool {
     INSTALLED.load(Ordering::Relaxed)

@@ -102,6 +102,22 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     assert_eq!(ready["brick_size"], 16);
     let max_lod = ready["max_lod"].as_u64().unwrap();
     assert_eq!(max_lod, 2);
+    // The server's bound on its memory: the cache at its bound, the
+    // candidates it holds, every job slot at its most.
+    let bound = |text: &str, part: &str| {
+        metric(
+            text,
+            &format!(r#"solidtex_memory_bound_bytes{{part="{part}"}}"#),
+        )
+    };
+    let text = metrics(&c, &s).await;
+    assert_eq!(bound(&text, "cache"), (64u64 << 20) as f64);
+    let candidates = bound(&text, "candidates");
+    assert!(candidates > 0.0, "{text}");
+    let job = solidtex::server::memory::JOB_WORKING_BYTES
+        + solidtex::server::memory::JOB_BYTES_PER_VOXEL * (4 << 20);
+    assert_eq!(bound(&text, "jobs"), (4 * job) as f64);
+    assert_eq!(bound(&text, "precomputes"), 0.0);
 
     // Same pixels re-encoded, same params spelled differently: same texture, 201.
     let (_, _, pixels) = decode_png(&png);
@@ -137,6 +153,8 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
         metric(&text, r#"solidtex_precomputes_total{outcome="reused"}"#),
         1.0
     );
+    // Shared candidates are held, and counted, once.
+    assert_eq!(bound(&text, "candidates"), candidates);
     let (_, _, a) = get(
         &c,
         &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=16&h=16")),

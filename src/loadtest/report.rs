@@ -264,18 +264,25 @@ impl Report {
                     d.cache_evictions,
                     d.jobs_rejected
                 );
-                let budget = match d.resident_within_budget {
+                let verdict = match d.resident_within_budget {
                     Some(true) => "within",
                     Some(false) => "OVER",
                     None => "unknown against",
                 };
+                let bound = match d.peaks.least_margin_bytes {
+                    Some(margin) => format!(
+                        "the server's own bound at every sample (closest: {} of {})",
+                        mib(d.peaks.bound_at_least_margin - margin),
+                        mib(d.peaks.bound_at_least_margin)
+                    ),
+                    None => format!("cache bound {} + 256 MiB", mib(d.cache_max_bytes)),
+                };
                 let _ = writeln!(
                     out,
-                    "server memory: resident peak {} (end {}), {budget} cache bound {} + 256 MiB; \
-                     cache holds {}; threads peak {:.0}",
+                    "server memory: resident peak {} (end {}), {verdict} {bound}; cache holds {}; \
+                     threads peak {:.0}",
                     mib(d.peaks.resident_bytes),
                     mib(d.resident_bytes_end),
-                    mib(d.cache_max_bytes),
                     mib(d.cache_bytes),
                     d.peaks.threads
                 );

@@ -1,7 +1,8 @@
 //! Reading the server's `/metrics` (Prometheus text) into totals per
 //! metric name, and the differences a load test reports: voxels
 //! synthesized, tiles computed versus served from the cache, requests shed,
-//! and the server's resident memory against its cache bound.
+//! and the server's resident memory against the bound it reports for
+//! itself.
 
 use serde::Serialize;
 use std::collections::HashMap;
@@ -68,27 +69,45 @@ mod name {
     pub const CACHE_MAX_BYTES: &str = "solidtex_cache_max_bytes";
     pub const REJECTED: &str = "solidtex_jobs_rejected_total";
     pub const RESIDENT: &str = "solidtex_process_resident_bytes";
+    pub const MEMORY_BOUND: &str = "solidtex_memory_bound_bytes";
     pub const THREADS: &str = "solidtex_process_threads";
 }
 
-/// Memory headroom the server may use beyond its tile cache (candidates,
-/// request working sets, allocator slack) before a run is flagged.
+/// Memory headroom a server that reports no bound of its own may use
+/// beyond its tile cache (candidates, request working sets, allocator
+/// slack) before a run is flagged.
 pub const RSS_HEADROOM_BYTES: f64 = 256.0 * 1024.0 * 1024.0;
 
-/// The largest resident memory and thread count seen while sampling.
+/// The largest resident memory and thread count seen while sampling, and
+/// how close resident memory came to the server's own bound.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Peaks {
     /// Largest `process_resident_bytes` seen.
     pub resident_bytes: f64,
     /// Largest `process_threads` seen.
     pub threads: f64,
+    /// The least of the server's bound minus its resident memory, over the
+    /// samples that had both (negative: over the bound); `None` when the
+    /// server reports no bound.
+    pub least_margin_bytes: Option<f64>,
+    /// The bound at that sample.
+    pub bound_at_least_margin: f64,
 }
 
 impl Peaks {
     /// Folds one scrape in.
     pub fn observe(&mut self, s: &Scrape) {
-        self.resident_bytes = self.resident_bytes.max(s.get(name::RESIDENT));
+        let resident = s.get(name::RESIDENT);
+        self.resident_bytes = self.resident_bytes.max(resident);
         self.threads = self.threads.max(s.get(name::THREADS));
+        if s.has(name::MEMORY_BOUND) && s.has(name::RESIDENT) {
+            let bound = s.get(name::MEMORY_BOUND);
+            let margin = bound - resident;
+            if self.least_margin_bytes.is_none_or(|m| margin < m) {
+                self.least_margin_bytes = Some(margin);
+                self.bound_at_least_margin = bound;
+            }
+        }
     }
 }
 
@@ -123,8 +142,10 @@ pub struct ServerDelta {
     pub resident_bytes_end: f64,
     /// Peak resident memory and threads seen while the run was sampled.
     pub peaks: Peaks,
-    /// Whether the peak stayed within cache bound + 256 MiB (`None` when
-    /// the server does not report its memory).
+    /// Whether resident memory stayed within the server's own bound at
+    /// every sample (for a server that reports none: whether the peak
+    /// stayed within cache bound + 256 MiB); `None` when the server does
+    /// not report its memory.
     pub resident_within_budget: Option<bool>,
 }
 
@@ -155,8 +176,12 @@ impl ServerDelta {
             cache_max_bytes: max_bytes,
             resident_bytes_end: after.get(name::RESIDENT),
             peaks,
-            resident_within_budget: reports_memory
-                .then_some(peaks.resident_bytes <= max_bytes + RSS_HEADROOM_BYTES),
+            resident_within_budget: match peaks.least_margin_bytes {
+                Some(margin) => Some(margin >= 0.0),
+                None => {
+                    reports_memory.then_some(peaks.resident_bytes <= max_bytes + RSS_HEADROOM_BYTES)
+                }
+            },
         }
     }
 }
@@ -202,5 +227,28 @@ mod tests {
         let none = ServerDelta::between(&before, &before, Peaks::default());
         assert_eq!(none.resident_within_budget, None);
         assert_eq!(none.tile_hit_rate, 0.0);
+    }
+
+    #[test]
+    fn resident_memory_is_checked_against_the_servers_own_bound() {
+        let sample = |resident: u64, parts: [u64; 2]| {
+            Scrape::parse(&format!(
+                "solidtex_process_resident_bytes {resident}\n\
+                 solidtex_memory_bound_bytes{{part=\"cache\"}} {}\n\
+                 solidtex_memory_bound_bytes{{part=\"jobs\"}} {}\n",
+                parts[0], parts[1]
+            ))
+        };
+        let mut peaks = Peaks::default();
+        peaks.observe(&sample(900, [500, 600]));
+        peaks.observe(&sample(700, [300, 450]));
+        // The tightest sample is the second (50 to spare), not the largest.
+        assert_eq!(peaks.least_margin_bytes, Some(50.0));
+        assert_eq!(peaks.bound_at_least_margin, 750.0);
+        let d = ServerDelta::between(&Scrape::default(), &sample(700, [300, 450]), peaks);
+        assert_eq!(d.resident_within_budget, Some(true));
+        peaks.observe(&sample(800, [300, 450]));
+        let d = ServerDelta::between(&Scrape::default(), &sample(700, [300, 450]), peaks);
+        assert_eq!(d.resident_within_budget, Some(false));
     }
 }

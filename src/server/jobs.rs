@@ -179,6 +179,11 @@ impl Jobs {
         }
     }
 
+    /// Jobs running at once at most.
+    pub fn max_jobs(&self) -> usize {
+        self.max_jobs
+    }
+
     /// True when a new job would be refused.
     pub fn is_full(&self) -> bool {
         self.admit.available_permits() == 0

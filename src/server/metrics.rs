@@ -55,6 +55,13 @@ pub struct StageLabels {
     pub stage: String,
 }
 
+/// Labels of the memory bound's parts.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct PartLabels {
+    /// `base`, `cache`, `candidates`, `precomputes`, `jobs`, `allocator`.
+    pub part: String,
+}
+
 /// Labels of the texture gauge.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct StatusLabels {
@@ -122,6 +129,9 @@ pub struct Metrics {
     pub textures_refused: Counter,
     /// Textures by status.
     pub textures: Family<StatusLabels, Gauge>,
+    /// The server's bound on its resident memory, by part (see
+    /// [`super::memory`]); set at each scrape.
+    pub memory_bound: Family<PartLabels, Gauge>,
 }
 
 impl Metrics {
@@ -278,6 +288,14 @@ impl Metrics {
         );
         let textures = Family::<StatusLabels, Gauge>::default();
         registry.register("textures", "Textures by status", textures.clone());
+        let memory_bound = Family::<PartLabels, Gauge>::default();
+        registry.register_with_unit(
+            "memory_bound",
+            "The server's bound on its resident memory, by part (the bound is their sum): \
+             from its limits and what it holds now",
+            prometheus_client::registry::Unit::Bytes,
+            memory_bound.clone(),
+        );
         registry.register_collector(Box::new(CacheCollector { cache }));
         registry.register_collector(Box::new(ProcessCollector));
         Metrics {
@@ -306,6 +324,7 @@ impl Metrics {
             textures_loaded,
             textures_refused,
             textures,
+            memory_bound,
         }
     }
 
@@ -440,6 +459,17 @@ struct ProcessCollector;
 
 impl Collector for ProcessCollector {
     fn encode(&self, mut encoder: DescriptorEncoder) -> Result<(), std::fmt::Error> {
+        if let Some(bytes) = crate::peak_alloc::in_use() {
+            let g = ConstGauge::new(bytes as i64);
+            let m = encoder.encode_descriptor(
+                "heap_bytes",
+                "Heap bytes in use, as the server's allocator counts them (resident memory \
+                 adds the allocator's free pages and the binary)",
+                None,
+                g.metric_type(),
+            )?;
+            g.encode(m)?;
+        }
         let Some(s) = super::process::current() else {
             return Ok(());
         };

@@ -14,6 +14,7 @@
 //!   [`conn_io`]: their sockets as hyper sees them.
 //! - [`routes`]: the router, handlers and middleware.
 //! - [`host`]: the `Host` allow-list.
+//! - [`memory`]: the server's own bound on its resident memory.
 //! - [`metrics`], [`process`], [`error`], [`query`], [`png`]: the supporting
 //!   pieces.
 //!
@@ -28,6 +29,7 @@ pub mod error;
 pub mod host;
 pub mod jobs;
 pub mod listen;
+pub mod memory;
 pub mod metrics;
 pub mod png;
 pub mod process;
@@ -258,6 +260,9 @@ fn init_tracing(args: &ServeArgs) {
 /// shutdown timeout for requests in flight. Prints
 /// `solidtex listening on http://ADDR` on stdout once accepting.
 pub fn serve_main(args: ServeArgs) -> anyhow::Result<()> {
+    // Heap in use is reported beside resident memory (two relaxed atomic
+    // operations per allocation).
+    crate::peak_alloc::start();
     init_tracing(&args);
     if args.worker_threads > 0 {
         rayon::ThreadPoolBuilder::new()

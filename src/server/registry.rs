@@ -472,6 +472,21 @@ impl Registry {
         }
     }
 
+    /// Bytes of candidates in memory now (candidates shared by textures
+    /// that differ in synthesis parameters only are counted once).
+    pub fn resident_candidate_bytes(&self) -> u64 {
+        let map = self.map.read().unwrap_or_else(|e| e.into_inner());
+        let mut seen = Vec::new();
+        let mut total = 0;
+        for c in map.values().filter_map(|e| e.candidates()) {
+            if !seen.iter().any(|s| Arc::ptr_eq(s, &c)) {
+                total += c.memory_bytes().1 as u64;
+                seen.push(c);
+            }
+        }
+        total
+    }
+
     /// The same registry, refusing uploads (507 `storage_full`) beyond
     /// `max_textures` textures or `max_stored_bytes` bytes on disk.
     pub fn with_storage_limits(mut self, max_textures: usize, max_stored_bytes: u64) -> Registry {

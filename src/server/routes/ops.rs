@@ -1,6 +1,8 @@
 //! Operational endpoints: liveness, readiness, metrics and the API document.
 
 use super::AppState;
+use crate::server::memory;
+use crate::server::metrics::PartLabels;
 use crate::server::registry::Status;
 use axum::Json;
 use axum::extract::State;
@@ -42,8 +44,24 @@ pub async fn readyz(State(s): State<AppState>) -> Response {
     res
 }
 
-/// `GET /metrics`: Prometheus text exposition.
+/// `GET /metrics`: Prometheus text exposition, with the memory bound
+/// brought up to date.
 pub async fn metrics(State(s): State<AppState>) -> Response {
+    let inputs = memory::Inputs {
+        cache_max_bytes: s.registry.cache().max_bytes() as u64,
+        candidates_bytes: s.registry.resident_candidate_bytes(),
+        precompute_bytes: s.registry.precompute_reserved().0,
+        max_jobs: s.jobs.max_jobs() as u64,
+        answer_voxels: s.max_request_voxels.min(s.max_request_work),
+    };
+    for part in memory::bound(&inputs) {
+        s.metrics
+            .memory_bound
+            .get_or_create(&PartLabels {
+                part: part.name.to_string(),
+            })
+            .set(i64::try_from(part.bytes).unwrap_or(i64::MAX));
+    }
     (
         [(
             header::CONTENT_TYPE,
