@@ -14,14 +14,13 @@
 
 /// Resident memory of the process besides the parts below: the binary's
 /// mapped pages, thread stacks, the runtime's and allocator's own
-/// structures (an idle server with only the bundled texture: 136 MiB
-/// resident, 94 MiB of it the candidates counted apart).
+/// structures (measured on an idle server: docs/server.md).
 pub const BASE_BYTES: u64 = 64 << 20;
 
 /// Working memory of one synthesis job besides its answer: the dependency
 /// masks and triple grids of its tile groups, one group per level at most
-/// at a time (the largest measured, a 256² y slice at lod 2, peaked at
-/// 117 MiB of heap).
+/// at a time. Above the largest heap peak measured over requests near the
+/// work budget (docs/server.md).
 pub const JOB_WORKING_BYTES: u64 = 160 << 20;
 
 /// Bytes per voxel of a job's answer: the final triples of the requested
