@@ -5,14 +5,6 @@ mod common;
 use common::*;
 use solidtex::{AnalysisParams, Candidates, CorruptKind, Error, Exemplar, ExemplarSet};
 
-fn with_threads<T: Send>(n: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(n)
-        .build()
-        .unwrap()
-        .install(f)
-}
-
 #[test]
 fn selected_triples_beat_random_ones_by_a_wide_margin() {
     let c = Candidates::compute(

@@ -11,14 +11,6 @@ use solidtex::{
 };
 use std::sync::Arc;
 
-fn with_threads<T: Send>(n: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(n)
-        .build()
-        .unwrap()
-        .install(f)
-}
-
 fn candidates(e: &Exemplar, orientation: Orientation) -> Arc<Candidates> {
     let params = AnalysisParams {
         orientation,

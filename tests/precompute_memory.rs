@@ -94,14 +94,7 @@ async fn uploads_over_the_bound_are_refused_and_peaks_are_reported() {
     let (st, v) = upload(&c, &s, exemplar_png(64, 1), "").await;
     assert_eq!(st, 413, "{v}");
     assert_eq!(v["error"]["code"], "precompute_too_large");
-    let listed: Value = c
-        .get(s.url("/v1/textures"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let listed: Value = get_json(&c, &s, "/v1/textures").await;
     assert_eq!(listed["textures"].as_array().unwrap().len(), 0);
     // A 32² fits; its peak is measured and reported, below the estimate.
     let (st, v) = upload(&c, &s, exemplar_png(32, 2), "").await;

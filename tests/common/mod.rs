@@ -68,6 +68,15 @@ pub fn texture() -> Texture {
     texture_with(SynthParams::default(), 256 << 20)
 }
 
+/// Runs `f` on a pool of `n` threads.
+pub fn with_threads<T: Send>(n: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
 /// FNV-1a, for pinning golden outputs.
 pub fn fnv(bytes: &[u8]) -> u64 {
     let mut h = 0xcbf2_9ce4_8422_2325u64;

@@ -150,18 +150,22 @@ pub async fn upload_form(
     (status, r.json().await.unwrap())
 }
 
+/// GETs `path` and reads its JSON body, whatever the status.
+pub async fn get_json(c: &reqwest::Client, s: &TestServer, path: &str) -> Value {
+    c.get(s.url(path))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap()
+}
+
 /// Polls a texture until it is ready (panics if it fails or takes too long).
 pub async fn wait_ready(c: &reqwest::Client, s: &TestServer, id: &str) -> Value {
     let t0 = Instant::now();
     loop {
-        let v: Value = c
-            .get(s.url(&format!("/v1/textures/{id}")))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let v = get_json(c, s, &format!("/v1/textures/{id}")).await;
         match v["status"].as_str() {
             Some("ready") => return v,
             Some("pending") => {}
