@@ -5,7 +5,7 @@
 use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use solidtex::{
+use solidtex_core::{
     AnalysisParams, Axis, Candidates, Correction, Exemplar, ExemplarSet, Region, Scheme, Slices,
     Stage, SynthParams, Texture, TileCache,
 };
@@ -43,7 +43,7 @@ enum Command {
     /// Score synthesized slices against their exemplar, next to baselines.
     Eval(EvalArgs),
     /// Run the HTTP voxel service.
-    Serve(solidtex::server::ServeArgs),
+    Serve(solidtex_server::ServeArgs),
     /// Measure a running server under concurrent voxel requests.
     Loadtest(LoadtestArgs),
 }
@@ -61,11 +61,11 @@ struct LoadtestArgs {
     concurrency: usize,
     /// How long new requests are sent (e.g. 30s, 2m); requests in flight
     /// at the end are waited for.
-    #[arg(long, default_value = "30s", value_parser = solidtex::loadtest::parse_duration)]
+    #[arg(long, default_value = "30s", value_parser = crate::loadtest::parse_duration)]
     duration: std::time::Duration,
     /// Request kinds, drawn uniformly: slices, cuts, bricks.
     #[arg(long, value_delimiter = ',', default_value = "slices,cuts,bricks")]
-    mix: Vec<solidtex::loadtest::workload::Kind>,
+    mix: Vec<crate::loadtest::workload::Kind>,
     /// Seed of the request sequences.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -84,9 +84,9 @@ struct LoadtestArgs {
     /// Replay interactive cutting instead: each client sweeps a plane one
     /// voxel per request (`axis` slices or `oblique` cuts); reports cuts/s.
     #[arg(long, num_args = 0..=1, default_missing_value = "axis")]
-    sweep: Option<solidtex::loadtest::workload::SweepPlane>,
+    sweep: Option<crate::loadtest::workload::SweepPlane>,
     /// Give up on one request after this long.
-    #[arg(long, default_value = "120s", value_parser = solidtex::loadtest::parse_duration)]
+    #[arg(long, default_value = "120s", value_parser = crate::loadtest::parse_duration)]
     timeout: std::time::Duration,
     /// A soak: also upload, read and delete small textures and hang up on
     /// requests while the load runs.
@@ -152,11 +152,11 @@ struct BenchArgs {
     #[arg(long, default_value_t = 32)]
     load_clients: usize,
     /// Duration of each load run.
-    #[arg(long, default_value = "60s", value_parser = solidtex::loadtest::parse_duration)]
+    #[arg(long, default_value = "60s", value_parser = crate::loadtest::parse_duration)]
     load_duration: std::time::Duration,
     /// The loaded server's `--max-queue-wait`, seconds: how long a job may
     /// wait for a slot before it is answered 503.
-    #[arg(long, default_value_t = 1.0, value_parser = solidtex::server::config::parse_wait)]
+    #[arg(long, default_value_t = 1.0, value_parser = solidtex_server::config::parse_wait)]
     load_max_wait: f64,
     /// Write the results as a Markdown page (e.g. BENCHMARKS.md).
     #[arg(long)]
@@ -224,7 +224,7 @@ struct SourceArgs {
 #[derive(Args, Clone)]
 struct SynthArgs {
     /// Random seed.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = SynthParams::default().seed)]
     seed: u64,
     /// Preview parameters: one correction pass per level and the finest
     /// level upsampled without correction; cold slices 5–7× faster for
@@ -232,26 +232,26 @@ struct SynthArgs {
     #[arg(long, conflicts_with_all = ["passes", "finest_passes", "fine_levels"])]
     preview: bool,
     /// Correction passes per level, the fine levels excepted.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = SynthParams::default().passes)]
     passes: u32,
     /// Correction passes at the finest levels (see `--fine-levels`).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = SynthParams::default().finest_passes)]
     finest_passes: u32,
     /// Levels, counted from the finest, corrected with `--finest-passes`
     /// passes instead of `--passes`.
-    #[arg(long, default_value_t = solidtex::params::DEFAULT_FINE_LEVELS)]
+    #[arg(long, default_value_t = SynthParams::default().fine_levels)]
     fine_levels: u32,
     /// Dual-grid cell side M.
-    #[arg(long, default_value_t = 12)]
+    #[arg(long, default_value_t = SynthParams::default().grid)]
     grid: u32,
     /// Jitter strength (0 disables).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = SynthParams::default().jitter)]
     jitter: f32,
     /// Subpass block side s (s³ subpasses per pass; 1 disables subpasses).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = SynthParams::default().subpass_side)]
     subpass_side: u32,
     /// Gain on correction queries around their mean colour (1 disables).
-    #[arg(long, default_value_t = solidtex::params::DEFAULT_CONTRAST)]
+    #[arg(long, default_value_t = SynthParams::default().contrast)]
     contrast: f32,
     /// Voxels the colour correction reads: sparse (direct neighbours, the rest of
     /// each N×N slice extrapolated) or full (every voxel of the slices).
@@ -259,11 +259,11 @@ struct SynthArgs {
     slices: Slices,
     /// Penalty on coherent triples whose three exemplar colours disagree
     /// (0 disables).
-    #[arg(long, default_value_t = solidtex::params::DEFAULT_CONSISTENCY)]
+    #[arg(long, default_value_t = SynthParams::default().consistency)]
     consistency: f32,
     /// Thickness of the candidate slab's layers, in voxels of the
     /// initialisation level (Dong et al.: N).
-    #[arg(long, default_value_t = solidtex::params::DEFAULT_SLAB_THICKNESS)]
+    #[arg(long, default_value_t = SynthParams::default().slab_thickness)]
     slab_thickness: u32,
     /// What a correction matches: appearance (sparse appearance-space
     /// neighbourhoods, 12 diagonal locations) or colour (N×N colour
@@ -322,7 +322,7 @@ struct PrecomputeArgs {
     /// an axis), none, or an arrangement as JSON, e.g.
     /// '{"rotate": [0, 270, 0], "weights": [1, 1, 0.25]}'.
     #[arg(long, default_value = "auto")]
-    orientation: solidtex::Orientation,
+    orientation: solidtex_core::Orientation,
     /// Also print each stage's time and each level's candidate statistics.
     #[arg(long)]
     verbose: bool,
@@ -453,7 +453,7 @@ struct VolumeArgs {
 }
 
 /// One sentence on what a synthesis command wrote and what it cost.
-fn summary(what: &str, path: &Path, t0: Instant, stats: &solidtex::SynthStats) -> String {
+fn summary(what: &str, path: &Path, t0: Instant, stats: &solidtex_core::SynthStats) -> String {
     let corrections: u64 = stats.corrections_per_level.iter().sum();
     format!(
         "wrote {what} to {} in {:.2} s: {corrections} corrections over {} levels, \
@@ -519,8 +519,8 @@ fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
             )?
         }
         None => {
-            let set = ExemplarSet::single(solidtex::bundled::exemplar());
-            match solidtex::bundled::candidates_for(&set, &AnalysisParams::default()) {
+            let set = ExemplarSet::single(solidtex_core::bundled::exemplar());
+            match solidtex_core::bundled::candidates_for(&set, &AnalysisParams::default()) {
                 Some(c) => c,
                 None => precompute(&set, &AnalysisParams::default(), false)?,
             }
@@ -545,7 +545,7 @@ fn open_exemplar(path: &Path) -> anyhow::Result<Exemplar> {
             path.display(),
             e.width(),
             e.height(),
-            solidtex::exemplar::MAX_SIDE
+            solidtex_core::Exemplar::MAX_SIDE
         );
     }
     Ok(e)
@@ -561,9 +561,9 @@ fn write_png(path: &Path, w: u32, h: u32, rgb: Vec<u8>) -> anyhow::Result<()> {
 /// Runs one subcommand.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Serve(a) => return solidtex::server::serve_main(a),
+        Command::Serve(a) => return solidtex_server::serve_main(a),
         Command::Loadtest(a) => {
-            let cfg = solidtex::loadtest::LoadConfig {
+            let cfg = crate::loadtest::LoadConfig {
                 url: a.url,
                 texture: a.texture,
                 concurrency: a.concurrency,
@@ -579,7 +579,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 churn: a.churn,
                 verify_url: a.verify_url,
             };
-            let report = solidtex::loadtest::run_blocking(&cfg)?;
+            let report = crate::loadtest::run_blocking(&cfg)?;
             if a.json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
@@ -607,13 +607,13 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             };
             let (w, h) = (set.width(), set.height());
             let estimate =
-                solidtex::candidates::estimated_peak_bytes(w, h, !set.is_single(), &params);
-            solidtex::peak_alloc::start();
-            let baseline = solidtex::peak_alloc::reset();
+                solidtex_core::Candidates::estimated_peak_bytes(w, h, !set.is_single(), &params);
+            solidtex_server::peak_alloc::start();
+            let baseline = solidtex_server::peak_alloc::reset();
             let t0 = Instant::now();
             let c = precompute(&set, &params, false)?;
             let total = t0.elapsed().as_secs_f64();
-            let peak = solidtex::peak_alloc::peak_above(baseline);
+            let peak = solidtex_server::peak_alloc::peak_above(baseline);
             let bytes = c.to_bytes();
             write_atomically(&a.output, &bytes)?;
             print_report(&c, &a.output, total, bytes.len(), a.verbose);
@@ -682,7 +682,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Cut(a) => {
             let tex = load_source(&a.src)?;
-            let plane = solidtex::CutPlane {
+            let plane = solidtex_core::CutPlane {
                 origin: a.origin,
                 u: a.u,
                 v: a.v,
@@ -690,8 +690,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
                 height: a.height,
             };
             let filter = match a.filter {
-                CutFilter::Nearest => solidtex::Filter::Nearest,
-                CutFilter::Trilinear => solidtex::Filter::Trilinear,
+                CutFilter::Nearest => solidtex_core::Filter::Nearest,
+                CutFilter::Trilinear => solidtex_core::Filter::Trilinear,
             };
             let t0 = Instant::now();
             let (rgb, stats) = tex.cut(&plane, a.src.lod, filter)?;
@@ -825,13 +825,13 @@ fn print_report(c: &Candidates, path: &Path, total: f64, file_bytes: usize, verb
 }
 
 /// One line on how the exemplar is laid on the planes.
-fn describe_layout(asked: solidtex::Orientation, l: &solidtex::orientation::Layout) -> String {
+fn describe_layout(asked: solidtex_core::Orientation, l: &solidtex_core::Layout) -> String {
     let a = l.arrangement;
     let how = match asked {
-        solidtex::Orientation::Auto if l.detected => "auto: strongly oriented along an axis",
-        solidtex::Orientation::Auto => "auto: not strongly oriented along an axis",
-        solidtex::Orientation::None => "none",
-        solidtex::Orientation::Given(_) => "given",
+        solidtex_core::Orientation::Auto if l.detected => "auto: strongly oriented along an axis",
+        solidtex_core::Orientation::Auto => "auto: not strongly oriented along an axis",
+        solidtex_core::Orientation::None => "none",
+        solidtex_core::Orientation::Given(_) => "given",
     };
     format!(
         "orientation ({how}; coherence {:.3}, grain {:.1}° from u): rotate xy {}°, yz {}°, zx {}°; weights {}, {}, {}",
@@ -852,54 +852,14 @@ fn inspect(a: &InspectArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.out)?;
     let dims = c.dims();
     for k in 0..c.level_count() {
-        // The slab: the xy exemplar rebuilt from each pixel's first
-        // candidate (mean of its three colours), and its crossbar error.
-        let level = c.level(k);
-        let cands = level.candidates(0);
-        let mut slab = Vec::with_capacity(dims.len() * 3);
-        let mut errs = Vec::with_capacity(dims.len());
-        for px in 0..dims.len() as u32 {
-            let t = cands.triples[cands.range(px).start];
-            let col = solidtex::synth::correction::colour(&c, k, t);
-            slab.extend(col.map(|v| v.round().clamp(0.0, 255.0) as u8));
-            errs.push(c.crossbar_error(k, t));
-        }
-        write_png(
-            &a.out.join(format!("slab_level{k}.png")),
-            dims.w,
-            dims.h,
-            slab,
-        )?;
-        // The slab seen from the side: the x–z section through the middle
-        // row, each of its N layers drawn 4 pixels tall.
-        let n = c.params().neighbourhood as i64;
-        let y0 = dims.h / 2;
-        let h = 1i64 << k;
-        let mut side = Vec::new();
-        for row in 0..n * 4 {
-            let dz = row / 4 - n / 2;
-            for x in 0..dims.w {
-                let px = y0 * dims.w + x;
-                let t = cands.triples[cands.range(px).start];
-                let t = solidtex::candidates::geometry::offset_triple(dims, t, [0, 0, dz], h);
-                let col = solidtex::synth::correction::colour(&c, k, t);
-                side.extend(col.map(|v| v.round().clamp(0.0, 255.0) as u8));
-            }
-        }
-        write_png(
-            &a.out.join(format!("slab_side_level{k}.png")),
-            dims.w,
-            (n * 4) as u32,
-            side,
-        )?;
+        let v = c.slab_views(k);
+        let name = |what: &str| a.out.join(format!("{what}_level{k}.png"));
+        write_png(&name("slab"), dims.w, dims.h, v.slab)?;
+        write_png(&name("slab_side"), dims.w, v.side_height, v.side)?;
+        let errs = v.crossbar_error;
         let max = errs.iter().cloned().fold(1e-6f32, f32::max);
         let heat: Vec<u8> = errs.iter().flat_map(|&e| heat(e / max)).collect();
-        write_png(
-            &a.out.join(format!("crossbar_error_level{k}.png")),
-            dims.w,
-            dims.h,
-            heat,
-        )?;
+        write_png(&name("crossbar_error"), dims.w, dims.h, heat)?;
     }
     println!("wrote {} levels to {}", c.level_count(), a.out.display());
     Ok(())

@@ -6,8 +6,8 @@
 //! same way: the slab initialisation without correction, and a per-pixel
 //! shuffle of the exemplar.
 
-use solidtex::eval::{RgbView, SliceScores, anisotropy, score_slice, shuffled_exemplar};
-use solidtex::{
+use solidtex_core::eval::{RgbView, SliceScores, anisotropy, score_slice, shuffled_exemplar};
+use solidtex_core::{
     AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Scheme, SynthParams,
     Texture, TileCache,
 };
@@ -30,7 +30,7 @@ pub struct Score {
     pub histogram: f64,
     /// Axis slices: how much more the slice is stretched along one of its
     /// axes than the exemplar along the matching one (lower is better;
-    /// see [`solidtex::eval::anisotropy`]). None for the oblique cut and
+    /// see [`solidtex_core::eval::anisotropy`]). None for the oblique cut and
     /// the shuffle, which have no matching exemplar axes.
     pub anisotropy: Option<f64>,
 }

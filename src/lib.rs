@@ -1,38 +1,15 @@
-//! solidtex: infinite, spatially deterministic solid textures synthesized
-//! lazily from 2D exemplars (Dong et al. 2008, Zhang et al. 2011).
+//! The `solidtex` command line: precompute candidates, inspect them,
+//! synthesize regions, slices and volumes, plan dependency sets, evaluate
+//! quality, run the HTTP service, benchmark it and load-test it.
 //!
-//! Data flows one way: [`Exemplar`]s → [`Candidates`] (Gaussian stack,
-//! appearance vectors, 3D candidate triples; computed once and saved as
-//! `.stx`) → [`Texture`] (pyramid synthesis of exactly the voxels a request
-//! depends on, in level-aligned tiles kept in a shared [`TileCache`]).
-//!
-//! A voxel's colour is a pure function of (candidates, synthesis parameters,
-//! integer position): request shape, thread count and cache state never
-//! change a byte.
+//! The method is `solidtex_core`; the service is `solidtex_server`. This
+//! crate only parses arguments, reads and writes files and reports.
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
-pub mod appearance;
-pub mod bundled;
-pub mod candidates;
-pub mod error;
-pub mod eval;
-pub mod exemplar;
+mod bench;
+mod cli;
+mod evalcmd;
 pub mod loadtest;
-pub mod orientation;
-pub mod params;
-pub mod peak_alloc;
-pub mod server;
-pub mod stack;
-pub mod synth;
-pub mod texture;
 
-pub use candidates::{Candidates, PrecomputeReport, Stage};
-pub use error::{CorruptKind, Error, Result};
-pub use exemplar::{Exemplar, ExemplarSet};
-pub use params::{
-    AnalysisParams, Arrangement, Correction, Orientation, Scheme, Slices, SynthParams,
-};
-pub use synth::cache::{CacheStats, TileCache};
-pub use synth::cancel::{CancelFlag, Cancelled, run_cancellable};
-pub use texture::{Axis, CutPlane, Filter, Region, SynthStats, Texture, WorkEstimate};
+pub use cli::{Cli, run};

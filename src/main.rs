@@ -1,14 +1,9 @@
-//! The `solidtex` command line: precompute candidates, inspect them,
-//! synthesize regions, slices and volumes, plan dependency sets, evaluate
-//! quality, run benchmarks and load-test a server.
-
-mod bench;
-mod cli;
-mod evalcmd;
+//! The `solidtex` binary: the allocator, its options, and the command line
+//! of the `solidtex` library.
 
 /// Counts heap bytes for `solidtex bench` and per precompute in the server.
 #[global_allocator]
-static ALLOC: solidtex::peak_alloc::PeakAlloc = solidtex::peak_alloc::PeakAlloc;
+static ALLOC: solidtex_server::peak_alloc::PeakAlloc = solidtex_server::peak_alloc::PeakAlloc;
 
 /// jemalloc's options, read once before its first allocation: it looks up
 /// this symbol by name (a NUL-terminated C string, the `malloc_conf` of
@@ -30,6 +25,5 @@ pub static JEMALLOC_CONF: &[u8; 54] = b"thp:always,background_thread:true,dirty_
 use clap::Parser;
 
 fn main() -> anyhow::Result<()> {
-    let args = cli::Cli::parse();
-    cli::run(args)
+    solidtex::run(solidtex::Cli::parse())
 }

@@ -3,7 +3,7 @@
 mod common;
 
 use common::*;
-use solidtex::{AnalysisParams, Candidates, CorruptKind, Error, Exemplar, ExemplarSet};
+use solidtex_core::{AnalysisParams, Candidates, CorruptKind, Error, Exemplar, ExemplarSet};
 
 #[test]
 fn selected_triples_beat_random_ones_by_a_wide_margin() {

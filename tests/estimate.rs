@@ -3,11 +3,11 @@
 //! it for axis slices and bricks, and under the default budget for what
 //! the viewer, the load test and the benchmarks ask for.
 
-use solidtex::server::ServeArgs;
-use solidtex::{
+use solidtex_core::{
     AnalysisParams, Axis, CutPlane, ExemplarSet, Filter, Region, SynthParams, Texture, TileCache,
     bundled,
 };
+use solidtex_server::ServeArgs;
 use std::sync::Arc;
 
 /// The bundled texture (128², four levels), as served by default.

@@ -7,8 +7,8 @@ mod common;
 mod server_support;
 
 use proptest::prelude::*;
-use solidtex::Candidates;
-use solidtex::server::query::{Query, parse_vec3};
+use solidtex_core::Candidates;
+use solidtex_server::query::{Query, parse_vec3};
 
 /// Offset of the payload in a `.stx` file: magic, version, length, CRC.
 const HEADER: usize = 8 + 4 + 8 + 4;

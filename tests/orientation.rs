@@ -4,11 +4,11 @@
 mod common;
 
 use common::*;
-use solidtex::orientation::{Grain, Layout};
-use solidtex::{
+use solidtex_core::{
     AnalysisParams, Arrangement, Candidates, Exemplar, ExemplarSet, Orientation, Region,
     SynthParams, Texture, TileCache,
 };
+use solidtex_core::{Grain, Layout};
 use std::sync::Arc;
 
 fn candidates(e: &Exemplar, orientation: Orientation) -> Arc<Candidates> {
@@ -44,7 +44,11 @@ fn the_grain_of_wood_and_leather_is_detected_and_leopard_and_marble_are_not() {
         ("wood_wood5", exemplar("wood_wood5.png"), true),
         ("animal_leather", exemplar("animal_leather.png"), true),
         ("animal_leopard", exemplar("animal_leopard.png"), false),
-        ("stone_pink_marble", solidtex::bundled::exemplar(), false),
+        (
+            "stone_pink_marble",
+            solidtex_core::bundled::exemplar(),
+            false,
+        ),
     ] {
         let g = Grain::measure(&e);
         let layout = Layout::resolve(&ExemplarSet::single(e), &Orientation::Auto).unwrap();

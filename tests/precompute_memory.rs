@@ -8,9 +8,9 @@ mod server_support;
 
 use serde_json::Value;
 use server_support::*;
-use solidtex::candidates::estimated_peak_bytes;
-use solidtex::peak_alloc::{Meter, PeakAlloc};
-use solidtex::{AnalysisParams, Candidates, Exemplar, ExemplarSet};
+
+use solidtex_core::{AnalysisParams, Candidates, Exemplar, ExemplarSet};
+use solidtex_server::peak_alloc::{Meter, PeakAlloc};
 
 #[global_allocator]
 static ALLOC: PeakAlloc = PeakAlloc;
@@ -62,7 +62,8 @@ fn the_estimate_bounds_the_measured_peak() {
         (three, AnalysisParams::default()),
     ];
     for (set, params) in cases {
-        let estimate = estimated_peak_bytes(set.width(), set.height(), !set.is_single(), &params);
+        let estimate =
+            Candidates::estimated_peak_bytes(set.width(), set.height(), !set.is_single(), &params);
         let baseline = meter.reset();
         pool.install(|| Candidates::compute(&set, &params, &|_, _| {}).unwrap());
         let peak = meter.peak_above(baseline);
@@ -85,7 +86,7 @@ fn scrape(text: &str, name: &str) -> f64 {
 async fn uploads_over_the_bound_are_refused_and_peaks_are_reported() {
     let dir = tempfile::tempdir().unwrap();
     let mut args = test_args(dir.path());
-    let small = estimated_peak_bytes(32, 32, false, &AnalysisParams::default());
+    let small = Candidates::estimated_peak_bytes(32, 32, false, &AnalysisParams::default());
     args.max_precompute_bytes = small + (small >> 1);
     let s = TestServer::start(args).await;
     let c = client();
@@ -121,7 +122,7 @@ async fn uploads_over_the_bound_are_refused_and_peaks_are_reported() {
 async fn precomputes_run_together_only_within_the_bound() {
     let dir = tempfile::tempdir().unwrap();
     let mut args = test_args(dir.path());
-    let one = estimated_peak_bytes(32, 32, false, &AnalysisParams::default());
+    let one = Candidates::estimated_peak_bytes(32, 32, false, &AnalysisParams::default());
     args.max_precomputes = 3;
     args.max_precompute_bytes = one + (one >> 1);
     let s = TestServer::start(args).await;

@@ -114,8 +114,8 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     assert_eq!(bound(&text, "cache"), (64u64 << 20) as f64);
     let candidates = bound(&text, "candidates");
     assert!(candidates > 0.0, "{text}");
-    let job = solidtex::server::memory::JOB_WORKING_BYTES
-        + solidtex::server::memory::JOB_BYTES_PER_VOXEL * (4 << 20);
+    let job = solidtex_server::memory::JOB_WORKING_BYTES
+        + solidtex_server::memory::JOB_BYTES_PER_VOXEL * (4 << 20);
     assert_eq!(bound(&text, "jobs"), (4 * job) as f64);
     assert_eq!(bound(&text, "precomputes"), 0.0);
 
@@ -1070,14 +1070,14 @@ async fn request_budget_is_enforced() {
     // Bricks larger than the budget are a configuration error.
     let mut args = test_args(dir.path());
     args.max_request_voxels = 1000;
-    let err = solidtex::server::Server::bind(&args).await.err().unwrap();
+    let err = solidtex_server::Server::bind(&args).await.err().unwrap();
     assert!(err.to_string().contains("budget"), "{err}");
     // So are volume chunks larger than the budget.
     let mut args = test_args(dir.path());
     args.max_request_voxels = 4096;
     args.brick_size = 16;
     args.chunk_size = 32;
-    let err = solidtex::server::Server::bind(&args).await.err().unwrap();
+    let err = solidtex_server::Server::bind(&args).await.err().unwrap();
     assert!(err.to_string().contains("chunks"), "{err}");
 }
 
@@ -1289,7 +1289,7 @@ async fn a_cors_origin_that_is_no_header_value_is_refused_at_start() {
     let dir = tempfile::tempdir().unwrap();
     let mut args = test_args(dir.path());
     args.cors_origins = vec!["https://a.example\nx".into()];
-    let err = solidtex::server::Server::bind(&args)
+    let err = solidtex_server::Server::bind(&args)
         .await
         .err()
         .expect("refused");

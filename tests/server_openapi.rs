@@ -6,8 +6,8 @@ mod server_support;
 use axum::body::Body;
 use axum::http::{Method, Request};
 use serde_json::Value;
-use solidtex::server::Server;
-use solidtex::server::routes::{ROUTES, router};
+use solidtex_server::Server;
+use solidtex_server::routes::{ROUTES, router};
 use std::collections::BTreeSet;
 use tower::ServiceExt;
 

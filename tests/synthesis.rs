@@ -3,9 +3,11 @@
 mod common;
 
 use common::*;
-use solidtex::eval::{RgbView, anisotropy};
-use solidtex::params::DEFAULT_CONSISTENCY;
-use solidtex::{Axis, Correction, CutPlane, Filter, Region, Scheme, Slices, SynthParams, Texture};
+use solidtex_core::eval::{RgbView, anisotropy};
+
+use solidtex_core::{
+    Axis, Correction, CutPlane, Filter, Region, Scheme, Slices, SynthParams, Texture,
+};
 
 fn region(t: &Texture, origin: [i64; 3], size: [u32; 3]) -> Vec<u8> {
     t.region(&Region { origin, size }, 0).unwrap().0
@@ -397,7 +399,7 @@ fn levels_of_detail_and_limits() {
     assert_eq!(huge.voxel_count(), None);
     assert!(matches!(
         t.region(&huge, 0),
-        Err(solidtex::Error::TooLarge(_))
+        Err(solidtex_core::Error::TooLarge(_))
     ));
     assert!(t.plan(&huge, 0).is_err());
     assert!(t.slice(Axis::Z, 0, 0, 0, 5000, 1, 0).is_err());
@@ -555,12 +557,19 @@ fn golden_regions_are_pinned() {
     // penalty and full slices were the defaults when the stored textures of earlier versions
     // were written: their bytes stay pinned.
     for (slices, finest_passes, fine_levels, consistency, slab_thickness, golden) in [
-        (Slices::Sparse, 1, 2, DEFAULT_CONSISTENCY, 1, GOLDEN_SPARSE),
+        (
+            Slices::Sparse,
+            1,
+            2,
+            SynthParams::default().consistency,
+            1,
+            GOLDEN_SPARSE,
+        ),
         (
             Slices::Sparse,
             1,
             1,
-            DEFAULT_CONSISTENCY,
+            SynthParams::default().consistency,
             1,
             GOLDEN_SPARSE_ONE_FINE_LEVEL,
         ),
@@ -568,7 +577,7 @@ fn golden_regions_are_pinned() {
             Slices::Sparse,
             1,
             1,
-            DEFAULT_CONSISTENCY,
+            SynthParams::default().consistency,
             5,
             GOLDEN_SPARSE_THICK_SLAB,
         ),

@@ -76,7 +76,7 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         "| machine | {}, {} cores, {:.0} GiB, {} |",
         m.cpu, m.cores, m.memory_gib, m.os
     );
-    let d = solidtex::SynthParams::default();
+    let d = solidtex_core::SynthParams::default();
     let _ = writeln!(
         w,
         "| synthesis exemplar | {} ({} levels; otherwise default parameters: {} passes, {} at the {} finest levels, dual grid M = {}) |\n",
@@ -104,7 +104,7 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         let _ = writeln!(w, "| {what} | {paper} | {target} |");
     }
     let _ = writeln!(w, "\n## Engine\n");
-    let p = solidtex::SynthParams::preview();
+    let p = solidtex_core::SynthParams::preview();
     let _ = writeln!(
         w,
         "Rows marked \"preview\" (and the preview sweep below) use \

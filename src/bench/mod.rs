@@ -18,11 +18,11 @@ pub mod service;
 
 use anyhow::Context;
 use serde::Serialize;
-use solidtex::peak_alloc;
-use solidtex::{
+use solidtex_core::{
     AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Region, Scheme,
     SynthParams, SynthStats, Texture, TileCache,
 };
+use solidtex_server::peak_alloc;
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::path::PathBuf;
@@ -447,7 +447,7 @@ fn warm_row(
     name: String,
     runs: usize,
     target: Option<&'static str>,
-    run: impl FnMut() -> solidtex::Result<(Vec<u8>, SynthStats)>,
+    run: impl FnMut() -> solidtex_core::Result<(Vec<u8>, SynthStats)>,
 ) -> anyhow::Result<Row> {
     let m = measure(runs, run);
     let (bytes, stats) = m.value?;

@@ -7,11 +7,11 @@
 //! compared with: one client alone already keeps every core busy), many
 //! clients, and an interactive plane sweep.
 
+use crate::loadtest::report::{KindSummary, Report};
+use crate::loadtest::workload::{Kind, SweepPlane};
+use crate::loadtest::{self, LoadConfig};
 use anyhow::{Context, bail};
 use serde::Serialize;
-use solidtex::loadtest::report::{KindSummary, Report};
-use solidtex::loadtest::workload::{Kind, SweepPlane};
-use solidtex::loadtest::{self, LoadConfig};
 use std::fmt::Write;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

@@ -65,7 +65,7 @@ fn exemplar_png(variant: u64) -> Vec<u8> {
             rgb.push((200 - stripe * 120) as u8);
         }
     }
-    crate::server::png::encode(side, side, &rgb).expect("a small PNG encodes")
+    solidtex_core::png::encode(side, side, &rgb).expect("a small PNG encodes")
 }
 
 /// Uploads, reads and deletes textures and abandons voxel requests until

@@ -5,7 +5,7 @@
 use crate::server_support::*;
 use serde_json::Value;
 use sha2::{Digest, Sha256};
-use solidtex::server::{ServeArgs, Server};
+use solidtex_server::{ServeArgs, Server};
 use std::fs;
 use std::path::Path;
 
@@ -158,7 +158,7 @@ async fn data_directories_of_the_first_layout_still_load() {
     ] {
         params.remove(k).unwrap();
     }
-    let stored = solidtex::server::spec::TextureParams::from_stored(params).unwrap();
+    let stored = solidtex_server::spec::TextureParams::from_stored(params).unwrap();
     let then = SynthParamsVersion1 {
         seed: stored.synth.seed,
         passes: stored.synth.passes,
@@ -169,7 +169,7 @@ async fn data_directories_of_the_first_layout_still_load() {
         correct_init_level: stored.synth.correct_init_level,
         contrast: stored.synth.contrast,
     };
-    let e = solidtex::Exemplar::open(tex.join(&new_id).join("exemplar.png")).unwrap();
+    let e = solidtex_core::Exemplar::open(tex.join(&new_id).join("exemplar.png")).unwrap();
     let mut h = Sha256::new();
     h.update(b"solidtex texture v1\0");
     for _ in 0..3 {

@@ -75,7 +75,7 @@ async fn a_malformed_allow_list_stops_the_start() {
     let dir = tempfile::tempdir().unwrap();
     let mut args = test_args(dir.path());
     args.allowed_hosts = vec!["not a host".into()];
-    let err = solidtex::server::Server::bind(&args)
+    let err = solidtex_server::Server::bind(&args)
         .await
         .err()
         .expect("a bad host name is refused");

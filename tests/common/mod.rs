@@ -2,7 +2,7 @@
 //! precomputed once per test binary.
 #![allow(dead_code)]
 
-use solidtex::{
+use solidtex_core::{
     AnalysisParams, Candidates, Exemplar, ExemplarSet, SynthParams, Texture, TileCache,
 };
 use std::path::PathBuf;

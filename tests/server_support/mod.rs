@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use serde_json::Value;
-use solidtex::server::{ServeArgs, Server};
+use solidtex_server::{ServeArgs, Server};
 use std::net::SocketAddr;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -66,7 +66,7 @@ pub struct TestServer {
     /// Bound address.
     pub addr: SocketAddr,
     /// Handler state.
-    pub state: solidtex::server::routes::AppState,
+    pub state: solidtex_server::routes::AppState,
     stop: Option<oneshot::Sender<()>>,
     handle: Option<JoinHandle<anyhow::Result<()>>>,
 }

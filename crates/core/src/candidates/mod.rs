@@ -1,0 +1,1003 @@
+//! Everything computed once per texture before any voxel is synthesized
+//! (Dong et al. §"Candidate pre-computation"): Gaussian stacks, appearance
+//! vectors, 2D similarity sets, 3D candidate triples (crossbar search, then
+//! coherence filtering) and the PCA-projected, 8-bit quantised
+//! 3-neighbourhood of every candidate. [`Candidates::save`] and
+//! [`Candidates::load`] move it to and from the `.stx` format.
+
+pub mod coherence;
+mod format;
+pub mod geometry;
+pub mod search;
+pub mod sparse;
+
+use crate::appearance::{self, AppearanceLevel, Pca, Projector};
+use crate::error::{Error, Result};
+use crate::exemplar::ExemplarSet;
+use crate::orientation::Layout;
+use crate::params::AnalysisParams;
+use crate::stack::{GaussianStack, spacing};
+use geometry::Dims;
+use kiddo::SquaredEuclidean;
+use rayon::prelude::*;
+use search::{Scored, Strips};
+use std::num::NonZero;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Stages of the precomputation, for progress reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Gaussian stacks and appearance vectors.
+    Analysis,
+    /// Strip search and crossbar errors.
+    Search,
+    /// Coherence filtering.
+    Coherence,
+    /// 2D similarity sets and neighbourhood vectors.
+    Finish,
+}
+
+/// Per-level summary of the candidate sets.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LevelReport {
+    /// `histogram[n]` pixels (over all three planes) have n candidates.
+    pub histogram: Vec<u64>,
+    /// Pixels that fell back to their best triple.
+    pub fallbacks: u64,
+    /// Coherence filter iterations.
+    pub iterations: u32,
+    /// Mean crossbar error of every pixel's first candidate.
+    pub mean_best_error: f64,
+    /// Mean crossbar error of hashed random triples, for comparison.
+    pub mean_random_error: f64,
+}
+
+/// Summary of a precomputation: time per stage and candidate statistics.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PrecomputeReport {
+    /// Seconds spent per stage name.
+    pub stage_seconds: Vec<(String, f64)>,
+    /// One entry per level, finest first.
+    pub levels: Vec<LevelReport>,
+}
+
+/// Candidate triples of one plane at one level, in compressed-row form.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlaneCandidates {
+    /// `offsets[c]..offsets[c + 1]` indexes the candidates of pixel c
+    /// (shared by the rotated copies of a single exemplar's planes).
+    pub offsets: Arc<Vec<u32>>,
+    /// Triples (xy, yz, zx pixel indices), best first per pixel.
+    pub triples: Vec<[u32; 3]>,
+    /// Crossbar error of each triple.
+    pub errors: Vec<f32>,
+}
+
+impl PlaneCandidates {
+    fn from_lists(lists: &[Vec<Scored>]) -> Self {
+        let mut offsets = Vec::with_capacity(lists.len() + 1);
+        let mut triples = Vec::new();
+        let mut errors = Vec::new();
+        offsets.push(0);
+        for l in lists {
+            for s in l {
+                triples.push(s.triple);
+                errors.push(s.error);
+            }
+            offsets.push(triples.len() as u32);
+        }
+        PlaneCandidates {
+            offsets: Arc::new(offsets),
+            triples,
+            errors,
+        }
+    }
+
+    /// Candidate index range of pixel `c`.
+    #[inline]
+    pub fn range(&self, c: u32) -> std::ops::Range<usize> {
+        self.offsets[c as usize] as usize..self.offsets[c as usize + 1] as usize
+    }
+
+    /// The same candidates seen from plane `p` when all three exemplars are
+    /// one image: coordinates rotate with the plane roles.
+    fn rotated(&self, p: usize) -> Self {
+        let triples = self
+            .triples
+            .iter()
+            .map(|t| {
+                let mut o = [0u32; 3];
+                for (j, &c) in t.iter().enumerate() {
+                    o[(j + p) % 3] = c;
+                }
+                o
+            })
+            .collect();
+        PlaneCandidates {
+            offsets: self.offsets.clone(),
+            triples,
+            errors: self.errors.clone(),
+        }
+    }
+}
+
+/// What is stored per level; the rest is derived at load.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct StoredLevel {
+    pub appearance_pca: [Pca; 3],
+    pub candidates: [PlaneCandidates; 3],
+    /// `k2` most similar pixels per pixel (itself first), per plane.
+    pub similar: [Vec<u32>; 3],
+    pub k2: usize,
+    /// PCA of the concatenated appearance vectors of a triple's three pixels.
+    pub joint_pca: Pca,
+    /// Quantisation scale of joint vectors: byte = round(v·scale) + 128.
+    pub quant_scale: f32,
+}
+
+/// One level, with derived data for synthesis.
+#[derive(Clone, Debug)]
+pub struct Level {
+    pub(crate) stored: StoredLevel,
+    /// Appearance vectors per plane.
+    pub appearance: [AppearanceLevel; 3],
+    /// Quantised 3-neighbourhood vector of every candidate, per plane,
+    /// `joint_dims` bytes each, in candidate order.
+    pub vectors: [Vec<u8>; 3],
+    /// The appearance vectors of each pixel's 2D similarity set, quantised
+    /// and stored beside the set, so that one correction reads one cache
+    /// line per neighbour instead of chasing every similar pixel.
+    /// With one exemplar, only plane 0's (see [`Level::alias`]).
+    similar_vectors: [Vec<[i16; SIMILAR_DIMS]>; 3],
+    /// Scale of [`Level::similar_vectors`] per plane (see [`quantise_wide`]).
+    similar_scale: [f32; 3],
+    /// Each pixel's share of the joint projection, per plane (`joint_dims`
+    /// floats per pixel): the joint vector of any triple is the sum of its
+    /// three shares less the projected mean, so triples that are not
+    /// precomputed candidates (coherent ones) are scored cheaply.
+    joint_shares: [Vec<f32>; 3],
+    /// The plane whose 2D tables (similarity sets and their vectors) plane
+    /// p reads: with one exemplar for all three planes those tables are
+    /// equal, and reading one copy keeps it in cache where three would not
+    /// stay.
+    alias: [usize; 3],
+    /// Each plane's weight in the sparse neighbourhoods' matching.
+    weights: [f32; 3],
+    /// Sparse appearance-space neighbourhoods, built when a correction
+    /// first needs them.
+    sparse: std::sync::OnceLock<sparse::SparseTables>,
+}
+
+impl Level {
+    /// Candidate triples of plane `p`.
+    pub fn candidates(&self, p: usize) -> &PlaneCandidates {
+        &self.stored.candidates[p]
+    }
+
+    /// The 2D similarity set of pixel `c` in plane `p`.
+    pub fn similar(&self, p: usize, c: u32) -> &[u32] {
+        let k2 = self.stored.k2;
+        &self.stored.similar[self.alias[p]][c as usize * k2..(c as usize + 1) * k2]
+    }
+
+    /// Quantised appearance vectors of the similarity set of pixel `c` in
+    /// plane `p`, in the order of [`Level::similar`].
+    #[inline]
+    pub fn similar_vectors(&self, p: usize, c: u32) -> &[[i16; SIMILAR_DIMS]] {
+        let k2 = self.stored.k2;
+        &self.similar_vectors[self.alias[p]][c as usize * k2..(c as usize + 1) * k2]
+    }
+
+    /// Quantises an appearance vector of plane `p` like
+    /// [`Level::similar_vectors`] (the first [`SIMILAR_DIMS`] dimensions).
+    #[inline]
+    pub fn quantise_appearance(&self, p: usize, v: &[f32]) -> [i16; SIMILAR_DIMS] {
+        quantise_wide_vector(v, self.similar_scale[p])
+    }
+
+    /// Plane `p`'s share of the joint projection of pixel `c`.
+    #[inline]
+    pub fn joint_share(&self, p: usize, c: u32) -> &[f32] {
+        let d = self.stored.joint_pca.dims;
+        &self.joint_shares[p][c as usize * d..(c as usize + 1) * d]
+    }
+
+    /// Dimensions of the quantised 3-neighbourhood vectors.
+    pub fn joint_dims(&self) -> usize {
+        self.stored.joint_pca.dims
+    }
+
+    /// The joint PCA.
+    pub fn joint_pca(&self) -> &Pca {
+        &self.stored.joint_pca
+    }
+
+    /// Quantisation scale of the 3-neighbourhood vectors.
+    pub fn quant_scale(&self) -> f32 {
+        self.stored.quant_scale
+    }
+
+    /// The sparse appearance-space tables of this level (level `k` of an
+    /// exemplar of size `dims`), built on first use.
+    pub fn sparse_tables(&self, dims: Dims, k: usize) -> &sparse::SparseTables {
+        self.sparse.get_or_init(|| {
+            sparse::SparseTables::new(
+                &self.appearance,
+                &self.stored.candidates,
+                dims,
+                spacing(k) as i64,
+                self.weights,
+            )
+        })
+    }
+}
+
+/// Precomputed candidate data of one texture.
+pub struct Candidates {
+    exemplars: ExemplarSet,
+    /// The exemplars as analysed: each plane's turned by the layout.
+    analysed: ExemplarSet,
+    layout: Layout,
+    params: AnalysisParams,
+    dims: Dims,
+    stacks: [GaussianStack; 3],
+    levels: Vec<Level>,
+    report: PrecomputeReport,
+    /// Content fingerprint, the texture part of tile cache keys: taken
+    /// from the file when loaded, else from the encoding on first use.
+    digest: std::sync::OnceLock<u64>,
+}
+
+impl std::fmt::Debug for Candidates {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "Candidates({}x{}, {} levels)",
+            self.dims.w,
+            self.dims.h,
+            self.levels.len()
+        )
+    }
+}
+
+/// Appearance dimensions used by the similarity k-d tree and the first
+/// stage of correction.
+pub const SIMILAR_DIMS: usize = 8;
+
+/// Largest magnitude of a [`quantise_wide`] value: squared differences of
+/// [`SIMILAR_DIMS`] such values fit an `i32` sum.
+const WIDE_MAX: f32 = 4095.0;
+
+/// The first [`SIMILAR_DIMS`] coordinates of `v`, [`quantise_wide`]d
+/// (missing ones are zero).
+fn quantise_wide_vector(v: &[f32], scale: f32) -> [i16; SIMILAR_DIMS] {
+    let mut q = [0i16; SIMILAR_DIMS];
+    for (o, &x) in q.iter_mut().zip(v) {
+        *o = quantise_wide(x, scale);
+    }
+    q
+}
+
+/// Sum of the squares of 16-bit differences, taken in pairs so that eight
+/// lanes are one `pmaddwd` (`N` even). Quantised distances of both
+/// corrections end here.
+#[inline(always)]
+pub fn sum_of_squares<const N: usize>(e: &[i16; N]) -> u32 {
+    let (pairs, _) = e.as_chunks::<2>();
+    pairs
+        .iter()
+        .map(|p| p[0] as i32 * p[0] as i32 + p[1] as i32 * p[1] as i32)
+        .sum::<i32>() as u32
+}
+
+/// Quantises an appearance coordinate to a 13-bit signed integer.
+#[inline]
+pub fn quantise_wide(v: f32, scale: f32) -> i16 {
+    // Rounds half up through a non-negative truncation (see [`quantise`]).
+    ((v * scale).clamp(-WIDE_MAX, WIDE_MAX) + (WIDE_MAX + 0.5)) as i32 as i16 - WIDE_MAX as i16
+}
+
+impl Candidates {
+    /// Heap bytes that [`Candidates::compute`] is expected to peak at for
+    /// exemplars of `width`×`height` pixels (`distinct_planes`: three
+    /// different exemplars, searched one by one), an upper bound fitted to
+    /// measurements (docs/server.md). Most of it is the search's lists: for
+    /// every level, searched plane and pixel its best `triples` candidates (16
+    /// bytes each), all kept until the coherence filter reads them.
+    pub fn estimated_peak_bytes(
+        width: u32,
+        height: u32,
+        distinct_planes: bool,
+        params: &AnalysisParams,
+    ) -> u64 {
+        let pixels = f64::from(width) * f64::from(height);
+        let searched = if distinct_planes { 3.0 } else { 1.0 };
+        let levels = f64::from(params.levels);
+        let list = 16.0 * (f64::from(params.triples) + 1.0) + 54.0;
+        // The lists of every level, and the filter's working copy of about
+        // two thirds of one more.
+        let search = (searched * levels + 1.7) * list;
+        // With few triples the peak comes later, in the coherence filter and
+        // the final tables.
+        let later = 1000.0 * searched * levels;
+        let n = f64::from(params.neighbourhood);
+        let wider = 11.0 * (n * n - 25.0).max(0.0);
+        let kept = 40.0 * (f64::from(params.max_candidates) - 12.0).max(0.0);
+        let per_pixel = search.max(later) + wider + kept;
+        // Small exemplars peak at fixed costs (samples of set sizes, trees).
+        ((pixels * per_pixel) as u64 + (4 << 20)).max(10 << 20)
+    }
+
+    /// Runs the whole precomputation; `progress(stage, fraction 0..1)` is
+    /// called as it advances. Uses the current rayon pool; the result is
+    /// identical whatever its size.
+    pub fn compute(
+        exemplars: &ExemplarSet,
+        params: &AnalysisParams,
+        progress: &(dyn Fn(Stage, f32) + Sync),
+    ) -> Result<Candidates> {
+        params.validate()?;
+        let layout = Layout::resolve(exemplars, &params.orientation)?;
+        let given = exemplars;
+        // Turned planes differ from each other: the search takes the
+        // general path, one plane at a time.
+        let analysed = layout.apply(given)?;
+        let exemplars = &analysed;
+        let dims = Dims::new(exemplars.width(), exemplars.height());
+        let single = exemplars.is_single();
+        let levels_n = params.levels as usize;
+        let n = params.neighbourhood;
+        let mut report = PrecomputeReport::default();
+        let mut timer = Instant::now();
+        let mut lap = |report: &mut PrecomputeReport, name: &str| {
+            report
+                .stage_seconds
+                .push((name.to_string(), timer.elapsed().as_secs_f64()));
+            timer = Instant::now();
+        };
+
+        progress(Stage::Analysis, 0.0);
+        let stacks = build_stacks(exemplars, levels_n);
+        let mut appearance_pca: Vec<[Pca; 3]> = Vec::new();
+        for k in 0..levels_n {
+            let fit = |p: usize| {
+                let all = appearance::all_neighbourhoods(&stacks[p], k, n);
+                let stride = (dims.len() / 8192).max(1);
+                let len = (n * n * 3) as usize;
+                let sample: Vec<f32> = all
+                    .chunks_exact(len)
+                    .step_by(stride)
+                    .flatten()
+                    .copied()
+                    .collect();
+                Pca::fit(&sample, len, params.pca_dims as usize)
+            };
+            let first = fit(0);
+            let pcas = if single {
+                [first.clone(), first.clone(), first]
+            } else {
+                [first, fit(1), fit(2)]
+            };
+            appearance_pca.push(pcas);
+            progress(Stage::Analysis, (k + 1) as f32 / levels_n as f32);
+        }
+        lap(&mut report, "analysis");
+
+        let mut raw_lists: Vec<Vec<Vec<Vec<Scored>>>> = Vec::new();
+        for k in 0..levels_n {
+            let strips: Vec<Strips> = if single {
+                vec![Strips::new(&stacks[0], k, n)]
+            } else {
+                (0..3).map(|p| Strips::new(&stacks[p], k, n)).collect()
+            };
+            let refs: [&Strips; 3] = if single {
+                [&strips[0], &strips[0], &strips[0]]
+            } else {
+                [&strips[0], &strips[1], &strips[2]]
+            };
+            let planes = if single { 1 } else { 3 };
+            let per_plane: Vec<Vec<Vec<Scored>>> = (0..planes)
+                .map(|p| {
+                    search::search_plane(
+                        p,
+                        refs,
+                        dims,
+                        params.strips as usize,
+                        params.triples as usize,
+                    )
+                })
+                .collect();
+            raw_lists.push(per_plane);
+            progress(Stage::Search, (k + 1) as f32 / levels_n as f32);
+        }
+        lap(&mut report, "search");
+
+        let mut filtered_levels: Vec<[PlaneCandidates; 3]> = Vec::new();
+        for (k, per_plane) in raw_lists.into_iter().enumerate() {
+            let h = spacing(k) as i64;
+            let mut level_report = LevelReport {
+                histogram: vec![0; params.max_candidates as usize + 1],
+                ..Default::default()
+            };
+            let mut planes: Vec<PlaneCandidates> = Vec::new();
+            for (p, lists) in per_plane.into_iter().enumerate() {
+                let f = coherence::filter(p, lists, dims, h, params.max_candidates as usize);
+                let copies = if single { 3 } else { 1 };
+                for l in &f.lists {
+                    level_report.histogram[l.len()] += copies;
+                }
+                level_report.fallbacks += f.fallbacks as u64 * copies;
+                level_report.iterations = level_report.iterations.max(f.iterations as u32);
+                planes.push(PlaneCandidates::from_lists(&f.lists));
+            }
+            let planes: [PlaneCandidates; 3] = if single {
+                let base = planes.pop_single();
+                [base.clone(), base.rotated(1), base.rotated(2)]
+            } else {
+                planes.try_into().expect("three planes")
+            };
+            level_report.mean_best_error = mean_best_error(&planes);
+            level_report.mean_random_error = mean_random_error(&stacks, k, n, dims);
+            report.levels.push(level_report);
+            filtered_levels.push(planes);
+            progress(Stage::Coherence, (k + 1) as f32 / levels_n as f32);
+        }
+        lap(&mut report, "coherence");
+
+        let mut stored = Vec::new();
+        for (k, candidates) in filtered_levels.into_iter().enumerate() {
+            let pcas = appearance_pca[k].clone();
+            let appearance: Vec<AppearanceLevel> = (0..3)
+                .map(|p| appearance::project_all(&stacks[p], k, n, &pcas[p]))
+                .collect();
+            let k2 = if k == 0 {
+                params.similar_fine
+            } else {
+                params.similar_coarse
+            } as usize;
+            let similar_0 = similar_sets(&appearance[0], dims, k2, spacing(k) as i64);
+            let similar = if single {
+                [similar_0.clone(), similar_0.clone(), similar_0]
+            } else {
+                [
+                    similar_0,
+                    similar_sets(&appearance[1], dims, k2, spacing(k) as i64),
+                    similar_sets(&appearance[2], dims, k2, spacing(k) as i64),
+                ]
+            };
+            let joint_dims = joint_dims(k, levels_n);
+            let joint_pca = fit_joint(&appearance, &candidates, joint_dims);
+            let quant_scale = quant_scale(&appearance, &candidates, &joint_pca);
+            stored.push(StoredLevel {
+                appearance_pca: pcas,
+                candidates,
+                similar,
+                k2,
+                joint_pca,
+                quant_scale,
+            });
+            progress(Stage::Finish, (k + 1) as f32 / levels_n as f32);
+        }
+        let levels = derive_levels(&stacks, stored, n, single, layout.arrangement.weights);
+        lap(&mut report, "finish");
+        Ok(Candidates {
+            exemplars: given.clone(),
+            analysed,
+            layout,
+            params: params.clone(),
+            dims,
+            stacks,
+            levels,
+            report,
+            digest: std::sync::OnceLock::new(),
+        })
+    }
+
+    /// Rebuilds derived data around stored levels (used by `load`).
+    pub(crate) fn from_stored(
+        exemplars: ExemplarSet,
+        params: AnalysisParams,
+        layout: Layout,
+        stored: Vec<StoredLevel>,
+        report: PrecomputeReport,
+    ) -> Result<Candidates> {
+        params.validate()?;
+        let analysed = layout.apply(&exemplars)?;
+        let dims = Dims::new(analysed.width(), analysed.height());
+        if stored.len() != params.levels as usize {
+            return Err(Error::CorruptFile(crate::error::CorruptKind::Invalid(
+                "level count".into(),
+            )));
+        }
+        let stacks = build_stacks(&analysed, stored.len());
+        let levels = derive_levels(
+            &stacks,
+            stored,
+            params.neighbourhood,
+            analysed.is_single(),
+            layout.arrangement.weights,
+        );
+        Ok(Candidates {
+            exemplars,
+            analysed,
+            layout,
+            params,
+            dims,
+            stacks,
+            levels,
+            report,
+            digest: std::sync::OnceLock::new(),
+        })
+    }
+
+    /// Writes the `.stx` form.
+    pub fn save(&self, w: &mut dyn std::io::Write) -> Result<()> {
+        let bytes = format::encode(self);
+        w.write_all(&bytes)?;
+        Ok(())
+    }
+
+    /// The `.stx` form as bytes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        format::encode(self)
+    }
+
+    /// Reads the `.stx` form; a truncated, corrupt or foreign file is an
+    /// error.
+    pub fn load(bytes: &[u8]) -> Result<Candidates> {
+        let c = format::decode(bytes)?;
+        _ = c.digest.set(crate::hash::fingerprint(bytes));
+        Ok(c)
+    }
+
+    /// A fingerprint of the content: equal candidates loaded from the same
+    /// file, or computed once, share it; different ones differ.
+    pub(crate) fn digest(&self) -> u64 {
+        *self
+            .digest
+            .get_or_init(|| crate::hash::fingerprint(&self.to_bytes()))
+    }
+
+    /// The exemplars as given.
+    pub fn exemplars(&self) -> &ExemplarSet {
+        &self.exemplars
+    }
+
+    /// The exemplars as analysed and synthesized from: each plane's turned
+    /// by [`Candidates::layout`].
+    pub fn analysed(&self) -> &ExemplarSet {
+        &self.analysed
+    }
+
+    /// How the exemplar is laid on the planes, and what was measured to
+    /// choose it.
+    pub fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    /// The analysis parameters.
+    pub fn params(&self) -> &AnalysisParams {
+        &self.params
+    }
+
+    /// Exemplar size.
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// Precomputation summary.
+    pub fn report(&self) -> &PrecomputeReport {
+        &self.report
+    }
+
+    /// Number of levels (finest is 0).
+    pub fn level_count(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Level `k` (0 = finest).
+    pub fn level(&self, k: usize) -> &Level {
+        &self.levels[k]
+    }
+
+    /// Gaussian stack of plane `p`.
+    pub fn stack(&self, p: usize) -> &GaussianStack {
+        &self.stacks[p]
+    }
+
+    pub(crate) fn stored_levels(&self) -> impl Iterator<Item = &StoredLevel> {
+        self.levels.iter().map(|l| &l.stored)
+    }
+
+    /// Crossbar error of any triple at level `k`, from the stacks.
+    pub fn crossbar_error(&self, k: usize, t: [u32; 3]) -> f32 {
+        triple_error(&self.stacks, k, self.params.neighbourhood, self.dims, t)
+    }
+
+    /// Bytes held by the candidate triples in their stored form (two
+    /// foreign coordinates per triple, a count per pixel), and bytes of
+    /// everything held in memory, derived data included (the appearance
+    /// correction's tables once a texture has built them).
+    pub fn memory_bytes(&self) -> (usize, usize) {
+        let coord_bits = (self.dims.len() as f64).log2().ceil() as usize;
+        let mut compact = 0usize;
+        let mut total = 0usize;
+        for l in &self.levels {
+            let planes = if self.analysed.is_single() { 1 } else { 3 };
+            for p in 0..planes {
+                let c = &l.stored.candidates[p];
+                compact += (c.triples.len() * 2 * coord_bits).div_ceil(8) + self.dims.len();
+            }
+            for p in 0..3 {
+                let c = &l.stored.candidates[p];
+                total += c.triples.len() * 16 + c.offsets.len() * 4;
+                total += l.vectors[p].len() + l.stored.similar[p].len() * 4;
+                total += l.appearance[p].vectors.len() * 4;
+            }
+            total += l.sparse.get().map_or(0, |t| t.memory_bytes());
+        }
+        for s in &self.stacks {
+            total += s.len() * self.dims.len() * 12;
+        }
+        (compact, total)
+    }
+}
+
+trait PopSingle {
+    fn pop_single(self) -> PlaneCandidates;
+}
+
+impl PopSingle for Vec<PlaneCandidates> {
+    fn pop_single(mut self) -> PlaneCandidates {
+        self.pop().expect("one plane")
+    }
+}
+
+fn build_stacks(exemplars: &ExemplarSet, levels: usize) -> [GaussianStack; 3] {
+    if exemplars.is_single() {
+        let s = GaussianStack::new(exemplars.plane(0), levels);
+        [s.clone(), s.clone(), s]
+    } else {
+        [0, 1, 2].map(|p| GaussianStack::new(exemplars.plane(p), levels))
+    }
+}
+
+/// Joint 3-neighbourhood dimensions: 12 at the coarsest level down to 8 at
+/// the finest (coarse levels capture less variance per component).
+fn joint_dims(k: usize, levels: usize) -> usize {
+    if levels <= 1 {
+        return 8;
+    }
+    8 + (4 * k + (levels - 1) / 2) / (levels - 1)
+}
+
+/// Plane `p`'s block of the joint basis applied to every pixel's
+/// appearance vector.
+fn joint_shares(appearance: &[AppearanceLevel; 3], joint: &Pca, p: usize) -> Vec<f32> {
+    let start: usize = appearance[..p].iter().map(|a| a.pca.dims).sum();
+    let app = &appearance[p];
+    let d = app.pca.dims;
+    let pixels = app.vectors.len() / d;
+    let mut out = vec![0f32; pixels * joint.dims];
+    out.par_chunks_mut(joint.dims)
+        .enumerate()
+        .for_each(|(c, dst)| {
+            let v = app.vector(c);
+            for (j, o) in dst.iter_mut().enumerate() {
+                let row = &joint.basis[j * joint.input + start..j * joint.input + start + d];
+                *o = appearance::dot(v, row);
+            }
+        });
+    out
+}
+
+fn concat(appearance: &[AppearanceLevel], t: [u32; 3], out: &mut Vec<f32>) {
+    out.clear();
+    for (p, a) in appearance.iter().enumerate() {
+        out.extend_from_slice(a.vector(t[p] as usize));
+    }
+}
+
+fn fit_joint(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], dims: usize) -> Pca {
+    let input: usize = appearance.iter().map(|a| a.pca.dims).sum();
+    let total: usize = planes.iter().map(|c| c.triples.len()).sum();
+    let stride = (total / 20000).max(1);
+    let mut sample = Vec::new();
+    let mut buf = Vec::new();
+    for c in planes {
+        for t in c.triples.iter().step_by(stride) {
+            concat(appearance, *t, &mut buf);
+            sample.extend_from_slice(&buf);
+        }
+    }
+    Pca::fit(&sample, input, dims)
+}
+
+fn quant_scale(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], pca: &Pca) -> f32 {
+    let mut max = 1e-6f32;
+    let mut buf = Vec::new();
+    let mut out = vec![0f32; pca.dims];
+    let projector = Projector::new(pca);
+    for c in planes {
+        for t in &c.triples {
+            concat(appearance, *t, &mut buf);
+            projector.project(&buf, &mut out);
+            for v in &out {
+                max = max.max(v.abs());
+            }
+        }
+    }
+    127.0 / max
+}
+
+/// Quantises a projected vector: byte = round(v·scale) + 128 (halves up),
+/// clamped.
+#[inline]
+pub fn quantise(v: f32, scale: f32) -> u8 {
+    // Rounds half up by truncating a non-negative value: no libm call in
+    // the correction's inner loop.
+    (v * scale + 128.5).clamp(0.0, 255.0) as u8
+}
+
+/// Derives each level's synthesis tables. `single`: one exemplar serves
+/// all three planes, so their stacks, PCAs and similarity sets are equal and
+/// the per-plane 2D tables are computed once.
+fn derive_levels(
+    stacks: &[GaussianStack; 3],
+    stored: Vec<StoredLevel>,
+    n: u32,
+    single: bool,
+    weights: [f32; 3],
+) -> Vec<Level> {
+    let alias = if single { [0, 0, 0] } else { [0, 1, 2] };
+    stored
+        .into_iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let appearance: [AppearanceLevel; 3] = if single {
+                let a = appearance::project_all(&stacks[0], k, n, &s.appearance_pca[0]);
+                [a.clone(), a.clone(), a]
+            } else {
+                [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &s.appearance_pca[p]))
+            };
+            // The projected mean once per level, not once per candidate
+            // (`Projector` computes what `Pca::project` does, bit for bit).
+            let joint = Projector::new(&s.joint_pca);
+            let vectors = [0, 1, 2].map(|p| {
+                let c = &s.candidates[p];
+                let d = s.joint_pca.dims;
+                let mut bytes = vec![0u8; c.triples.len() * d];
+                bytes
+                    .par_chunks_mut(d)
+                    .zip(c.triples.par_iter())
+                    .for_each_init(
+                        || (Vec::new(), vec![0f32; d]),
+                        |(buf, out), (dst, t)| {
+                            concat(&appearance, *t, buf);
+                            joint.project(buf, out);
+                            for (b, v) in dst.iter_mut().zip(out.iter()) {
+                                *b = quantise(*v, s.quant_scale);
+                            }
+                        },
+                    );
+                bytes
+            });
+            let similar_scale = [0, 1, 2].map(|p| {
+                let d = appearance[p].pca.dims.min(SIMILAR_DIMS);
+                let max = appearance[p]
+                    .vectors
+                    .chunks_exact(appearance[p].pca.dims)
+                    .flat_map(|v| &v[..d])
+                    .fold(1e-6f32, |m, v| m.max(v.abs()));
+                WIDE_MAX / max
+            });
+            let similar_vectors = [0, 1, 2].map(|p| {
+                if alias[p] != p {
+                    return Vec::new();
+                }
+                let d = appearance[p].pca.dims.min(SIMILAR_DIMS);
+                s.similar[p]
+                    .iter()
+                    .map(|&c| {
+                        quantise_wide_vector(
+                            &appearance[p].vector(c as usize)[..d],
+                            similar_scale[p],
+                        )
+                    })
+                    .collect()
+            });
+            let joint_shares = [0, 1, 2].map(|p| joint_shares(&appearance, &s.joint_pca, p));
+            Level {
+                stored: s,
+                appearance,
+                vectors,
+                similar_vectors,
+                similar_scale,
+                joint_shares,
+                alias,
+                weights,
+                sparse: std::sync::OnceLock::new(),
+            }
+        })
+        .collect()
+}
+
+/// The `k2` pixels most similar to each pixel in appearance space, itself
+/// first, skipping pixels closer than 2·h (they would only repeat the
+/// coherent candidate).
+fn similar_sets(app: &AppearanceLevel, dims: Dims, k2: usize, h: i64) -> Vec<u32> {
+    let d = app.pca.dims.min(SIMILAR_DIMS);
+    let point = |c: usize| {
+        let mut p = [0f32; SIMILAR_DIMS];
+        p[..d].copy_from_slice(&app.vector(c)[..d]);
+        p
+    };
+    let pts: Vec<[f32; SIMILAR_DIMS]> = (0..dims.len()).map(point).collect();
+    let tree: kiddo::ImmutableKdTree<f32, SIMILAR_DIMS> =
+        kiddo::ImmutableKdTree::new_from_slice(&pts);
+    let want = NonZero::new((k2 * 6 + 1).min(dims.len())).expect("non-empty");
+    let (w, hh) = (dims.w as i64, dims.h as i64);
+    (0..dims.len())
+        .into_par_iter()
+        .map(|c| {
+            let mut nn = tree.nearest_n::<SquaredEuclidean>(&pts[c], want);
+            nn.sort_by(|a, b| a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item)));
+            let (cx, cy) = dims.xy(c as u32);
+            let mut out = vec![c as u32];
+            for n in nn {
+                if out.len() == k2 {
+                    break;
+                }
+                let (x, y) = dims.xy(n.item as u32);
+                let dx = (x - cx).rem_euclid(w).min((cx - x).rem_euclid(w));
+                let dy = (y - cy).rem_euclid(hh).min((cy - y).rem_euclid(hh));
+                if dx.max(dy) >= 2 * h {
+                    out.push(n.item as u32);
+                }
+            }
+            while out.len() < k2 {
+                out.push(c as u32);
+            }
+            out
+        })
+        .flatten()
+        .collect()
+}
+
+fn triple_error(stacks: &[GaussianStack; 3], k: usize, n: u32, dims: Dims, t: [u32; 3]) -> f32 {
+    let r = (n / 2) as i64;
+    let h = spacing(k) as i64;
+    let mut e = 0f32;
+    for p in 0..3 {
+        let next = (p + 1) % 3;
+        let (px, py) = dims.xy(t[p]);
+        let (nx, ny) = dims.xy(t[next]);
+        for s in -r..=r {
+            // p's v-strip against next's u-strip.
+            let a = stacks[p].at(k, px, py + s * h);
+            let b = stacks[next].at(k, nx + s * h, ny);
+            e += (0..3).map(|c| (a[c] - b[c]).powi(2)).sum::<f32>();
+        }
+    }
+    e
+}
+
+fn mean_best_error(planes: &[PlaneCandidates; 3]) -> f64 {
+    let mut sum = 0f64;
+    let mut count = 0usize;
+    for c in planes {
+        for px in 0..c.offsets.len() - 1 {
+            let r = c.range(px as u32);
+            if !r.is_empty() {
+                sum += c.errors[r.start] as f64;
+                count += 1;
+            }
+        }
+    }
+    sum / count.max(1) as f64
+}
+
+fn mean_random_error(stacks: &[GaussianStack; 3], k: usize, n: u32, dims: Dims) -> f64 {
+    let samples = 2000u64;
+    let mut sum = 0f64;
+    for i in 0..samples {
+        let t =
+            [0u64, 1, 2].map(|p| (crate::hash::hash3(0x5eed, i, p, 0) % dims.len() as u64) as u32);
+        sum += triple_error(stacks, k, n, dims, t) as f64;
+    }
+    sum / samples as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::exemplar::Exemplar;
+
+    fn pattern(w: u32, seed: u32) -> Exemplar {
+        let rgb: Vec<u8> = (0..w * w * 3)
+            .map(|i| ((i ^ seed.wrapping_mul(0x9e37_79b9)).wrapping_mul(2_654_435_761) >> 24) as u8)
+            .collect();
+        Exemplar::from_rgb(w, w, &rgb).unwrap()
+    }
+
+    fn compute(set: &ExemplarSet) -> Candidates {
+        let params = AnalysisParams {
+            levels: 2,
+            ..AnalysisParams::default()
+        };
+        Candidates::compute(set, &params, &|_, _| {}).unwrap()
+    }
+
+    /// A query is projected unweighted and the tables hold weighted
+    /// vectors: a triple's own 12 locations, as a query, must land on the
+    /// triple's vector, and the weights must change what is compared.
+    #[test]
+    fn weighted_planes_are_weighted_alike_in_tables_and_queries() {
+        let e = pattern(16, 4);
+        let tables_for = |weights: [f32; 3]| {
+            let params = AnalysisParams {
+                levels: 1,
+                orientation: crate::params::Orientation::Given(crate::params::Arrangement {
+                    rotate: [0, 270, 0],
+                    weights,
+                }),
+                ..AnalysisParams::default()
+            };
+            Candidates::compute(&ExemplarSet::single(e.clone()), &params, &|_, _| {}).unwrap()
+        };
+        let weighted = tables_for([1.0, 0.5, 0.1]);
+        let even = tables_for([1.0; 3]);
+        let (level, dims) = (weighted.level(0), weighted.dims());
+        let tables = level.sparse_tables(dims, 0);
+        let d = tables.location_dims();
+        let mut worst = 0;
+        for px in 0..dims.len() as u32 {
+            let t = tables.best(1, px).triples[0];
+            let mut q = Vec::with_capacity(12 * d);
+            for (p, &c) in t.iter().enumerate() {
+                for &(i, j) in &sparse::DIAGONALS {
+                    let at = dims.shift(c, i, j) as usize;
+                    q.extend_from_slice(level.appearance[p].vector(at));
+                }
+            }
+            let got = tables.project(&q);
+            worst = worst.max(sparse::wide_distance(&got, &tables.triple_vector(t)));
+        }
+        // Shares are rounded one by one (three and the bias), so a triple's
+        // vector is within 2 units per dimension of the direct projection;
+        // an unweighted query side would be thousands away.
+        assert!(worst <= 4 * sparse::SPARSE_DIMS as u32, "{worst}");
+        let other = even.level(0).sparse_tables(dims, 0);
+        assert_ne!(other.best(1, 0).vectors, tables.best(1, 0).vectors);
+        assert_eq!(other.best(1, 0).triples, tables.best(1, 0).triples);
+    }
+
+    /// Planes 1 and 2 of a single exemplar read plane 0's 2D tables, which
+    /// is only right while the three planes' tables are equal.
+    #[test]
+    fn single_exemplar_planes_share_equal_2d_tables() {
+        let single = compute(&ExemplarSet::single(pattern(16, 1)));
+        for level in &single.levels {
+            assert_eq!(level.alias, [0, 0, 0]);
+            for p in 1..3 {
+                assert_eq!(level.stored.similar[p], level.stored.similar[0]);
+                assert_eq!(level.appearance[p].vectors, level.appearance[0].vectors);
+                assert_eq!(level.similar_scale[p], level.similar_scale[0]);
+            }
+        }
+        let reloaded = Candidates::load(&single.to_bytes()).unwrap();
+        assert!(reloaded.levels.iter().all(|l| l.alias == [0, 0, 0]));
+
+        let triple =
+            compute(&ExemplarSet::triple(pattern(16, 1), pattern(16, 2), pattern(16, 3)).unwrap());
+        for level in &triple.levels {
+            assert_eq!(level.alias, [0, 1, 2]);
+            assert_ne!(level.stored.similar[1], level.stored.similar[0]);
+            assert_eq!(
+                level.similar_vectors[2].len(),
+                level.similar_vectors[0].len()
+            );
+        }
+    }
+}

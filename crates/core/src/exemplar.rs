@@ -1,0 +1,320 @@
+//! Exemplars: the small 2D RGB images a solid texture is synthesized from.
+//!
+//! One exemplar may serve all three planes (xy, yz, zx) or each plane gets
+//! its own; all three must then have equal size.
+
+use crate::error::{Error, Result};
+use std::io::Cursor;
+
+/// Smallest accepted exemplar side in pixels.
+pub const MIN_SIDE: u32 = 16;
+/// Largest accepted exemplar side in pixels.
+pub const MAX_SIDE: u32 = 512;
+/// Largest photo side that [`Exemplar::decode_fitting`] downscales to
+/// [`MAX_SIDE`] (a 24-megapixel camera image, 6000×4000, fits).
+pub const MAX_PHOTO_SIDE: u32 = 6000;
+
+/// An RGB8 image, row-major, toroidally addressed by the synthesis.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Exemplar {
+    width: u32,
+    height: u32,
+    pixels: Vec<[u8; 3]>,
+}
+
+impl std::fmt::Debug for Exemplar {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Exemplar({}x{})", self.width, self.height)
+    }
+}
+
+impl Exemplar {
+    /// Largest side an exemplar may have, in pixels.
+    pub const MAX_SIDE: u32 = MAX_SIDE;
+
+    /// Builds an exemplar from packed RGB8 bytes, validating its size.
+    pub fn from_rgb(width: u32, height: u32, rgb: &[u8]) -> Result<Self> {
+        check_side(width, height)?;
+        if rgb.len() != width as usize * height as usize * 3 {
+            return Err(Error::MalformedImage(format!(
+                "expected {} RGB bytes for {width}x{height}, got {}",
+                width as usize * height as usize * 3,
+                rgb.len()
+            )));
+        }
+        let pixels = rgb.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        Ok(Exemplar {
+            width,
+            height,
+            pixels,
+        })
+    }
+
+    /// Decodes a PNG or JPEG image of 16 to 512 pixels per side. The header
+    /// is checked before any pixel is allocated, so a decompression bomb is
+    /// rejected cheaply.
+    pub fn decode(bytes: &[u8]) -> Result<Self> {
+        let (w, h) = dimensions(bytes)?;
+        check_side(w, h)?;
+        let img = decode_rgb(bytes, w, h)?;
+        Self::from_rgb(img.width(), img.height(), img.as_raw())
+    }
+
+    /// Like [`Exemplar::decode`], but a photo larger than [`MAX_SIDE`] (up to
+    /// [`MAX_PHOTO_SIDE`] per side) is downscaled to fit, keeping its aspect
+    /// ratio. Returns the original size when it was downscaled, so that the
+    /// caller can say so.
+    pub fn decode_fitting(bytes: &[u8]) -> Result<(Self, Option<(u32, u32)>)> {
+        let (w, h) = dimensions(bytes)?;
+        if w <= MAX_SIDE && h <= MAX_SIDE {
+            return Ok((Self::decode(bytes)?, None));
+        }
+        if w > MAX_PHOTO_SIDE || h > MAX_PHOTO_SIDE {
+            // Photos up to MAX_PHOTO_SIDE are downscaled; larger ones are not.
+            return Err(Error::ImageSize {
+                width: w,
+                height: h,
+                min: MIN_SIDE,
+                max: MAX_PHOTO_SIDE,
+            });
+        }
+        let img = decode_rgb(bytes, w, h)?;
+        // The longer side becomes MAX_SIDE; rounding keeps the aspect ratio.
+        let long = u64::from(w.max(h));
+        let fit = |s: u32| ((u64::from(s) * u64::from(MAX_SIDE) + long / 2) / long) as u32;
+        let (fw, fh) = (fit(w), fit(h));
+        // Too thin to keep MIN_SIDE once downscaled: say what was sent.
+        check_side(fw, fh).map_err(|_| Error::ImageSize {
+            width: w,
+            height: h,
+            min: MIN_SIDE,
+            max: MAX_SIDE,
+        })?;
+        let small = image::imageops::resize(&img, fw, fh, image::imageops::FilterType::Lanczos3);
+        Ok((Self::from_rgb(fw, fh, small.as_raw())?, Some((w, h))))
+    }
+
+    /// Reads and decodes an image file.
+    pub fn open(path: impl AsRef<std::path::Path>) -> Result<Self> {
+        let bytes = std::fs::read(path)?;
+        Self::decode(&bytes)
+    }
+
+    /// Reads and decodes an image file, downscaling a large photo
+    /// ([`Exemplar::decode_fitting`]).
+    pub fn open_fitting(path: impl AsRef<std::path::Path>) -> Result<(Self, Option<(u32, u32)>)> {
+        let bytes = std::fs::read(path)?;
+        Self::decode_fitting(&bytes)
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Pixels, row-major.
+    pub fn pixels(&self) -> &[[u8; 3]] {
+        &self.pixels
+    }
+
+    /// The image turned clockwise as displayed (u right, v down) by
+    /// `degrees`: 0, 90, 180 or 270 (anything else is taken modulo 360 and
+    /// rounded down to a quarter turn). A quarter turn swaps width and
+    /// height.
+    pub fn rotated(&self, degrees: u32) -> Exemplar {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let at = |u: usize, v: usize| self.pixels[v * w + u];
+        let (width, height, pixels): (usize, usize, Vec<[u8; 3]>) = match degrees % 360 / 90 {
+            0 => return self.clone(),
+            // The left column, bottom to top, becomes the top row.
+            1 => (h, w, grid(h, w, |u, v| at(v, h - 1 - u))),
+            2 => (w, h, grid(w, h, |u, v| at(w - 1 - u, h - 1 - v))),
+            // The right column, top to bottom, becomes the top row.
+            _ => (h, w, grid(h, w, |u, v| at(w - 1 - v, u))),
+        };
+        Exemplar {
+            width: width as u32,
+            height: height as u32,
+            pixels,
+        }
+    }
+
+    /// Packed RGB8 bytes, row-major.
+    pub fn to_rgb_bytes(&self) -> Vec<u8> {
+        self.pixels.iter().flatten().copied().collect()
+    }
+}
+
+/// A `width`×`height` image, row-major, from a function of (u, v).
+fn grid(width: usize, height: usize, f: impl Fn(usize, usize) -> [u8; 3]) -> Vec<[u8; 3]> {
+    (0..height)
+        .flat_map(|v| (0..width).map(move |u| (u, v)))
+        .map(|(u, v)| f(u, v))
+        .collect()
+}
+
+/// The image's size from its header alone.
+fn dimensions(bytes: &[u8]) -> Result<(u32, u32)> {
+    let reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::MalformedImage(e.to_string()))?;
+    if reader.format().is_none() {
+        return Err(Error::MalformedImage(
+            "unrecognised image format (expected PNG or JPEG)".into(),
+        ));
+    }
+    reader
+        .into_dimensions()
+        .map_err(|e| Error::MalformedImage(e.to_string()))
+}
+
+/// Decodes to RGB8 an image whose header said `width`×`height` (already
+/// checked against a side limit); the decoder may allocate no more.
+fn decode_rgb(bytes: &[u8], width: u32, height: u32) -> Result<image::RgbImage> {
+    let mut reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::MalformedImage(e.to_string()))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(width);
+    limits.max_image_height = Some(height);
+    // RGBA8 of that size, with room for the decoder's own buffers.
+    limits.max_alloc = Some(u64::from(width) * u64::from(height) * 4 + (16 << 20));
+    reader.limits(limits);
+    Ok(reader
+        .decode()
+        .map_err(|e| Error::MalformedImage(e.to_string()))?
+        .to_rgb8())
+}
+
+fn check_side(width: u32, height: u32) -> Result<()> {
+    let ok = |s: u32| (MIN_SIDE..=MAX_SIDE).contains(&s);
+    if ok(width) && ok(height) {
+        Ok(())
+    } else {
+        Err(Error::ImageSize {
+            width,
+            height,
+            min: MIN_SIDE,
+            max: MAX_SIDE,
+        })
+    }
+}
+
+/// The exemplars of the three planes. `xy` is sampled in the plane spanned by
+/// the x and y axes (image u along x, v along y), `yz` with u along y and v
+/// along z, `zx` with u along z and v along x.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ExemplarSet {
+    planes: [Exemplar; 3],
+}
+
+impl ExemplarSet {
+    /// One exemplar used for all three planes.
+    pub fn single(e: Exemplar) -> Self {
+        ExemplarSet {
+            planes: [e.clone(), e.clone(), e],
+        }
+    }
+
+    /// Three exemplars of equal size, for the xy, yz and zx planes.
+    pub fn triple(xy: Exemplar, yz: Exemplar, zx: Exemplar) -> Result<Self> {
+        let (w, h) = (xy.width, xy.height);
+        for (name, e) in [("yz", &yz), ("zx", &zx)] {
+            if (e.width, e.height) != (w, h) {
+                return Err(Error::SizeMismatch(format!(
+                    "xy is {w}x{h} but {name} is {}x{}",
+                    e.width, e.height
+                )));
+            }
+        }
+        Ok(ExemplarSet {
+            planes: [xy, yz, zx],
+        })
+    }
+
+    /// The exemplar of plane `p` (0 = xy, 1 = yz, 2 = zx).
+    pub fn plane(&self, p: usize) -> &Exemplar {
+        &self.planes[p]
+    }
+
+    /// True when all three planes hold the same image, which lets the
+    /// candidate search run once and derive the other planes by symmetry.
+    pub fn is_single(&self) -> bool {
+        self.planes[0] == self.planes[1] && self.planes[1] == self.planes[2]
+    }
+
+    /// Width of every plane.
+    pub fn width(&self) -> u32 {
+        self.planes[0].width
+    }
+
+    /// Height of every plane.
+    pub fn height(&self) -> u32 {
+        self.planes[0].height
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn png(w: u32, h: u32) -> Vec<u8> {
+        let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i % 251) as u8).collect();
+        crate::png::encode(w, h, &rgb).unwrap()
+    }
+
+    #[test]
+    fn rotations_turn_the_image_clockwise_and_compose() {
+        // 16 wide, 20 tall: pixel (u, v) holds [u, v, 0].
+        let (w, h) = (16u8, 20u8);
+        let rgb: Vec<u8> = (0..h)
+            .flat_map(|v| (0..w).flat_map(move |u| [u, v, 0]))
+            .collect();
+        let e = Exemplar::from_rgb(w as u32, h as u32, &rgb).unwrap();
+        let at = |e: &Exemplar, u: u32, v: u32| e.pixels()[(v * e.width() + u) as usize];
+        let cw = e.rotated(90);
+        assert_eq!((cw.width(), cw.height()), (20, 16));
+        // Clockwise: the bottom-left corner comes to the top left, the
+        // top-left corner to the top right.
+        assert_eq!(at(&cw, 0, 0), [0, h - 1, 0]);
+        assert_eq!(at(&cw, 19, 0), [0, 0, 0]);
+        assert_eq!(at(&cw, 0, 1), [1, h - 1, 0]);
+        // Counter-clockwise: the top-right corner comes to the top left.
+        let ccw = e.rotated(270);
+        assert_eq!(at(&ccw, 0, 0), [w - 1, 0, 0]);
+        assert_eq!(at(&e.rotated(180), 0, 0), [w - 1, h - 1, 0]);
+        assert_eq!(e.rotated(0), e);
+        assert_eq!(e.rotated(360), e);
+        assert_eq!(cw.rotated(90), e.rotated(180));
+        assert_eq!(cw.rotated(270), e);
+        assert_eq!(ccw.rotated(90), e);
+        assert_eq!(e.rotated(180).rotated(180), e);
+    }
+
+    #[test]
+    fn photos_up_to_the_photo_limit_are_downscaled_and_larger_ones_refused() {
+        let (e, original) = Exemplar::decode_fitting(&png(MAX_PHOTO_SIDE, 376)).unwrap();
+        assert_eq!((e.width(), e.height()), (MAX_SIDE, 32));
+        assert_eq!(original, Some((MAX_PHOTO_SIDE, 376)));
+        // At the exemplar limit nothing is downscaled.
+        let (e, original) = Exemplar::decode_fitting(&png(MAX_SIDE, 20)).unwrap();
+        assert_eq!((e.width(), e.height(), original), (MAX_SIDE, 20, None));
+        let size_error = |w, h| match Exemplar::decode_fitting(&png(w, h)) {
+            Err(Error::ImageSize { width, height, .. }) => (width, height),
+            other => panic!("{w}x{h}: {other:?}"),
+        };
+        // Past the photo limit, and too thin to keep MIN_SIDE: the size sent.
+        assert_eq!(
+            size_error(MAX_PHOTO_SIDE + 1, 376),
+            (MAX_PHOTO_SIDE + 1, 376)
+        );
+        assert_eq!(size_error(600, 16), (600, 16));
+        // The strict decoder still refuses anything over MAX_SIDE.
+        assert!(Exemplar::decode(&png(MAX_SIDE + 1, 20)).is_err());
+    }
+}

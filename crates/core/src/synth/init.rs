@@ -1,0 +1,213 @@
+//! Version 0 of a level: at the coarsest synthesized level, the candidate
+//! slab tiled over space and warped by the jitter field; at finer levels,
+//! the parent's triples upsampled.
+
+use crate::candidates::Candidates;
+use crate::candidates::geometry::offset_triple;
+use crate::hash::{hash_pos, unit as unit_f};
+use crate::stack::spacing;
+
+const TAG_SLAB: u32 = 1;
+const TAG_JITTER: u32 = 2;
+
+/// Gaussians per jitter cell; cells are a quarter of the exemplar period,
+/// so the density matches the slides' G = 200 per exemplar-sized volume.
+const GAUSSIANS_PER_CELL: u64 = 3;
+
+/// The candidate slab (Dong et al.): every xy pixel's first candidate,
+/// thickened along z by its own neighbourhoods, `thickness` voxels thick
+/// (Dong et al.: N). It is tiled over space in blocks (half an exemplar
+/// period wide, one layer thick), each block shifted by a hashed offset, so
+/// the initialisation has no period at all; the seams between blocks are
+/// what the correction then repairs (Zhang et al.'s subpart initialisation,
+/// §4.1).
+pub fn slab_triple(c: &Candidates, seed: u64, thickness: u32, k: usize, p: [i64; 3]) -> [u32; 3] {
+    let n = thickness as i64;
+    let r = n / 2;
+    let h = spacing(k) as i64;
+    let dims = c.dims();
+    let block_xy = (period(c, k) as i64 / 2).max(4);
+    let block = [
+        p[0].div_euclid(block_xy),
+        p[1].div_euclid(block_xy),
+        (p[2] + r).div_euclid(n),
+    ];
+    let dz = (p[2] + r).rem_euclid(n) - r;
+    let o = hash_pos(seed, k as u32, TAG_SLAB, block);
+    let ox = (o % dims.w as u64) as i64;
+    let oy = ((o >> 32) % dims.h as u64) as i64;
+    let pixel = dims.index(p[0] * h + ox, p[1] * h + oy);
+    let cands = c.level(k).candidates(0);
+    let first = cands.triples[cands.range(pixel).start];
+    offset_triple(dims, first, [0, 0, dz], h)
+}
+
+/// The exemplar's period in voxels of level `k`.
+fn period(c: &Candidates, k: usize) -> f32 {
+    let dims = c.dims();
+    (dims.w.min(dims.h) as f32 / spacing(k) as f32).max(1.0)
+}
+
+#[derive(Clone, Copy)]
+struct Bump {
+    centre: [f32; 3],
+    inv_sigma2: f32,
+    reach2: f32,
+    push: [f32; 3],
+}
+
+/// The jitter deformation (Dong et al.): a sum of Gaussian bumps with hashed
+/// centres, directions, amplitudes and widths, defined cell by cell so it
+/// exists everywhere without a global list (the slides' G = 200 bumps per
+/// exemplar-period cube). Larger amplitudes go with smaller widths, so small
+/// scales are disturbed strongly and coarse scales only subtly. A field is
+/// built for one box: the bumps of the cells around it are generated once.
+pub struct JitterField {
+    lo: [i64; 3],
+    cells: [i64; 3],
+    cell: f32,
+    bumps: Vec<[Bump; GAUSSIANS_PER_CELL as usize]>,
+}
+
+impl JitterField {
+    /// The field over `b` (voxels of level `k`).
+    pub fn new(c: &Candidates, seed: u64, strength: f32, k: usize, b: &super::grid::Box3) -> Self {
+        let unit = period(c, k);
+        let cell = (unit / 4.0).max(1.0);
+        let to_cell = |v: i64| (v as f32 / cell).floor() as i64;
+        let lo = b.lo.map(|v| to_cell(v) - 1);
+        let hi = b.hi.map(|v| to_cell(v - 1) + 1);
+        let cells = [0, 1, 2].map(|a| hi[a] - lo[a] + 1);
+        let mut bumps = Vec::with_capacity((cells[0] * cells[1] * cells[2]) as usize);
+        for cz in lo[2]..=hi[2] {
+            for cy in lo[1]..=hi[1] {
+                for cx in lo[0]..=hi[0] {
+                    bumps.push(std::array::from_fn(|g| {
+                        let hsh = |i: u64| {
+                            unit_f(hash_pos(
+                                seed,
+                                k as u32,
+                                TAG_JITTER + (((g as u64) * 8 + i) << 8) as u32,
+                                [cx, cy, cz],
+                            ))
+                        };
+                        let centre = [
+                            (cx as f32 + hsh(0)) * cell,
+                            (cy as f32 + hsh(1)) * cell,
+                            (cz as f32 + hsh(2)) * cell,
+                        ];
+                        let t = hsh(3);
+                        let sigma = (0.01 + 0.04 * t) * unit;
+                        let amp = (0.3 - 0.2 * t) * unit * strength;
+                        let dir = [hsh(4) * 2.0 - 1.0, hsh(5) * 2.0 - 1.0, hsh(6) * 2.0 - 1.0];
+                        let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+                        let push = if len < 1e-3 {
+                            [0.0; 3]
+                        } else {
+                            dir.map(|v| v / len * amp)
+                        };
+                        Bump {
+                            centre,
+                            inv_sigma2: 1.0 / (sigma * sigma),
+                            reach2: 9.0 * sigma * sigma,
+                            push,
+                        }
+                    }));
+                }
+            }
+        }
+        JitterField {
+            lo,
+            cells,
+            cell,
+            bumps,
+        }
+    }
+
+    /// Displacement at `p` (inside the field's box), in voxels.
+    pub fn displacement(&self, p: [i64; 3]) -> [f32; 3] {
+        let pc = p.map(|v| (v as f32 / self.cell).floor() as i64);
+        let pf = p.map(|v| v as f32);
+        let mut d = [0f32; 3];
+        for cz in pc[2] - 1..=pc[2] + 1 {
+            for cy in pc[1] - 1..=pc[1] + 1 {
+                for cx in pc[0] - 1..=pc[0] + 1 {
+                    let i = ((cz - self.lo[2]) * self.cells[1] + (cy - self.lo[1])) * self.cells[0]
+                        + (cx - self.lo[0]);
+                    for bump in &self.bumps[i as usize] {
+                        let dist2: f32 = (0..3).map(|a| (pf[a] - bump.centre[a]).powi(2)).sum();
+                        if dist2 > bump.reach2 {
+                            continue;
+                        }
+                        let w = exp_neg(dist2 * bump.inv_sigma2);
+                        for (da, pa) in d.iter_mut().zip(bump.push) {
+                            *da += w * pa;
+                        }
+                    }
+                }
+            }
+        }
+        d
+    }
+}
+
+/// Version 0 of the initial level at `p`: the slab, warped by the jitter.
+pub fn initial_triple(
+    c: &Candidates,
+    seed: u64,
+    slab_thickness: u32,
+    field: &JitterField,
+    k: usize,
+    p: [i64; 3],
+) -> [u32; 3] {
+    let d = field.displacement(p);
+    let q = [0, 1, 2].map(|a| p[a] + d[a].round() as i64);
+    slab_triple(c, seed, slab_thickness, k, q)
+}
+
+/// Upsampling (Zhang et al. eq. 3–4): a child inherits its parent's triple
+/// moved by its offset within the parent, scaled by the child level's
+/// spacing.
+#[inline]
+pub fn upsample(c: &Candidates, parent: [u32; 3], k: usize, p: [i64; 3]) -> [u32; 3] {
+    let o = p.map(|v| v.rem_euclid(2));
+    offset_triple(c.dims(), parent, o, spacing(k) as i64)
+}
+
+/// e^(−x) for x ≥ 0 from basic arithmetic only, so every machine computes
+/// the same bits (libm's `exp` may differ in the last place between
+/// platforms, and a rounded displacement would then differ too).
+fn exp_neg(x: f32) -> f32 {
+    if x > 80.0 {
+        return 0.0;
+    }
+    // e^(−x) = 2^(−n) · e^(−r) with r = x − n·ln 2 in [0, ln 2).
+    let n = (x * std::f32::consts::LOG2_E).floor();
+    let r = x - n * std::f32::consts::LN_2;
+    // Taylor series of e^(−r) to r¹⁰/10!: truncation below 1e−8 on [0, ln 2).
+    let mut term = 1.0f32;
+    let mut sum = 1.0f32;
+    for i in 1..11 {
+        term *= -r / i as f32;
+        sum += term;
+    }
+    let mut scale = 1.0f32;
+    for _ in 0..n as u32 {
+        scale *= 0.5;
+    }
+    sum * scale
+}
+
+#[cfg(test)]
+mod tests {
+    use super::exp_neg;
+
+    #[test]
+    fn exp_neg_matches_exp() {
+        for i in 0..2000 {
+            let x = i as f32 * 0.01;
+            let want = (-x).exp();
+            assert!((exp_neg(x) - want).abs() <= 2e-6 * want, "x = {x}");
+        }
+    }
+}

@@ -1,0 +1,951 @@
+//! Lazy, spatially deterministic pyramid synthesis (Dong et al. 2008 with
+//! Zhang et al. 2011's history windows and dual-grid correction).
+//!
+//! Each level k (0 = finest) holds a coordinate triple per voxel. Version 0
+//! of a level comes from the jittered candidate slab (coarsest synthesized
+//! level) or from upsampling the parent level; correction steps refine it.
+//! A correction's history window says which version of each neighbour it
+//! reads:
+//!
+//! - **standard** (Dong et al.): the latest version of every neighbour, so
+//!   the dependency set grows by N/2 with every subpass;
+//! - **dual grid** (Zhang et al.): ⌈P/2⌉ passes on a grid of M³ cells, then
+//!   ⌊P/2⌋ on the grid shifted by M/2; a neighbour across the cell wall is
+//!   read at the version the step started from, which bounds the set.
+//!
+//! A request is answered from final-version tiles (level-aligned cubes of
+//! [`TILE`] voxels) kept in the shared [`cache::TileCache`]. Missing tiles of
+//! a level are synthesized together: [`plan::backward`] walks the history
+//! windows back from them to the exact voxels each subpass must correct and
+//! the version-0 voxels needed, whose parents come from the parent level's
+//! tiles (recursively), and only those voxels are computed. What a request
+//! computes beyond what it was asked for is kept where it is reusable: every
+//! voxel it corrects, with its value after that pass (final after the last
+//! pass), so overlapping requests end their chains on it.
+
+pub mod cache;
+pub mod cancel;
+mod colour;
+pub mod correction;
+pub mod estimate;
+pub mod grid;
+pub mod init;
+mod inspect;
+pub mod plan;
+mod stats;
+
+use crate::candidates::Candidates;
+use crate::error::Result;
+use crate::params::{Correction, Scheme, SynthParams};
+use crate::request::{CutPlane, Filter, Region};
+use cache::{Claim, Tile, TileCache, TileData, TileKey};
+use colour::{colour, rgb8, triple_rgb8};
+use correction::{Corrector, Scratch, Work};
+use grid::{Box3, Grid};
+pub use inspect::SlabViews;
+use rayon::prelude::*;
+use rustc_hash::FxHashMap as HashMap;
+pub use stats::SynthStats;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Side of the final-version tiles cached per level (TILE³ = 64 voxels,
+/// one bit each in a tile's mask).
+pub const TILE: i64 = 4;
+
+/// Voxels wanted per tile: cell → mask of its voxels.
+type Wanted = BTreeMap<[i64; 3], u64>;
+
+/// Most tiles synthesized together in one group (bounds working memory).
+/// Neighbouring groups share their halos through the cached after-pass
+/// voxels, so smaller groups cost little: with 4096 rather than 8192, a
+/// 512² slice held 487 MB instead of 674 MB resident in the same time, and
+/// a 256² slice (more groups at coarse levels) took about 2.5 % longer.
+const MAX_GROUP_TILES: usize = 4096;
+
+/// One correction step of a level: cells of side M shifted by `offset`,
+/// corrected `passes` times.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Step {
+    /// Grid shift (0 for the primary grid, M/2 for the dual grid).
+    pub offset: i64,
+    /// Passes in this step.
+    pub passes: u32,
+}
+
+/// Counters gathered while serving one request.
+pub(crate) struct Acc {
+    voxels: Vec<AtomicU64>,
+    corrections: Vec<AtomicU64>,
+    computed: AtomicU64,
+    cached: AtomicU64,
+    /// Count the work without doing it (tiles hold zeros).
+    dry: bool,
+    /// The request's cancellation flag (see [`cancel`]).
+    cancel: Option<cancel::CancelFlag>,
+}
+
+impl Acc {
+    fn new(levels: usize, dry: bool) -> Acc {
+        Acc {
+            dry,
+            cancel: cancel::current(),
+            voxels: (0..levels).map(|_| AtomicU64::new(0)).collect(),
+            corrections: (0..levels).map(|_| AtomicU64::new(0)).collect(),
+            computed: AtomicU64::new(0),
+            cached: AtomicU64::new(0),
+        }
+    }
+
+    fn stats(&self) -> SynthStats {
+        SynthStats {
+            voxels_per_level: self
+                .voxels
+                .iter()
+                .map(|a| a.load(Ordering::Relaxed))
+                .collect(),
+            corrections_per_level: self
+                .corrections
+                .iter()
+                .map(|a| a.load(Ordering::Relaxed))
+                .collect(),
+            tiles_computed: self.computed.load(Ordering::Relaxed),
+            tiles_from_cache: self.cached.load(Ordering::Relaxed),
+        }
+    }
+}
+
+/// The synthesis engine behind a [`crate::Texture`].
+pub(crate) struct Engine {
+    cands: Arc<Candidates>,
+    params: SynthParams,
+    cache: Arc<TileCache>,
+    key: u64,
+    init_level: usize,
+    radius: i64,
+    cell: i64,
+    steps: Vec<Step>,
+    /// Steps of the finest levels (see [`SynthParams::finest_passes`] and
+    /// [`SynthParams::fine_levels`]).
+    finest_steps: Vec<Step>,
+    /// How far each level's chain reaches, finest first.
+    reach: Vec<plan::Reach>,
+}
+
+/// Correction steps for `passes` passes under the texture's scheme.
+fn steps_for(params: &SynthParams, passes: u32) -> Vec<Step> {
+    match params.scheme {
+        Scheme::DualGrid => [
+            Step {
+                offset: 0,
+                passes: passes.div_ceil(2),
+            },
+            Step {
+                offset: params.grid as i64 / 2,
+                passes: passes / 2,
+            },
+        ]
+        .into_iter()
+        .filter(|s| s.passes > 0)
+        .collect(),
+        Scheme::Standard if passes > 0 => vec![Step { offset: 0, passes }],
+        Scheme::Standard => Vec::new(),
+    }
+}
+
+impl Engine {
+    pub(crate) fn new(cands: Arc<Candidates>, params: SynthParams, cache: Arc<TileCache>) -> Self {
+        let mut bytes = cands.digest().to_le_bytes().to_vec();
+        bytes.extend_from_slice(&serde_json::to_vec(&params).expect("params serialise"));
+        let key = crate::hash::fingerprint(&bytes);
+        let steps = steps_for(&params, params.passes);
+        let finest_steps = steps_for(&params, params.finest_passes);
+        if params.correction == Correction::Appearance {
+            // The appearance tables are built with the texture, not by its
+            // first request.
+            (0..cands.level_count())
+                .into_par_iter()
+                .for_each(|k| _ = cands.level(k).sparse_tables(cands.dims(), k));
+        }
+        let mut engine = Engine {
+            init_level: cands.level_count() - 1,
+            radius: correction::reach(&params, cands.params().neighbourhood),
+            cell: params.grid as i64,
+            cands,
+            params,
+            cache,
+            key,
+            steps,
+            finest_steps,
+            reach: Vec::new(),
+        };
+        engine.reach = (0..=engine.init_level)
+            .map(|k| {
+                known_reach(
+                    engine.steps_at(k),
+                    engine.radius,
+                    engine.params.subpass_side as i64,
+                    engine.barrier_cell(),
+                )
+            })
+            .collect();
+        engine
+    }
+
+    /// The dual grid's cell side, or `None` under the standard scheme.
+    fn barrier_cell(&self) -> Option<i64> {
+        match self.params.scheme {
+            Scheme::DualGrid => Some(self.cell),
+            Scheme::Standard => None,
+        }
+    }
+
+    /// How far a correction reads, in voxels of its level.
+    pub(crate) fn radius(&self) -> i64 {
+        self.radius
+    }
+
+    pub(crate) fn candidates(&self) -> &Candidates {
+        &self.cands
+    }
+
+    pub(crate) fn params(&self) -> &SynthParams {
+        &self.params
+    }
+
+    pub(crate) fn max_lod(&self) -> u32 {
+        self.init_level as u32
+    }
+
+    /// Correction steps applied at level `k`.
+    pub(crate) fn steps_at(&self, k: usize) -> &[Step] {
+        if k == self.init_level && !self.params.correct_init_level {
+            &[]
+        } else if k < self.params.fine_levels as usize {
+            &self.finest_steps
+        } else {
+            &self.steps
+        }
+    }
+
+    fn tile_of(p: [i64; 3]) -> [i64; 3] {
+        p.map(|v| v.div_euclid(TILE))
+    }
+
+    fn tile_box(t: [i64; 3]) -> Box3 {
+        Box3::new(t.map(|v| v * TILE), [TILE; 3])
+    }
+
+    /// Bit of voxel `p` in its tile's mask.
+    #[inline]
+    fn bit_of(p: [i64; 3]) -> u64 {
+        let l = p.map(|v| v.rem_euclid(TILE));
+        1 << (l[0] + TILE * (l[1] + TILE * l[2]))
+    }
+
+    /// The voxels of `b`, tile by tile.
+    fn wanted_box(b: &Box3) -> Wanted {
+        let lo = Self::tile_of(b.lo);
+        let hi = Self::tile_of(b.hi.map(|v| v - 1));
+        let mut out = Wanted::new();
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let t = Self::tile_box([x, y, z]).intersect(b);
+                    let mut mask = 0u64;
+                    for pz in t.lo[2]..t.hi[2] {
+                        for py in t.lo[1]..t.hi[1] {
+                            for px in t.lo[0]..t.hi[0] {
+                                mask |= Self::bit_of([px, py, pz]);
+                            }
+                        }
+                    }
+                    out.insert([x, y, z], mask);
+                }
+            }
+        }
+        out
+    }
+
+    /// Final triples of level `k` over `b`.
+    pub(crate) fn level_box(&self, k: usize, b: &Box3, acc: &Acc) -> Grid<[u32; 3]> {
+        let tiles = self.tiles(k, Self::wanted_box(b), acc);
+        let mut g = Grid::new(*b);
+        for t in tiles.values() {
+            t.copy_into(&mut g);
+        }
+        g
+    }
+
+    /// Final tiles of level `k` holding at least the wanted voxels, from
+    /// the cache or computed; a tile another request is computing is
+    /// waited for (outside rayon).
+    fn tiles(&self, k: usize, wanted: Wanted, acc: &Acc) -> HashMap<[i64; 3], Tile> {
+        let mut out = HashMap::default();
+        let mut mine = Vec::new();
+        let mut theirs = Vec::new();
+        let in_pool = rayon::current_thread_index().is_some();
+        let mut unclaimed = Vec::new();
+        let keys: Vec<(TileKey, u64)> = wanted
+            .iter()
+            .map(|(&c, &want)| {
+                let key = TileKey {
+                    texture: self.key,
+                    level: k as u8,
+                    version: 0,
+                    cell: c,
+                };
+                (key, want)
+            })
+            .collect();
+        for ((key, want), claim) in keys.iter().zip(self.cache.claim_all(&keys)) {
+            let (c, want) = (key.cell, *want);
+            match claim {
+                Claim::Ready(t) => {
+                    acc.cached.fetch_add(1, Ordering::Relaxed);
+                    out.insert(c, t);
+                }
+                Claim::Mine(ticket) => mine.push(ticket),
+                // Blocking a rayon worker on another computation could
+                // deadlock the pool, so inside it we compute instead.
+                Claim::Wait(_) if in_pool => unclaimed.push((c, want)),
+                Claim::Wait(w) => theirs.push(w),
+            }
+        }
+        // Voxels the cache already holds are not computed again.
+        let mut todo: Vec<([i64; 3], u64)> = mine
+            .iter()
+            .map(|t| {
+                let known = t.partial().map_or(0, |p| p.mask);
+                if known != 0 {
+                    acc.cached.fetch_add(1, Ordering::Relaxed);
+                }
+                (t.key().cell, wanted[&t.key().cell] & !known)
+            })
+            .collect();
+        todo.extend(&unclaimed);
+        if !todo.is_empty() {
+            let mut computed = self.compute(k, &todo, acc);
+            acc.computed
+                .fetch_add(computed.len() as u64, Ordering::Relaxed);
+            for ticket in mine {
+                let c = ticket.key().cell;
+                let mut t = computed.remove(&c).expect("computed");
+                if let Some(p) = ticket.partial() {
+                    t = Arc::new(p.merged(&t));
+                }
+                self.cache.publish(ticket, t.clone());
+                out.insert(c, t);
+            }
+            out.extend(computed);
+        }
+        for w in theirs {
+            let c = w.key().cell;
+            let want = wanted[&c];
+            match self.cache.wait(w).filter(|t| t.covers(want)) {
+                Some(t) => {
+                    acc.cached.fetch_add(1, Ordering::Relaxed);
+                    out.insert(c, t);
+                }
+                None => {
+                    let mut t = self.compute(k, &[(c, want)], acc);
+                    acc.computed.fetch_add(1, Ordering::Relaxed);
+                    out.insert(c, t.remove(&c).expect("one tile"));
+                }
+            }
+        }
+        out
+    }
+
+    /// Synthesizes the wanted voxels of tiles of level `k` (no cache
+    /// lookups for them; their prerequisites go through the cache). Tiles
+    /// are processed in compact groups so memory stays bounded and
+    /// scattered tiles never pull in the space between them. Only the
+    /// wanted voxels and their exact dependency chain are computed.
+    fn compute(&self, k: usize, tiles: &[([i64; 3], u64)], acc: &Acc) -> HashMap<[i64; 3], Tile> {
+        let masks: HashMap<[i64; 3], u64> = tiles.iter().copied().collect();
+        let cells: Vec<[i64; 3]> = tiles.iter().map(|t| t.0).collect();
+        let mut out = HashMap::default();
+        for group in plan::group_cells(&cells, MAX_GROUP_TILES) {
+            let group: Vec<([i64; 3], u64)> = group.into_iter().map(|c| (c, masks[&c])).collect();
+            out.extend(self.compute_group(k, &group, acc));
+        }
+        out
+    }
+
+    fn compute_group(
+        &self,
+        k: usize,
+        tiles: &[([i64; 3], u64)],
+        acc: &Acc,
+    ) -> Vec<([i64; 3], Tile)> {
+        let mut targets = Vec::with_capacity(tiles.len() * (TILE * TILE * TILE) as usize);
+        for &(t, mask) in tiles {
+            targets.extend(tile_voxels(t, mask).map(|(_, p)| p));
+        }
+        let steps = self.steps_at(k);
+        let barrier_cell = match self.params.scheme {
+            Scheme::DualGrid => Some(self.cell),
+            Scheme::Standard => None,
+        };
+        let side = self.params.subpass_side as i64;
+        cancel::check(&acc.cancel);
+        // Values after a pass that earlier requests cached end the chain
+        // there (see `plan::backward`), so that overlapping requests (a
+        // sweeping cut) share their work instead of redoing it; by forward
+        // subpass.
+        let mut ends: HashMap<usize, Vec<KnownVoxel>> = HashMap::default();
+        let mut peeked: HashMap<([i64; 3], usize), Option<Tile>> = HashMap::default();
+        let chain = plan::backward(
+            &targets,
+            steps,
+            self.radius,
+            side,
+            barrier_cell,
+            |pass, forward, voxels| {
+                if acc.dry {
+                    return Vec::new();
+                }
+                // One lookup per tile (the voxels come in runs within one):
+                // on a cold cache nothing is found and nothing is filtered.
+                let mut any = false;
+                let mut last = None;
+                for &q in voxels.iter() {
+                    let t = Self::tile_of(q);
+                    if last != Some(t) {
+                        last = Some(t);
+                        any |= peeked
+                            .entry((t, pass))
+                            .or_insert_with(|| self.cache.peek(&self.after_pass_key(k, pass, t)))
+                            .is_some();
+                    }
+                }
+                if !any {
+                    return Vec::new();
+                }
+                let mut found = Vec::new();
+                voxels.retain(|&q| {
+                    let t = Self::tile_of(q);
+                    let tile = peeked
+                        .entry((t, pass))
+                        .or_insert_with(|| self.cache.peek(&self.after_pass_key(k, pass, t)));
+                    match tile {
+                        Some(tile) if tile.mask & Self::bit_of(q) != 0 => {
+                            found.push((q, tile.get(q)));
+                            false
+                        }
+                        _ => true,
+                    }
+                });
+                let removed = found.iter().map(|f| f.0).collect();
+                if !found.is_empty() {
+                    ends.insert(forward, found);
+                }
+                removed
+            },
+        );
+        drop(peeked);
+        cancel::check(&acc.cancel);
+        if !acc.dry {
+            cancel::charge(&acc.cancel, chain.need.count());
+        }
+        acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
+        acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
+        let known_box = ends
+            .values()
+            .flatten()
+            .map(|(p, _)| Box3::new(*p, [1, 1, 1]))
+            .reduce(|a, b| a.union(&b));
+        let triples = match known_box {
+            // Everything came from cached passes: no version 0 at all.
+            Some(kb) if chain.need.count() == 0 => Grid::new(kb),
+            Some(kb) => {
+                let v0 = self.version0(k, &chain.need, acc);
+                let mut wider = Grid::new(v0.bounds.union(&kb));
+                wider.copy_from(&v0);
+                wider
+            }
+            None => self.version0(k, &chain.need, acc),
+        };
+        // Voxels corrected in the current pass: their values after it,
+        // cached once it ends.
+        let mut ended: HashMap<[i64; 3], u64> = HashMap::default();
+        let triples = if acc.dry {
+            triples
+        } else {
+            let mut work = Work::new(&self.cands, k, triples);
+            let corrector = Corrector::new(&self.cands, k, &self.params);
+            let mut step_start: Option<(usize, Work)> = None;
+            let mut current_pass = 0;
+            let classes = (side * side * side) as usize;
+            for (forward, (si, voxels)) in chain.subpasses.iter().enumerate() {
+                cancel::check(&acc.cancel);
+                if forward / classes != current_pass {
+                    // The values after the pass just done.
+                    let done = self.version_after_pass(k, current_pass);
+                    self.publish_ended(k, done, &ended, &work.triples);
+                    ended.clear();
+                    current_pass = forward / classes;
+                }
+                if barrier_cell.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
+                    step_start = Some((*si, work.clone()));
+                }
+                let offset = steps[*si].offset;
+                let start = step_start.as_ref().map(|s| &s.1);
+                let w = &work;
+                let new: Vec<(usize, [u32; 3], [f32; 3])> = voxels
+                    .par_iter()
+                    .map_init(Scratch::default, |s, &p| {
+                        let barrier = barrier_cell.map(|m| {
+                            let c = p.map(|v| (v - offset).div_euclid(m) * m + offset);
+                            Box3::new(c, [m; 3])
+                        });
+                        let t = match (start, barrier) {
+                            (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p, s),
+                            _ => corrector.correct(w, None, p, s),
+                        };
+                        (w.triples.index(p), t, colour(&self.cands, k, t))
+                    })
+                    .collect();
+                for (i, t, c) in new {
+                    work.triples.data[i] = t;
+                    work.colours.data[i] = c;
+                }
+                for &(p, t) in ends.get(&forward).into_iter().flatten() {
+                    let i = work.triples.index(p);
+                    work.triples.data[i] = t;
+                    work.colours.data[i] = colour(&self.cands, k, t);
+                }
+                // Sorted voxels come in runs within one tile: one map update
+                // per run.
+                let mut run: Option<([i64; 3], u64)> = None;
+                for &p in voxels {
+                    let t = Self::tile_of(p);
+                    match &mut run {
+                        Some((rt, bits)) if *rt == t => *bits |= Self::bit_of(p),
+                        _ => {
+                            if let Some((rt, bits)) = run {
+                                *ended.entry(rt).or_default() |= bits;
+                            }
+                            run = Some((t, Self::bit_of(p)));
+                        }
+                    }
+                }
+                if let Some((rt, bits)) = run {
+                    *ended.entry(rt).or_default() |= bits;
+                }
+            }
+            work.triples
+        };
+        // Every voxel corrected in the last pass holds its final value,
+        // though only the wanted ones were asked for: the requested tiles
+        // keep theirs, the rest go to the cache as final voxels, so that a
+        // neighbouring request (the next plane of a sweeping cut) finds
+        // them instead of walking their chains again.
+        let own: Vec<([i64; 3], u64)> = tiles
+            .iter()
+            .map(|&(t, mask)| (t, mask | ended.remove(&t).unwrap_or(0)))
+            .collect();
+        self.publish_ended(k, 0, &ended, &triples);
+        own.par_iter()
+            .map(|&(t, mask)| (t, Self::tile_from(&triples, t, mask)))
+            .collect()
+    }
+
+    /// Caches the voxels of `ended` (tile masks) from `triples` as the
+    /// version of level `k` after `done` passes (0: final values).
+    fn publish_ended(
+        &self,
+        k: usize,
+        done: usize,
+        ended: &HashMap<[i64; 3], u64>,
+        triples: &Grid<[u32; 3]>,
+    ) {
+        let tiles: Vec<([i64; 3], Tile)> = ended
+            .par_iter()
+            .map(|(&t, &mask)| (t, Self::tile_from(triples, t, mask)))
+            .collect();
+        for (t, tile) in tiles {
+            self.cache.merge(self.version_key(k, done, t), tile);
+        }
+    }
+
+    /// Tile `t` of `triples`, holding the voxels of `mask`.
+    fn tile_from(triples: &Grid<[u32; 3]>, t: [i64; 3], mask: u64) -> Tile {
+        Arc::new(TileData::from_grid(triples, Self::tile_box(t).lo, mask))
+    }
+
+    /// Key of the values after pass `pass` (counted over all steps from 0)
+    /// of level `k` in tile `cell`: the version after `pass + 1` passes, or
+    /// the final version after the last pass.
+    fn after_pass_key(&self, k: usize, pass: usize, cell: [i64; 3]) -> TileKey {
+        self.version_key(k, self.version_after_pass(k, pass), cell)
+    }
+
+    /// The version of level `k` after pass `pass`: `pass + 1`, or 0 (final)
+    /// after the last pass.
+    fn version_after_pass(&self, k: usize, pass: usize) -> usize {
+        let total: usize = self.steps_at(k).iter().map(|s| s.passes as usize).sum();
+        if pass + 1 < total { pass + 1 } else { 0 }
+    }
+
+    /// Key of the version after `done` correction passes of level `k` (0:
+    /// the final version) in tile `cell`.
+    fn version_key(&self, k: usize, done: usize, cell: [i64; 3]) -> TileKey {
+        TileKey {
+            texture: self.key,
+            level: k as u8,
+            version: done as u8,
+            cell,
+        }
+    }
+
+    /// Version 0 of level `k` at the voxels of `need` (a grid over its
+    /// box; other voxels are left unset): the jittered slab at the initial
+    /// level, else the parent level's final triples upsampled.
+    fn version0(&self, k: usize, need: &plan::Mask, acc: &Acc) -> Grid<[u32; 3]> {
+        let b = need.bounds();
+        let mut g = Grid::new(b);
+        let zs: Vec<i64> = (b.lo[2]..b.hi[2]).collect();
+        let layer = (b.size()[0] * b.size()[1]) as usize;
+        if k == self.init_level {
+            if acc.dry {
+                return g;
+            }
+            let field =
+                init::JitterField::new(&self.cands, self.params.seed, self.params.jitter, k, &b);
+            g.data
+                .par_chunks_mut(layer)
+                .zip(zs.par_iter())
+                .for_each(|(dst, &z)| {
+                    for p in need.layer(z) {
+                        let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
+                        dst[i] = init::initial_triple(
+                            &self.cands,
+                            self.params.seed,
+                            self.params.slab_thickness,
+                            &field,
+                            k,
+                            p,
+                        );
+                    }
+                });
+            return g;
+        }
+        let parent_tiles = tile_masks(need, 2);
+        let parents = self.tiles(k + 1, parent_tiles, acc);
+        if acc.dry {
+            return g;
+        }
+        g.data
+            .par_chunks_mut(layer)
+            .zip(zs.par_iter())
+            .for_each(|(dst, &z)| {
+                for p in need.layer(z) {
+                    let q = p.map(|v| v.div_euclid(2));
+                    let parent = parents[&Self::tile_of(q)].get(q);
+                    let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
+                    dst[i] = init::upsample(&self.cands, parent, k, p);
+                }
+            });
+        g
+    }
+
+    pub(crate) fn new_acc(&self) -> Acc {
+        Acc::new(self.init_level + 1, false)
+    }
+
+    /// Counts what synthesizing `r` from a cold cache would compute, per
+    /// level, without computing it.
+    pub(crate) fn plan_region(&self, r: &Region, lod: u32) -> SynthStats {
+        let acc = Acc::new(self.init_level + 1, true);
+        let b = Box3::new(r.origin, r.size.map(|s| s as i64));
+        self.dry().level_box(lod as usize, &b, &acc);
+        acc.stats()
+    }
+
+    /// Counts what the cut `plane` would compute from a cold cache.
+    pub(crate) fn plan_cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> SynthStats {
+        let acc = Acc::new(self.init_level + 1, true);
+        let mut wanted = Wanted::new();
+        for p in cut_points(plane, filter).0 {
+            *wanted.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
+        }
+        self.dry().tiles(lod as usize, wanted, &acc);
+        acc.stats()
+    }
+
+    /// The same engine over a private, unbounded cache, for counting.
+    fn dry(&self) -> Engine {
+        Engine {
+            cands: self.cands.clone(),
+            params: self.params.clone(),
+            cache: Arc::new(TileCache::new(usize::MAX)),
+            key: self.key,
+            init_level: self.init_level,
+            radius: self.radius,
+            cell: self.cell,
+            steps: self.steps.clone(),
+            finest_steps: self.finest_steps.clone(),
+            reach: self.reach.clone(),
+        }
+    }
+
+    /// An upper bound of what [`Engine::plan_region`] counts, found without
+    /// walking voxels (see [`estimate`]); counting stops past `limit`.
+    pub(crate) fn estimate_region(
+        &self,
+        r: &Region,
+        lod: u32,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
+        let piece = estimate::Piece::region(r.origin, r.size);
+        estimate::estimate(piece, &self.reach[lod as usize..], MAX_GROUP_TILES, limit)
+    }
+
+    /// An upper bound of what [`Engine::plan_cut`] counts.
+    pub(crate) fn estimate_cut(
+        &self,
+        plane: &CutPlane,
+        lod: u32,
+        filter: Filter,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
+        let piece = estimate::Piece::cut(
+            plane.origin,
+            plane.u,
+            plane.v,
+            plane.width,
+            plane.height,
+            filter == Filter::Trilinear,
+        );
+        estimate::estimate(piece, &self.reach[lod as usize..], MAX_GROUP_TILES, limit)
+    }
+
+    /// Exact voxel-level dependency chain of a few voxels (see
+    /// [`plan::exact_chain`]).
+    /// `radius` is the neighbourhood's half side (the analysis's own unless
+    /// a caller asks what another N would need).
+    pub(crate) fn exact_chain(
+        &self,
+        voxels: &[[i64; 3]],
+        lod: u32,
+        radius: i64,
+    ) -> Vec<plan::LevelPlan> {
+        let levels: Vec<Vec<Step>> = (0..=self.init_level)
+            .skip(lod as usize)
+            .map(|k| self.steps_at(k).to_vec())
+            .collect();
+        let cell = match self.params.scheme {
+            Scheme::DualGrid => Some(self.cell),
+            Scheme::Standard => None,
+        };
+        plan::exact_chain(
+            voxels,
+            levels.len(),
+            &levels,
+            radius,
+            self.params.subpass_side as i64,
+            cell,
+        )
+    }
+
+    pub(crate) fn region_rgb(&self, r: &Region, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
+        let acc = self.new_acc();
+        let b = Box3::new(r.origin, r.size.map(|s| s as i64));
+        let k = lod as usize;
+        let g = self.level_box(k, &b, &acc);
+        let mut rgb = vec![0u8; g.data.len() * 3];
+        rgb.par_chunks_mut(3)
+            .zip(g.data.par_iter())
+            .for_each(|(dst, t)| dst.copy_from_slice(&triple_rgb8(&self.cands, k, *t)));
+        Ok((rgb, acc.stats()))
+    }
+
+    /// Final triples at arbitrary voxels of level `k`, fetched tile by tile
+    /// so scattered points never pull in their bounding box.
+    fn triples_at(&self, k: usize, points: &[[i64; 3]], acc: &Acc) -> Vec<[u32; 3]> {
+        let mut wanted = Wanted::new();
+        for p in points {
+            *wanted.entry(Self::tile_of(*p)).or_default() |= Self::bit_of(*p);
+        }
+        let tiles = self.tiles(k, wanted, acc);
+        points
+            .iter()
+            .map(|p| tiles[&Self::tile_of(*p)].get(*p))
+            .collect()
+    }
+
+    pub(crate) fn points_rgb(
+        &self,
+        points: &[[i64; 3]],
+        lod: u32,
+    ) -> Result<(Vec<[u8; 3]>, SynthStats)> {
+        let acc = self.new_acc();
+        let k = lod as usize;
+        let triples = self.triples_at(k, points, &acc);
+        let out = triples
+            .par_iter()
+            .map(|t| triple_rgb8(&self.cands, k, *t))
+            .collect();
+        Ok((out, acc.stats()))
+    }
+
+    pub(crate) fn cut_rgb(
+        &self,
+        plane: &CutPlane,
+        lod: u32,
+        filter: Filter,
+    ) -> Result<(Vec<u8>, SynthStats)> {
+        let acc = self.new_acc();
+        let k = lod as usize;
+        let (w, h) = (plane.width as usize, plane.height as usize);
+        let at = |i: usize, j: usize| {
+            [0, 1, 2].map(|a| plane.origin[a] + i as f64 * plane.u[a] + j as f64 * plane.v[a])
+        };
+        let limit = crate::request::COORD_LIMIT as f64;
+        for (i, j) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)] {
+            if at(i, j).iter().any(|v| v.abs() > limit) {
+                return Err(crate::Error::InvalidRange {
+                    name: "cut coordinate",
+                    value: at(i, j).iter().fold(0f64, |m, v| m.max(v.abs())),
+                    min: -limit,
+                    max: limit,
+                });
+            }
+        }
+        let (pts, weights) = cut_points(plane, filter);
+        let rgb = match filter {
+            Filter::Nearest => {
+                let t = self.triples_at(k, &pts, &acc);
+                t.par_iter()
+                    .flat_map_iter(|t| triple_rgb8(&self.cands, k, *t))
+                    .collect()
+            }
+            Filter::Trilinear => {
+                let t = self.triples_at(k, &pts, &acc);
+                let mut out = vec![0u8; w * h * 3];
+                out.par_chunks_mut(3).enumerate().for_each(|(i, dst)| {
+                    let mut c = [0f32; 3];
+                    for j in i * 8..i * 8 + 8 {
+                        let col = colour(&self.cands, k, t[j]);
+                        for ch in 0..3 {
+                            c[ch] += weights[j] * col[ch];
+                        }
+                    }
+                    dst.copy_from_slice(&rgb8(c));
+                });
+                out
+            }
+        };
+        Ok((rgb, acc.stats()))
+    }
+}
+
+/// [`plan::reach`] of a level's steps, computed once per process for each
+/// set of steps: textures with the same synthesis parameters share it.
+fn known_reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> plan::Reach {
+    type Key = (Vec<Step>, i64, i64, Option<i64>);
+    static KNOWN: std::sync::LazyLock<std::sync::Mutex<HashMap<Key, plan::Reach>>> =
+        std::sync::LazyLock::new(Default::default);
+    let key = (steps.to_vec(), radius, side, cell);
+    let lock = || KNOWN.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(r) = lock().get(&key) {
+        return *r;
+    }
+    let r = plan::reach(steps, radius, side, cell);
+    lock().insert(key, r);
+    r
+}
+
+/// A voxel whose value at some version is known, with that value.
+type KnownVoxel = ([i64; 3], [u32; 3]);
+
+/// The voxels of tile `cell` whose bits are set in `mask`, with their
+/// index in the tile.
+fn tile_voxels(cell: [i64; 3], mask: u64) -> impl Iterator<Item = (usize, [i64; 3])> {
+    let b = Engine::tile_box(cell);
+    (0..(TILE * TILE * TILE) as usize)
+        .filter(move |i| mask >> i & 1 == 1)
+        .map(move |i| (i, position(&b, i)))
+}
+
+/// Tile masks of the members of `need` divided by `scale` (1: the members
+/// themselves, 2: their parents one level up), built one dense layer of
+/// tiles at a time in parallel.
+fn tile_masks(need: &plan::Mask, scale: i64) -> Wanted {
+    let b = need.bounds();
+    let lo = Engine::tile_of(b.lo.map(|v| v.div_euclid(scale)));
+    let hi = Engine::tile_of(b.hi.map(|v| (v - 1).div_euclid(scale)));
+    let (tx, ty) = ((hi[0] - lo[0] + 1) as usize, (hi[1] - lo[1] + 1) as usize);
+    let layers: Vec<(i64, Vec<u64>)> = (lo[2]..=hi[2])
+        .into_par_iter()
+        .map(|tz| {
+            let mut masks = vec![0u64; tx * ty];
+            let zs = tz * TILE * scale..(tz + 1) * TILE * scale;
+            for z in zs.start.max(b.lo[2])..zs.end.min(b.hi[2]) {
+                for p in need.layer(z) {
+                    let q = p.map(|v| v.div_euclid(scale));
+                    let c = Engine::tile_of(q);
+                    masks[(c[1] - lo[1]) as usize * tx + (c[0] - lo[0]) as usize] |=
+                        Engine::bit_of(q);
+                }
+            }
+            (tz, masks)
+        })
+        .collect();
+    let mut out = Wanted::new();
+    for (tz, masks) in layers {
+        for (i, &m) in masks.iter().enumerate().filter(|(_, m)| **m != 0) {
+            out.insert([lo[0] + (i % tx) as i64, lo[1] + (i / tx) as i64, tz], m);
+        }
+    }
+    out
+}
+
+#[inline]
+fn position(b: &Box3, i: usize) -> [i64; 3] {
+    let s = b.size();
+    let (sx, sy) = (s[0] as usize, s[1] as usize);
+    [
+        b.lo[0] + (i % sx) as i64,
+        b.lo[1] + ((i / sx) % sy) as i64,
+        b.lo[2] + (i / (sx * sy)) as i64,
+    ]
+}
+
+/// The voxels a cut samples, pixel by pixel, and for the trilinear filter
+/// the eight corners of each pixel with their weights (nearest: no weights).
+fn cut_points(plane: &CutPlane, filter: Filter) -> (Vec<[i64; 3]>, Vec<f32>) {
+    let (w, h) = (plane.width as usize, plane.height as usize);
+    let at = |i: usize, j: usize| {
+        [0, 1, 2].map(|a| plane.origin[a] + i as f64 * plane.u[a] + j as f64 * plane.v[a])
+    };
+    match filter {
+        Filter::Nearest => {
+            let pts = (0..w * h)
+                .map(|i| at(i % w, i / w).map(|v| v.round() as i64))
+                .collect();
+            (pts, Vec::new())
+        }
+        Filter::Trilinear => {
+            let mut pts = Vec::with_capacity(w * h * 8);
+            let mut weights = Vec::with_capacity(w * h * 8);
+            for i in 0..w * h {
+                let q = at(i % w, i / w);
+                let base = q.map(|v| v.floor());
+                let f = [0, 1, 2].map(|a| q[a] - base[a]);
+                for corner in 0..8 {
+                    let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                    pts.push([0, 1, 2].map(|a| base[a] as i64 + o[a] as i64));
+                    let wgt: f64 = (0..3)
+                        .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
+                        .product();
+                    weights.push(wgt as f32);
+                }
+            }
+            (pts, weights)
+        }
+    }
+}

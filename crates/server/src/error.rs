@@ -1,0 +1,334 @@
+//! Errors as the HTTP client sees them: a status, a stable machine-readable
+//! `code` and a message, always sent as `{"error": {"code", "message"}}`.
+//!
+//! Engine errors map onto this by kind; anything the server itself rejects
+//! (routing, parsing, overload) is built here too, and
+//! [`json_errors`] rewrites the few plain-text rejections of the framework,
+//! so that no error leaves the server in another shape.
+
+use axum::body::Body;
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde_json::json;
+
+/// An error answer.
+#[derive(Debug, Clone)]
+pub struct ApiError {
+    /// HTTP status.
+    pub status: StatusCode,
+    /// Stable identifier of the error class (`not_found`, `invalid_parameter`…).
+    pub code: &'static str,
+    /// Human-readable explanation.
+    pub message: String,
+    /// Seconds after which a retry may succeed (sets `Retry-After`).
+    pub retry_after: Option<u32>,
+}
+
+impl ApiError {
+    /// An error with the given status, code and message.
+    pub fn new(status: StatusCode, code: &'static str, message: impl Into<String>) -> Self {
+        ApiError {
+            status,
+            code,
+            message: message.into(),
+            retry_after: None,
+        }
+    }
+
+    /// Adds a `Retry-After` header.
+    pub fn retry_after(mut self, seconds: u32) -> Self {
+        self.retry_after = Some(seconds);
+        self
+    }
+
+    /// 400: a query or path parameter is not what it should be.
+    pub fn invalid_parameter(name: &str, message: impl std::fmt::Display) -> Self {
+        Self::new(
+            StatusCode::BAD_REQUEST,
+            "invalid_parameter",
+            format!("parameter `{name}`: {message}"),
+        )
+    }
+
+    /// 400: a parameter lies outside its documented range.
+    pub fn out_of_range(
+        name: &str,
+        value: impl std::fmt::Display,
+        min: impl std::fmt::Display,
+        max: impl std::fmt::Display,
+    ) -> Self {
+        Self::new(
+            StatusCode::BAD_REQUEST,
+            "out_of_range",
+            format!("parameter `{name}` = {value} is outside {min}..={max}"),
+        )
+    }
+
+    /// 400: the request asks for more than the documented caps.
+    pub fn too_large(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::BAD_REQUEST, "too_large", message)
+    }
+
+    /// 400: the request needed more synthesis than one request may do.
+    pub fn over_budget(voxels: u64) -> Self {
+        Self::new(
+            StatusCode::BAD_REQUEST,
+            "over_budget",
+            format!(
+                "this request needs more than {voxels} voxels synthesized, the server's \
+                 budget per request (--max-request-work); ask for a smaller area or a \
+                 coarser lod"
+            ),
+        )
+    }
+
+    /// 400: the request is predicted, before any work, to need more
+    /// synthesis than one request may do (`predicted` is an upper bound;
+    /// `complete` false when counting stopped once past the budget).
+    pub fn predicted_over_budget(predicted: u64, complete: bool, budget: u64) -> Self {
+        let more = if complete { "" } else { "more than " };
+        Self::new(
+            StatusCode::BAD_REQUEST,
+            "over_budget",
+            format!(
+                "this request is predicted to synthesize up to {more}{predicted} voxels from a \
+                 cold cache, over the server's budget of {budget} voxels per request \
+                 (--max-request-work); ask for fewer pixels, pixels closer together or a \
+                 smaller box"
+            ),
+        )
+    }
+
+    /// 413: the upload's precompute is expected to need more memory than
+    /// the server lets precomputes take.
+    pub fn precompute_too_large(estimated: u64, bound: u64) -> Self {
+        let mib = |b: u64| b.div_ceil(1 << 20);
+        Self::new(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            "precompute_too_large",
+            format!(
+                "precomputing this texture is estimated to take {} MiB of memory at its peak, \
+                 more than the {} MiB this server allows (--max-precompute-bytes); send a \
+                 smaller exemplar, one image for all planes, or fewer levels or triples",
+                mib(estimated),
+                mib(bound)
+            ),
+        )
+    }
+
+    /// 404: no texture has this id.
+    pub fn unknown_texture(id: &str) -> Self {
+        Self::new(
+            StatusCode::NOT_FOUND,
+            "unknown_texture",
+            format!("no texture with id `{id}`"),
+        )
+    }
+
+    /// 507: the server keeps no more textures until some are deleted.
+    pub fn storage_full(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::INSUFFICIENT_STORAGE, "storage_full", message)
+    }
+
+    /// 503: too much work queued; retry later.
+    pub fn overloaded(what: &str) -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "overloaded",
+            format!("{what}; retry later"),
+        )
+        .retry_after(1)
+    }
+
+    /// 500: something went wrong inside the server.
+    pub fn internal(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", message)
+    }
+}
+
+impl std::fmt::Display for ApiError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} {}: {}",
+            self.status.as_u16(),
+            self.code,
+            self.message
+        )
+    }
+}
+
+impl From<solidtex_core::Error> for ApiError {
+    fn from(e: solidtex_core::Error) -> Self {
+        use solidtex_core::Error as E;
+        let message = e.to_string();
+        let (status, code) = match &e {
+            E::MalformedImage(_) => (StatusCode::BAD_REQUEST, "malformed_image"),
+            E::ImageSize { .. } => (StatusCode::BAD_REQUEST, "image_size"),
+            E::SizeMismatch(_) => (StatusCode::BAD_REQUEST, "size_mismatch"),
+            E::InvalidRange { .. } => (StatusCode::BAD_REQUEST, "out_of_range"),
+            E::TooLarge(_) => (StatusCode::BAD_REQUEST, "too_large"),
+            E::InvalidRequest(_) => (StatusCode::BAD_REQUEST, "invalid_request"),
+            E::CorruptFile(_) => (StatusCode::INTERNAL_SERVER_ERROR, "corrupt_file"),
+            E::Io(_) => (StatusCode::INTERNAL_SERVER_ERROR, "io"),
+        };
+        ApiError::new(status, code, message)
+    }
+}
+
+/// The JSON body of an error.
+pub fn error_body(code: &str, message: &str) -> String {
+    json!({ "error": { "code": code, "message": message } }).to_string()
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        // Shedding load (503) is the server working as configured, not a
+        // failure; `log_response` reports it at INFO.
+        if self.status == StatusCode::SERVICE_UNAVAILABLE {
+            tracing::debug!(code = self.code, message = %self.message, "request shed");
+        } else if self.status.is_server_error() {
+            tracing::error!(code = self.code, message = %self.message, "request failed");
+        } else {
+            tracing::debug!(code = self.code, message = %self.message, "request rejected");
+        }
+        let mut res = Response::new(Body::from(error_body(self.code, &self.message)));
+        *res.status_mut() = self.status;
+        res.headers_mut().insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/json"),
+        );
+        if let Some(s) = self.retry_after {
+            res.headers_mut()
+                .insert(header::RETRY_AFTER, HeaderValue::from(s));
+        }
+        res
+    }
+}
+
+/// The error code used for a bare status.
+pub fn code_for_status(status: StatusCode) -> &'static str {
+    match status {
+        StatusCode::BAD_REQUEST => "bad_request",
+        StatusCode::NOT_FOUND => "no_route",
+        StatusCode::METHOD_NOT_ALLOWED => "method_not_allowed",
+        StatusCode::PAYLOAD_TOO_LARGE => "payload_too_large",
+        StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
+        StatusCode::UNPROCESSABLE_ENTITY => "unprocessable",
+        StatusCode::REQUEST_TIMEOUT => "timeout",
+        StatusCode::SERVICE_UNAVAILABLE => "unavailable",
+        s if s.is_server_error() => "internal",
+        _ => "error",
+    }
+}
+
+/// Middleware: rewrites any error response that is not already JSON
+/// (framework rejections, empty 405s) into the JSON error shape, keeping
+/// its status and headers. An error to an upload closes the connection.
+pub async fn json_errors(req: axum::extract::Request, next: axum::middleware::Next) -> Response {
+    let upload = req.method() == axum::http::Method::POST;
+    let mut res = next.run(req).await;
+    let status = res.status();
+    if !(status.is_client_error() || status.is_server_error()) {
+        return res;
+    }
+    if upload {
+        // The upload may have been refused before its body was read (too
+        // large, bad query or type): the connection cannot be reused, and
+        // saying so keeps the client from sending its next request on it.
+        res.headers_mut()
+            .insert(header::CONNECTION, HeaderValue::from_static("close"));
+    }
+    let is_json = res
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("application/json"));
+    if is_json {
+        return res;
+    }
+    let (mut parts, body) = res.into_parts();
+    let text = axum::body::to_bytes(body, 4096)
+        .await
+        .map(|b| String::from_utf8_lossy(&b).trim().to_string())
+        .unwrap_or_default();
+    let message = if text.is_empty() {
+        status
+            .canonical_reason()
+            .unwrap_or("error")
+            .to_ascii_lowercase()
+    } else {
+        text
+    };
+    parts.headers.remove(header::CONTENT_LENGTH);
+    parts.headers.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/json"),
+    );
+    Response::from_parts(
+        parts,
+        Body::from(error_body(code_for_status(status), &message)),
+    )
+}
+
+/// The answer to a panic inside a handler: a JSON 500; the server goes on.
+pub fn panic_response(err: Box<dyn std::any::Any + Send + 'static>) -> Response {
+    let what = panic_message(err.as_ref());
+    tracing::error!(panic = %what, "handler panicked");
+    ApiError::internal(format!("internal error: {what}")).into_response()
+}
+
+/// The message of a panic payload.
+pub fn panic_message(err: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = err.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = err.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "panic".to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn engine_errors_map_to_statuses() {
+        let e: ApiError = solidtex_core::Error::MalformedImage("x".into()).into();
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::BAD_REQUEST, "malformed_image")
+        );
+        let e: ApiError = solidtex_core::Error::TooLarge("x".into()).into();
+        assert_eq!(e.code, "too_large");
+        let e: ApiError = solidtex_core::Error::InvalidRange {
+            name: "lod",
+            value: 9.0,
+            min: 0.0,
+            max: 3.0,
+        }
+        .into();
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::BAD_REQUEST, "out_of_range")
+        );
+        let e: ApiError = solidtex_core::Error::Io(std::io::Error::other("disk")).into();
+        assert_eq!(e.status, StatusCode::INTERNAL_SERVER_ERROR);
+    }
+
+    #[test]
+    fn body_shape() {
+        let v: serde_json::Value = serde_json::from_str(&error_body("a", "b \"c\"")).unwrap();
+        assert_eq!(v["error"]["code"], "a");
+        assert_eq!(v["error"]["message"], "b \"c\"");
+    }
+
+    #[test]
+    fn panic_messages() {
+        let p: Box<dyn std::any::Any + Send> = Box::new("boom");
+        assert_eq!(panic_message(p.as_ref()), "boom");
+        let p: Box<dyn std::any::Any + Send> = Box::new(String::from("bang"));
+        assert_eq!(panic_message(p.as_ref()), "bang");
+    }
+}

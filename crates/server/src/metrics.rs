@@ -1,0 +1,499 @@
+//! Prometheus metrics of the service, served as text at `/metrics`.
+//!
+//! Each server owns its registry (no process-global state), so several
+//! servers in one process — as in the tests — count separately. Request
+//! counters and latency histograms are labelled by route template (never
+//! by raw path, which would explode cardinality); tile-cache counters and
+//! the process's resident memory and threads are read at scrape time.
+
+use prometheus_client::collector::Collector;
+use prometheus_client::encoding::{DescriptorEncoder, EncodeLabelSet, EncodeMetric};
+use prometheus_client::metrics::counter::{ConstCounter, Counter};
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::{ConstGauge, Gauge};
+use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
+use prometheus_client::registry::Registry;
+use solidtex_core::{SynthStats, TileCache};
+use std::sync::Arc;
+
+/// Labels of a request counter.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct RequestLabels {
+    /// Route template, e.g. `/v1/textures/{id}/cut.png`.
+    pub route: String,
+    /// HTTP method.
+    pub method: String,
+    /// Response status code.
+    pub status: String,
+}
+
+/// Labels of a per-route histogram.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct RouteLabels {
+    /// Route template.
+    pub route: String,
+}
+
+/// Labels of per-level counters.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct LevelLabels {
+    /// Pyramid level, 0 = finest.
+    pub level: String,
+}
+
+/// Labels of precompute outcomes.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct OutcomeLabels {
+    /// `ok` or `failed`.
+    pub outcome: String,
+}
+
+/// Labels of the over-budget counter.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct StageLabels {
+    /// `predicted` (refused before any work) or `running` (stopped).
+    pub stage: String,
+}
+
+/// Labels of the memory bound's parts.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct PartLabels {
+    /// `base`, `cache`, `candidates`, `precomputes`, `jobs`, `allocator`.
+    pub part: String,
+}
+
+/// Labels of the texture gauge.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct StatusLabels {
+    /// `pending`, `ready` or `failed`.
+    pub status: String,
+}
+
+fn latency_histogram() -> Histogram {
+    Histogram::new(exponential_buckets(0.0005, 2.0, 18))
+}
+
+fn precompute_histogram() -> Histogram {
+    Histogram::new(exponential_buckets(0.05, 2.0, 14))
+}
+
+/// All metrics of one server.
+pub struct Metrics {
+    registry: Registry,
+    /// HTTP requests by route, method and status.
+    pub requests: Family<RequestLabels, Counter>,
+    /// Request latency by route, seconds.
+    pub latency: Family<RouteLabels, Histogram, fn() -> Histogram>,
+    /// Voxels produced by synthesis, per level.
+    pub voxels: Family<LevelLabels, Counter>,
+    /// Voxel corrections performed, per level.
+    pub corrections: Family<LevelLabels, Counter>,
+    /// Tiles computed by requests.
+    pub tiles_computed: Counter,
+    /// Tiles requests found in the cache.
+    pub tiles_from_cache: Counter,
+    /// Synthesis jobs waiting for a slot.
+    pub jobs_queued: Gauge,
+    /// Synthesis jobs running.
+    pub jobs_running: Gauge,
+    /// Requests turned away: queue full, predicted wait too long, or wait
+    /// limit reached.
+    pub jobs_rejected: Counter,
+    /// Of those, jobs that waited the whole limit without a slot.
+    pub jobs_timed_out: Counter,
+    /// Running jobs stopped because their client went away.
+    pub jobs_cancelled: Counter,
+    /// Time admitted jobs waited for a running slot, seconds.
+    pub job_wait: Histogram,
+    /// Requests answered 400 `over_budget`, by when.
+    pub over_budget: Family<StageLabels, Counter>,
+    /// Precomputations finished, by outcome.
+    pub precomputes: Family<OutcomeLabels, Counter>,
+    /// Precomputation duration, seconds.
+    pub precompute_seconds: Histogram,
+    /// Precomputations queued or running.
+    pub precomputes_pending: Gauge,
+    /// Heap bytes each precomputation peaked at.
+    pub precompute_peak_bytes: Histogram,
+    /// Estimated peak bytes of the precomputations running.
+    pub precompute_reserved_bytes: Gauge,
+    /// Open client connections.
+    pub connections_open: Gauge,
+    /// Idle connections closed to make room for new ones.
+    pub connections_evicted: Counter,
+    /// Connections answered 503 because every open one was busy.
+    pub connections_refused: Counter,
+    /// Textures loaded from the data directory at start.
+    pub textures_loaded: Counter,
+    /// Stored textures not served because they do not match their id.
+    pub textures_refused: Counter,
+    /// Textures by status.
+    pub textures: Family<StatusLabels, Gauge>,
+    /// The server's bound on its resident memory, by part (see
+    /// [`super::memory`]); set at each scrape.
+    pub memory_bound: Family<PartLabels, Gauge>,
+}
+
+impl Metrics {
+    /// A fresh registry; `cache` is read at every scrape.
+    pub fn new(cache: Arc<TileCache>) -> Metrics {
+        let mut registry = Registry::with_prefix("solidtex");
+        let requests = Family::<RequestLabels, Counter>::default();
+        registry.register(
+            "http_requests",
+            "HTTP requests by route, method and status",
+            requests.clone(),
+        );
+        let latency = Family::<RouteLabels, Histogram, fn() -> Histogram>::new_with_constructor(
+            latency_histogram as fn() -> Histogram,
+        );
+        registry.register_with_unit(
+            "http_request_duration",
+            "HTTP request latency by route",
+            prometheus_client::registry::Unit::Seconds,
+            latency.clone(),
+        );
+        let voxels = Family::<LevelLabels, Counter>::default();
+        registry.register(
+            "synth_voxels",
+            "Voxels synthesized, per pyramid level (0 = finest)",
+            voxels.clone(),
+        );
+        let corrections = Family::<LevelLabels, Counter>::default();
+        registry.register(
+            "synth_corrections",
+            "Voxel corrections performed, per pyramid level",
+            corrections.clone(),
+        );
+        let tiles_computed = Counter::default();
+        registry.register(
+            "synth_tiles_computed",
+            "Tiles synthesized by requests",
+            tiles_computed.clone(),
+        );
+        let tiles_from_cache = Counter::default();
+        registry.register(
+            "synth_tiles_from_cache",
+            "Tiles requests found in the cache or got from a concurrent request",
+            tiles_from_cache.clone(),
+        );
+        let jobs_queued = Gauge::default();
+        registry.register(
+            "jobs_queued",
+            "Synthesis jobs waiting for a slot",
+            jobs_queued.clone(),
+        );
+        let jobs_running = Gauge::default();
+        registry.register(
+            "jobs_running",
+            "Synthesis jobs running",
+            jobs_running.clone(),
+        );
+        let jobs_rejected = Counter::default();
+        registry.register(
+            "jobs_rejected",
+            "Requests answered 503 because the queue was full or too slow",
+            jobs_rejected.clone(),
+        );
+        let jobs_cancelled = Counter::default();
+        registry.register(
+            "jobs_cancelled",
+            "Running synthesis jobs stopped because their client went away",
+            jobs_cancelled.clone(),
+        );
+        let jobs_timed_out = Counter::default();
+        registry.register(
+            "jobs_timed_out",
+            "Queued jobs answered 503 after waiting the whole wait limit",
+            jobs_timed_out.clone(),
+        );
+        let job_wait = latency_histogram();
+        registry.register_with_unit(
+            "job_wait",
+            "Time admitted synthesis jobs waited for a running slot",
+            prometheus_client::registry::Unit::Seconds,
+            job_wait.clone(),
+        );
+        let over_budget = Family::<StageLabels, Counter>::default();
+        registry.register(
+            "requests_over_budget",
+            "Voxel requests answered 400 over_budget: predicted over it before any work, \
+             or stopped while running",
+            over_budget.clone(),
+        );
+        let precomputes = Family::<OutcomeLabels, Counter>::default();
+        registry.register(
+            "precomputes",
+            "Candidate precomputations finished, by outcome",
+            precomputes.clone(),
+        );
+        let precompute_seconds = precompute_histogram();
+        registry.register_with_unit(
+            "precompute_duration",
+            "Candidate precomputation time",
+            prometheus_client::registry::Unit::Seconds,
+            precompute_seconds.clone(),
+        );
+        let precomputes_pending = Gauge::default();
+        registry.register(
+            "precomputes_pending",
+            "Precomputations queued or running",
+            precomputes_pending.clone(),
+        );
+        let precompute_peak_bytes = Histogram::new(exponential_buckets(4.0 * 1048576.0, 2.0, 14));
+        registry.register_with_unit(
+            "precompute_peak",
+            "Heap bytes each candidate precomputation peaked at (counted by the server's \
+             allocator on the precompute threads)",
+            prometheus_client::registry::Unit::Bytes,
+            precompute_peak_bytes.clone(),
+        );
+        let precompute_reserved_bytes = Gauge::default();
+        registry.register_with_unit(
+            "precompute_reserved",
+            "Estimated peak bytes of the precomputations running (bounded by \
+             --max-precompute-bytes)",
+            prometheus_client::registry::Unit::Bytes,
+            precompute_reserved_bytes.clone(),
+        );
+        let connections_open = Gauge::default();
+        registry.register(
+            "connections_open",
+            "Open client connections",
+            connections_open.clone(),
+        );
+        let connections_evicted = Counter::default();
+        registry.register(
+            "connections_evicted",
+            "Idle connections closed to make room under the connection cap",
+            connections_evicted.clone(),
+        );
+        let connections_refused = Counter::default();
+        registry.register(
+            "connections_refused",
+            "Connections answered 503 because every open one had a request in flight",
+            connections_refused.clone(),
+        );
+        let textures_loaded = Counter::default();
+        registry.register(
+            "textures_loaded",
+            "Ready textures loaded from the data directory without recomputation",
+            textures_loaded.clone(),
+        );
+        let textures_refused = Counter::default();
+        registry.register(
+            "textures_refused",
+            "Stored textures not served because their content does not match their id",
+            textures_refused.clone(),
+        );
+        let textures = Family::<StatusLabels, Gauge>::default();
+        registry.register("textures", "Textures by status", textures.clone());
+        let memory_bound = Family::<PartLabels, Gauge>::default();
+        registry.register_with_unit(
+            "memory_bound",
+            "The server's bound on its resident memory, by part (the bound is their sum): \
+             from its limits and what it holds now",
+            prometheus_client::registry::Unit::Bytes,
+            memory_bound.clone(),
+        );
+        registry.register_collector(Box::new(CacheCollector { cache }));
+        registry.register_collector(Box::new(ProcessCollector));
+        Metrics {
+            registry,
+            requests,
+            latency,
+            voxels,
+            corrections,
+            tiles_computed,
+            tiles_from_cache,
+            jobs_queued,
+            jobs_running,
+            jobs_rejected,
+            jobs_timed_out,
+            jobs_cancelled,
+            job_wait,
+            over_budget,
+            precomputes,
+            precompute_seconds,
+            precomputes_pending,
+            precompute_peak_bytes,
+            precompute_reserved_bytes,
+            connections_open,
+            connections_evicted,
+            connections_refused,
+            textures_loaded,
+            textures_refused,
+            textures,
+            memory_bound,
+        }
+    }
+
+    /// Counts one finished request.
+    pub fn observe_request(&self, route: &str, method: &str, status: u16, seconds: f64) {
+        self.requests
+            .get_or_create(&RequestLabels {
+                route: route.to_string(),
+                method: method.to_string(),
+                status: status.to_string(),
+            })
+            .inc();
+        self.latency
+            .get_or_create(&RouteLabels {
+                route: route.to_string(),
+            })
+            .observe(seconds);
+    }
+
+    /// Adds what a synthesis request cost.
+    pub fn observe_synthesis(&self, stats: &SynthStats) {
+        for (k, &n) in stats.voxels_per_level.iter().enumerate() {
+            if n > 0 {
+                self.voxels
+                    .get_or_create(&LevelLabels {
+                        level: k.to_string(),
+                    })
+                    .inc_by(n);
+            }
+        }
+        for (k, &n) in stats.corrections_per_level.iter().enumerate() {
+            if n > 0 {
+                self.corrections
+                    .get_or_create(&LevelLabels {
+                        level: k.to_string(),
+                    })
+                    .inc_by(n);
+            }
+        }
+        self.tiles_computed.inc_by(stats.tiles_computed);
+        self.tiles_from_cache.inc_by(stats.tiles_from_cache);
+    }
+
+    /// Counts a request answered `over_budget` at `stage`.
+    pub fn over_budget(&self, stage: &str) {
+        self.over_budget
+            .get_or_create(&StageLabels {
+                stage: stage.to_string(),
+            })
+            .inc();
+    }
+
+    /// Sets the texture gauge.
+    pub fn set_textures(&self, pending: i64, ready: i64, failed: i64) {
+        for (s, n) in [("pending", pending), ("ready", ready), ("failed", failed)] {
+            self.textures
+                .get_or_create(&StatusLabels { status: s.into() })
+                .set(n);
+        }
+    }
+
+    /// The Prometheus/OpenMetrics text exposition.
+    pub fn encode(&self) -> String {
+        let mut out = String::new();
+        if let Err(e) = prometheus_client::encoding::text::encode(&mut out, &self.registry) {
+            tracing::error!(error = %e, "encoding metrics failed");
+        }
+        out
+    }
+}
+
+/// Reads the tile cache's counters at scrape time.
+struct CacheCollector {
+    cache: Arc<TileCache>,
+}
+
+impl std::fmt::Debug for CacheCollector {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("CacheCollector")
+    }
+}
+
+impl Collector for CacheCollector {
+    fn encode(&self, mut encoder: DescriptorEncoder) -> Result<(), std::fmt::Error> {
+        let s = self.cache.stats();
+        for (name, help, v) in [
+            ("cache_hits", "Tile lookups served from the cache", s.hits),
+            (
+                "cache_misses",
+                "Tile lookups that computed the tile",
+                s.misses,
+            ),
+            (
+                "cache_coalesced",
+                "Tile lookups that waited for a concurrent computation",
+                s.coalesced,
+            ),
+            (
+                "cache_evictions",
+                "Tiles evicted to respect the byte bound",
+                s.evictions,
+            ),
+        ] {
+            let c = ConstCounter::new(v);
+            let m = encoder.encode_descriptor(name, help, None, c.metric_type())?;
+            c.encode(m)?;
+        }
+        for (name, help, v) in [
+            (
+                "cache_bytes",
+                "Bytes of tiles held in the cache",
+                s.bytes as i64,
+            ),
+            ("cache_entries", "Tiles held in the cache", s.entries as i64),
+            (
+                "cache_max_bytes",
+                "Byte bound of the cache",
+                self.cache.max_bytes() as i64,
+            ),
+        ] {
+            let g = ConstGauge::new(v);
+            let m = encoder.encode_descriptor(name, help, None, g.metric_type())?;
+            g.encode(m)?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads the process's resident memory and threads at scrape time.
+#[derive(Debug)]
+struct ProcessCollector;
+
+impl Collector for ProcessCollector {
+    fn encode(&self, mut encoder: DescriptorEncoder) -> Result<(), std::fmt::Error> {
+        if let Some(bytes) = crate::peak_alloc::in_use() {
+            let g = ConstGauge::new(bytes as i64);
+            let m = encoder.encode_descriptor(
+                "heap_bytes",
+                "Heap bytes in use, as the server's allocator counts them (resident memory \
+                 adds the allocator's free pages and the binary)",
+                None,
+                g.metric_type(),
+            )?;
+            g.encode(m)?;
+        }
+        let Some(s) = super::process::current() else {
+            return Ok(());
+        };
+        for (name, help, v) in [
+            (
+                "process_resident_bytes",
+                "Resident memory of the server process",
+                s.resident_bytes,
+            ),
+            (
+                "process_peak_resident_bytes",
+                "Peak resident memory of the server process since it started",
+                s.peak_resident_bytes,
+            ),
+            (
+                "process_threads",
+                "Threads of the server process (HTTP, blocking jobs, rayon pools)",
+                s.threads,
+            ),
+        ] {
+            let g = ConstGauge::new(v as i64);
+            let m = encoder.encode_descriptor(name, help, None, g.metric_type())?;
+            g.encode(m)?;
+        }
+        Ok(())
+    }
+}

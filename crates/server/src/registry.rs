@@ -1,0 +1,1107 @@
+//! The textures the server knows: their status, precompute progress and,
+//! once ready, the [`Texture`] that answers requests.
+//!
+//! A texture is created `pending` by an upload (or found so at start),
+//! precomputed in the background — at most `max_precomputes` at once, on
+//! a blocking thread driving a rayon pool of its own, so uploads never
+//! starve voxel requests of synthesis threads — and becomes `ready` once
+//! its candidates are durable in the [`Store`], or `failed` with a reason.
+//! Uploading content that is already known returns the existing texture;
+//! uploading a failed one tries again.
+
+use super::error::{ApiError, panic_message};
+use super::metrics::{Metrics, OutcomeLabels};
+use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
+use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
+use crate::peak_alloc::{self, Meter};
+use axum::http::StatusCode;
+use solidtex_core::Layout;
+use solidtex_core::{Candidates, Stage, Texture, TileCache};
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
+use std::time::{Instant, SystemTime, UNIX_EPOCH};
+use tokio::sync::Semaphore;
+
+/// Where a texture stands.
+#[derive(Clone)]
+pub enum Status {
+    /// Precompute queued or running.
+    Pending,
+    /// Ready to synthesize.
+    Ready(Texture),
+    /// Ready, but evicted from memory to keep within the server's bound;
+    /// loaded again from disk when asked for.
+    Stored,
+    /// Precompute failed.
+    Failed(String),
+}
+
+/// One texture.
+pub struct Entry {
+    /// Id in URLs.
+    pub id: String,
+    /// The uploaded file's name, for people; not part of the id.
+    pub name: Option<String>,
+    /// Content hash of exemplars and parameters.
+    pub content_hash: String,
+    /// Creation time, seconds since the Unix epoch.
+    pub created: u64,
+    /// Exemplar size and plane count.
+    pub exemplar: ExemplarInfo,
+    /// Parameters.
+    pub params: TextureParams,
+    /// How the exemplars are laid on the planes (`None` where the
+    /// parameters cannot apply to the exemplars, which an upload refuses).
+    pub layout: Option<Layout>,
+    analysis_hash: String,
+    candidates: Mutex<Option<Arc<Candidates>>>,
+    planes: Planes,
+    status: RwLock<Status>,
+    progress: AtomicU32,
+    stage: Mutex<&'static str>,
+    precompute_seconds: Mutex<Option<f64>>,
+    /// Heap bytes its precompute is expected to peak at.
+    pub precompute_estimate: u64,
+    /// Heap bytes its precompute peaked at, when measured.
+    precompute_peak: Mutex<Option<u64>>,
+    deleted: AtomicBool,
+    /// Woken whenever the status changes.
+    settled: tokio::sync::Notify,
+    /// When it was last asked for (the registry's use counter).
+    last_used: AtomicU64,
+    /// Its candidates are on disk, so it may be evicted from memory.
+    on_disk: AtomicBool,
+    /// Highest level of detail, known once ready.
+    max_lod: AtomicU32,
+    /// Serialises loading it back from disk.
+    loading: Mutex<()>,
+}
+
+impl Entry {
+    fn new(id: String, content_hash: String, created: u64, spec: TextureSpec) -> Entry {
+        let (width, height) = spec.planes.size();
+        let planes_n = match spec.planes {
+            Planes::Single(_) => 1,
+            Planes::Triple(_) => 3,
+        };
+        let analysis_hash = spec.analysis_hash();
+        let layout = spec.layout().ok();
+        // Turned planes differ from each other, so the search runs per
+        // plane, as for three exemplars.
+        let turned = layout
+            .as_ref()
+            .is_some_and(|l| l.arrangement.rotate != [0; 3]);
+        let precompute_estimate = solidtex_core::Candidates::estimated_peak_bytes(
+            width,
+            height,
+            planes_n == 3 || turned,
+            &spec.params.analysis,
+        );
+        Entry {
+            id,
+            name: None,
+            content_hash,
+            analysis_hash,
+            candidates: Mutex::new(None),
+            created,
+            exemplar: ExemplarInfo {
+                width,
+                height,
+                planes: planes_n,
+            },
+            params: spec.params,
+            layout,
+            planes: spec.planes,
+            status: RwLock::new(Status::Pending),
+            progress: AtomicU32::new(0f32.to_bits()),
+            stage: Mutex::new("queued"),
+            precompute_seconds: Mutex::new(None),
+            precompute_estimate,
+            precompute_peak: Mutex::new(None),
+            deleted: AtomicBool::new(false),
+            settled: tokio::sync::Notify::new(),
+            last_used: AtomicU64::new(0),
+            on_disk: AtomicBool::new(false),
+            max_lod: AtomicU32::new(0),
+            loading: Mutex::new(()),
+        }
+    }
+
+    /// The entry with a display name.
+    fn named(mut self, name: Option<String>) -> Entry {
+        self.name = name;
+        self
+    }
+
+    /// The xy exemplar (the only one of a single-exemplar texture).
+    pub fn exemplar_xy(&self) -> &solidtex_core::Exemplar {
+        self.planes.named()[0].1
+    }
+
+    /// Current status.
+    pub fn status(&self) -> Status {
+        self.status
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    fn candidates(&self) -> Option<Arc<Candidates>> {
+        self.candidates
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    fn set_ready(&self, c: Arc<Candidates>, t: Texture) {
+        self.max_lod.store(t.max_lod(), Ordering::Relaxed);
+        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = Some(c);
+        self.set_status(Status::Ready(t));
+    }
+
+    /// Highest level of detail served (meaningful once ready).
+    pub fn max_lod(&self) -> u32 {
+        self.max_lod.load(Ordering::Relaxed)
+    }
+
+    /// Drops its candidates from memory; requests in flight keep theirs.
+    fn evict(&self) {
+        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        self.set_status(Status::Stored);
+    }
+
+    fn set_status(&self, s: Status) {
+        *self.status.write().unwrap_or_else(|e| e.into_inner()) = s;
+        self.settled.notify_waiters();
+    }
+
+    /// Waits until the texture is no longer pending, or until `deadline`.
+    pub async fn settle(&self, deadline: tokio::time::Instant) {
+        loop {
+            // Registered before the status is read, so a change between
+            // the two still wakes this waiter.
+            let changed = self.settled.notified();
+            tokio::pin!(changed);
+            changed.as_mut().enable();
+            if !matches!(self.status(), Status::Pending) {
+                return;
+            }
+            if tokio::time::timeout_at(deadline, changed).await.is_err() {
+                return;
+            }
+        }
+    }
+
+    /// Precompute progress 0..=1 (1 once ready).
+    pub fn progress(&self) -> f32 {
+        f32::from_bits(self.progress.load(Ordering::Relaxed))
+    }
+
+    /// Current precompute stage name.
+    pub fn stage(&self) -> &'static str {
+        *self.stage.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Seconds the precompute took, when it ran in this process or was
+    /// recorded by an earlier one.
+    pub fn precompute_seconds(&self) -> Option<f64> {
+        *self
+            .precompute_seconds
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Heap bytes the precompute peaked at, when it ran in this process
+    /// under the counting allocator or was recorded by an earlier one.
+    pub fn precompute_peak(&self) -> Option<u64> {
+        *self
+            .precompute_peak
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn set_progress(&self, stage: &'static str, fraction: f32) {
+        *self.stage.lock().unwrap_or_else(|e| e.into_inner()) = stage;
+        // Never goes back (stages report their own fractions).
+        let new = fraction.clamp(0.0, 1.0);
+        let _ = self
+            .progress
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |old| {
+                (new > f32::from_bits(old)).then_some(new.to_bits())
+            });
+    }
+
+    fn meta(&self) -> StoredMeta {
+        let (status, reason) = match self.status() {
+            Status::Pending => (StoredStatus::Pending, None),
+            Status::Ready(_) | Status::Stored => (StoredStatus::Ready, None),
+            Status::Failed(r) => (StoredStatus::Failed, Some(r)),
+        };
+        StoredMeta {
+            version: META_VERSION,
+            id: self.id.clone(),
+            name: self.name.clone(),
+            content_hash: self.content_hash.clone(),
+            created: self.created,
+            exemplar: self.exemplar,
+            params: self.params.to_flat(),
+            status,
+            reason,
+            precompute_seconds: self.precompute_seconds(),
+            precompute_peak_bytes: self.precompute_peak(),
+        }
+    }
+}
+
+/// Overall progress from a stage and its fraction (stages weighted by their
+/// usual share of the time).
+fn overall_progress(stage: Stage, f: f32) -> (&'static str, f32) {
+    let (name, start, span) = match stage {
+        Stage::Analysis => ("analysis", 0.0, 0.1),
+        Stage::Search => ("search", 0.1, 0.6),
+        Stage::Coherence => ("coherence", 0.7, 0.1),
+        Stage::Finish => ("finish", 0.8, 0.2),
+    };
+    (name, (start + span * f.clamp(0.0, 1.0)).min(0.999))
+}
+
+/// What an upload found.
+pub enum Submitted {
+    /// The texture exists and is ready.
+    Known(Arc<Entry>),
+    /// The texture is (now) being precomputed.
+    Pending(Arc<Entry>),
+}
+
+/// All textures of a server.
+pub struct Registry {
+    map: RwLock<HashMap<String, Arc<Entry>>>,
+    store: Arc<Store>,
+    cache: Arc<TileCache>,
+    metrics: Arc<Metrics>,
+    slots: Arc<Semaphore>,
+    pool: rayon::ThreadPool,
+    pending: AtomicUsize,
+    max_pending: usize,
+    /// Uploaded textures kept at most (the bundled one not counted).
+    max_textures: usize,
+    /// Bytes of candidates kept in memory; beyond it the least recently
+    /// used textures are evicted.
+    max_resident_bytes: u64,
+    /// Counts uses, to find the least recently used texture.
+    uses: AtomicU64,
+    /// Bytes the textures may take on disk.
+    max_stored_bytes: u64,
+    /// Estimated peak bytes of the precomputes running at once, at most.
+    max_precompute_bytes: u64,
+    /// Units of [`MEMORY_UNIT`] bytes of that bound not taken by a running
+    /// precompute.
+    precompute_memory: Arc<Semaphore>,
+    /// Bytes taken from it now, and the most ever.
+    precompute_reserved: AtomicU64,
+    precompute_reserved_peak: AtomicU64,
+    /// Counts the allocations of the precompute pool's threads.
+    meter: Option<&'static Meter>,
+}
+
+/// Granularity of the precompute memory bound.
+const MEMORY_UNIT: u64 = 1 << 20;
+
+/// Units of [`MEMORY_UNIT`] in a bound of `bytes`, as many as a semaphore
+/// and one acquisition can hold.
+fn memory_units(bytes: u64) -> u64 {
+    (bytes / MEMORY_UNIT).clamp(1, u64::from(u32::MAX))
+}
+
+/// Disk bytes a texture takes per exemplar pixel and plane once its
+/// candidates are written (a 128² exemplar: about 6 MB), for admitting an
+/// upload before its candidates exist.
+const STORED_BYTES_PER_PIXEL: u64 = 400;
+
+/// Precompute memory counted as reserved while it lives.
+struct Reserved<'a> {
+    registry: &'a Registry,
+    bytes: u64,
+}
+
+impl Drop for Reserved<'_> {
+    fn drop(&mut self) {
+        let r = self.registry;
+        let now = r
+            .precompute_reserved
+            .fetch_sub(self.bytes, Ordering::SeqCst)
+            - self.bytes;
+        r.metrics.precompute_reserved_bytes.set(now as i64);
+    }
+}
+
+fn now() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0)
+}
+
+impl Registry {
+    /// An empty registry over `store`; precomputes run on `pool`.
+    pub fn new(
+        store: Arc<Store>,
+        cache: Arc<TileCache>,
+        metrics: Arc<Metrics>,
+        max_precomputes: u32,
+        precompute_queue: u32,
+        pool: rayon::ThreadPool,
+    ) -> Registry {
+        Registry {
+            pool,
+            map: RwLock::new(HashMap::new()),
+            store,
+            cache,
+            metrics,
+            slots: Arc::new(Semaphore::new(max_precomputes.max(1) as usize)),
+            pending: AtomicUsize::new(0),
+            max_pending: (max_precomputes + precompute_queue) as usize,
+            max_textures: usize::MAX,
+            max_stored_bytes: u64::MAX,
+            max_resident_bytes: u64::MAX,
+            uses: AtomicU64::new(0),
+            max_precompute_bytes: u64::MAX,
+            precompute_memory: Arc::new(Semaphore::new(memory_units(u64::MAX) as usize)),
+            precompute_reserved: AtomicU64::new(0),
+            precompute_reserved_peak: AtomicU64::new(0),
+            meter: None,
+        }
+    }
+
+    /// The same registry, running precomputes only while their estimated
+    /// peaks (see [`solidtex_core::Candidates::estimated_peak_bytes`]) add up to at
+    /// most `bytes`, refusing uploads whose own estimate is over it, and
+    /// measuring each precompute's peak with `meter` (the precompute
+    /// pool's threads must be attached to it).
+    pub fn with_precompute_memory(mut self, bytes: u64, meter: &'static Meter) -> Registry {
+        self.max_precompute_bytes = bytes;
+        self.precompute_memory = Arc::new(Semaphore::new(memory_units(bytes) as usize));
+        self.meter = Some(meter);
+        self
+    }
+
+    /// Estimated peak bytes of the precomputes running now, and the most
+    /// at any time.
+    pub fn precompute_reserved(&self) -> (u64, u64) {
+        (
+            self.precompute_reserved.load(Ordering::SeqCst),
+            self.precompute_reserved_peak.load(Ordering::SeqCst),
+        )
+    }
+
+    /// The same registry, keeping at most `bytes` of candidates in memory:
+    /// beyond it, the least recently used textures are evicted and loaded
+    /// again from disk when next asked for.
+    pub fn with_memory_limit(mut self, bytes: u64) -> Registry {
+        self.max_resident_bytes = bytes;
+        self
+    }
+
+    /// The texture `id` ready to synthesize, loaded back from disk first
+    /// when it was evicted from memory.
+    pub async fn loaded(self: &Arc<Self>, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
+        // A texture evicted again between its load and its use (memory
+        // contended by many) is loaded again, a few times at most.
+        for _ in 0..3 {
+            let Some(e) = self.get(id) else { break };
+            if !matches!(e.status(), Status::Stored) {
+                break;
+            }
+            let this = self.clone();
+            tokio::task::spawn_blocking(move || this.reload(&e))
+                .await
+                .map_err(|e| ApiError::internal(e.to_string()))??;
+        }
+        self.ready(id)
+    }
+
+    /// Loads an evicted texture's candidates back from disk (blocking).
+    fn reload(&self, entry: &Arc<Entry>) -> Result<(), ApiError> {
+        let _one = entry.loading.lock().unwrap_or_else(|e| e.into_inner());
+        if !matches!(entry.status(), Status::Stored) {
+            return Ok(());
+        }
+        let (c, t) = self
+            .load_ready(entry)
+            .map_err(|e| ApiError::internal(format!("loading texture `{}`: {e}", entry.id)))?;
+        entry.set_ready(c, t);
+        let now = self.uses.fetch_add(1, Ordering::Relaxed) + 1;
+        entry.last_used.store(now, Ordering::Relaxed);
+        self.metrics.textures_loaded.inc();
+        tracing::info!(id = %entry.id, "texture loaded back into memory");
+        self.keep_within_memory(&entry.id);
+        Ok(())
+    }
+
+    /// Evicts the least recently used ready textures (never `keep`, never
+    /// one whose candidates are not on disk) until the candidates in memory
+    /// fit the bound.
+    fn keep_within_memory(&self, keep: &str) {
+        if self.max_resident_bytes == u64::MAX {
+            return;
+        }
+        let mut resident: Vec<(u64, u64, Arc<Entry>)> = self
+            .map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .filter(|e| matches!(e.status(), Status::Ready(_)))
+            .filter_map(|e| {
+                let bytes = e.candidates()?.memory_bytes().1 as u64;
+                Some((e.last_used.load(Ordering::Relaxed), bytes, e.clone()))
+            })
+            .collect();
+        let mut total: u64 = resident.iter().map(|r| r.1).sum();
+        resident.sort_by_key(|r| r.0);
+        for (_, bytes, e) in resident {
+            if total <= self.max_resident_bytes {
+                break;
+            }
+            if e.id == keep || !e.on_disk.load(Ordering::Relaxed) {
+                continue;
+            }
+            e.evict();
+            total = total.saturating_sub(bytes);
+            tracing::info!(id = %e.id, bytes, "texture evicted from memory");
+        }
+    }
+
+    /// Bytes of candidates in memory now (candidates shared by textures
+    /// that differ in synthesis parameters only are counted once).
+    pub fn resident_candidate_bytes(&self) -> u64 {
+        let map = self.map.read().unwrap_or_else(|e| e.into_inner());
+        let mut seen = Vec::new();
+        let mut total = 0;
+        for c in map.values().filter_map(|e| e.candidates()) {
+            if !seen.iter().any(|s| Arc::ptr_eq(s, &c)) {
+                total += c.memory_bytes().1 as u64;
+                seen.push(c);
+            }
+        }
+        total
+    }
+
+    /// The same registry, refusing uploads (507 `storage_full`) beyond
+    /// `max_textures` textures or `max_stored_bytes` bytes on disk.
+    pub fn with_storage_limits(mut self, max_textures: usize, max_stored_bytes: u64) -> Registry {
+        self.max_textures = max_textures;
+        self.max_stored_bytes = max_stored_bytes;
+        self
+    }
+
+    /// The shared tile cache.
+    pub fn cache(&self) -> &Arc<TileCache> {
+        &self.cache
+    }
+
+    /// The texture `id`, if known.
+    pub fn get(&self, id: &str) -> Option<Arc<Entry>> {
+        self.map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(id)
+            .cloned()
+    }
+
+    /// Every texture, oldest first.
+    pub fn list(&self) -> Vec<Arc<Entry>> {
+        let mut v: Vec<Arc<Entry>> = self
+            .map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .cloned()
+            .collect();
+        v.sort_by(|a, b| (a.created, &a.id).cmp(&(b.created, &b.id)));
+        v
+    }
+
+    /// The texture `id` ready to synthesize: 404 when unknown, 409 with
+    /// `Retry-After` while pending, 409 when failed.
+    pub fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
+        let e = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
+        match e.status() {
+            Status::Ready(t) => {
+                let now = self.uses.fetch_add(1, Ordering::Relaxed) + 1;
+                e.last_used.store(now, Ordering::Relaxed);
+                Ok((e, t))
+            }
+            Status::Stored => Err(ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "texture_loading",
+                format!("texture `{id}` is being loaded back into memory"),
+            )
+            .retry_after(1)),
+            Status::Pending => Err(ApiError::new(
+                StatusCode::CONFLICT,
+                "texture_pending",
+                format!(
+                    "texture `{id}` is still being precomputed ({:.0}%)",
+                    e.progress() * 100.0
+                ),
+            )
+            .retry_after(1)),
+            Status::Failed(r) => Err(ApiError::new(
+                StatusCode::CONFLICT,
+                "texture_failed",
+                format!("texture `{id}` failed to precompute: {r}"),
+            )),
+        }
+    }
+
+    fn update_gauges(&self) {
+        let (mut p, mut r, mut f) = (0, 0, 0);
+        for e in self.map.read().unwrap_or_else(|e| e.into_inner()).values() {
+            match e.status() {
+                Status::Pending => p += 1,
+                Status::Ready(_) | Status::Stored => r += 1,
+                Status::Failed(_) => f += 1,
+            }
+        }
+        self.metrics.set_textures(p, r, f);
+    }
+
+    /// Registers an upload under its content hash (or under `id` when
+    /// given, as for `default`) and starts its precompute unless it is
+    /// known already. Fails with 503 when too many precomputes wait.
+    pub async fn submit(
+        self: &Arc<Self>,
+        id: Option<&str>,
+        spec: TextureSpec,
+        name: Option<String>,
+    ) -> Result<Submitted, ApiError> {
+        let hash = spec.content_hash();
+        let fixed_id = id.is_some();
+        let id = id.map(str::to_string).unwrap_or_else(|| hash.clone());
+        let (w, h) = spec.planes.size();
+        let planes = spec.planes.named().len() as u64;
+        let estimate = (u64::from(w) * u64::from(h))
+            .saturating_mul(planes)
+            .saturating_mul(STORED_BYTES_PER_PIXEL);
+        let stored = if fixed_id || self.max_stored_bytes == u64::MAX {
+            0
+        } else {
+            let store = self.store.clone();
+            tokio::task::spawn_blocking(move || store.bytes())
+                .await
+                .map_err(|e| ApiError::internal(e.to_string()))?
+                .map_err(|e| ApiError::internal(format!("reading the data directory: {e}")))?
+        };
+        let entry = {
+            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            if let Some(e) = map.get(&id).filter(|e| e.content_hash == hash) {
+                match e.status() {
+                    Status::Ready(_) | Status::Stored => {
+                        return Ok(Submitted::Known(e.clone()));
+                    }
+                    Status::Pending => return Ok(Submitted::Pending(e.clone())),
+                    Status::Failed(_) => {}
+                }
+            }
+            // Server-chosen ids (the bundled default) are never refused.
+            // The check and the reservation happen under the map's lock, so
+            // concurrent uploads cannot all pass the check before any of
+            // them is counted.
+            if !fixed_id && self.pending.load(Ordering::SeqCst) >= self.max_pending {
+                self.metrics.jobs_rejected.inc();
+                return Err(ApiError::overloaded("precompute queue is full"));
+            }
+            if !fixed_id {
+                let need = solidtex_core::Candidates::estimated_peak_bytes(
+                    w,
+                    h,
+                    planes == 3,
+                    &spec.params.analysis,
+                );
+                if need > self.max_precompute_bytes {
+                    return Err(ApiError::precompute_too_large(
+                        need,
+                        self.max_precompute_bytes,
+                    ));
+                }
+                let uploaded = map.values().filter(|e| e.id == e.content_hash).count();
+                if uploaded >= self.max_textures {
+                    return Err(ApiError::storage_full(format!(
+                        "this server keeps at most {} textures (--max-textures); delete one first",
+                        self.max_textures
+                    )));
+                }
+                // Precomputes in flight have not written their candidates
+                // yet: count them at the estimate too.
+                let pending = self.pending.load(Ordering::SeqCst) as u64;
+                let needed = stored.saturating_add(estimate.saturating_mul(pending + 1));
+                if needed > self.max_stored_bytes {
+                    return Err(ApiError::storage_full(format!(
+                        "the textures take {stored} bytes on disk and this one would need about \
+                         {estimate} more; the limit is {} (--max-stored-bytes); delete some first",
+                        self.max_stored_bytes
+                    )));
+                }
+            }
+            self.reserve_precompute();
+            if let Some(old) = map.get(&id) {
+                old.deleted.store(true, Ordering::SeqCst);
+            }
+            let e = Arc::new(Entry::new(id.clone(), hash, now(), spec).named(name));
+            map.insert(id.clone(), e.clone());
+            e
+        };
+        self.update_gauges();
+        let store = self.store.clone();
+        let meta = entry.meta();
+        let planes = entry.planes.clone();
+        let written = tokio::task::spawn_blocking(move || {
+            let _g = store.lock();
+            store.create(&meta, &planes)
+        })
+        .await;
+        let failure = match written {
+            Ok(Ok(())) => None,
+            Ok(Err(e)) => Some(e.to_string()),
+            Err(e) => Some(e.to_string()),
+        };
+        if let Some(why) = failure {
+            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
+                map.remove(&id);
+            }
+            drop(map);
+            self.release_precompute();
+            self.update_gauges();
+            return Err(ApiError::internal(format!(
+                "could not store the texture: {why}"
+            )));
+        }
+        self.start_precompute(entry.clone());
+        Ok(Submitted::Pending(entry))
+    }
+
+    /// Removes texture `id` and its files; 404 when unknown. The files go
+    /// first: when they cannot be removed the texture stays as it was.
+    pub async fn delete(self: &Arc<Self>, id: &str) -> Result<(), ApiError> {
+        let entry = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
+        let this = self.clone();
+        let id_for_error = id.to_string();
+        let id = id.to_string();
+        let found = tokio::task::spawn_blocking(move || {
+            // Under the store's lock, as a precompute's final writes are,
+            // so that none lands after the removal.
+            let _g = this.store.lock();
+            // A concurrent delete or re-upload may have replaced it by now;
+            // the new one owns the directory.
+            let (present, current) = {
+                let map = this.map.read().unwrap_or_else(|e| e.into_inner());
+                let e = map.get(&id);
+                (e.is_some(), e.is_some_and(|e| Arc::ptr_eq(e, &entry)))
+            };
+            if !current {
+                return Ok(present);
+            }
+            this.store.remove(&id)?;
+            let mut map = this.map.write().unwrap_or_else(|e| e.into_inner());
+            if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
+                map.remove(&id);
+            }
+            entry.deleted.store(true, Ordering::SeqCst);
+            Ok::<_, std::io::Error>(true)
+        })
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))?
+        .map_err(|e| ApiError::internal(format!("could not remove the texture's files: {e}")))?;
+        self.update_gauges();
+        if found {
+            Ok(())
+        } else {
+            Err(ApiError::unknown_texture(&id_for_error))
+        }
+    }
+
+    /// Counts one more precompute as pending.
+    fn reserve_precompute(&self) {
+        self.pending.fetch_add(1, Ordering::SeqCst);
+        self.metrics.precomputes_pending.inc();
+    }
+
+    /// Counts one pending precompute less.
+    fn release_precompute(&self) {
+        self.pending.fetch_sub(1, Ordering::SeqCst);
+        self.metrics.precomputes_pending.dec();
+    }
+
+    /// Runs the precompute of `entry`, whose place in the queue is
+    /// reserved already ([`Registry::reserve_precompute`]).
+    fn start_precompute(self: &Arc<Self>, entry: Arc<Entry>) {
+        let this = self.clone();
+        tokio::spawn(async move {
+            let permit = this.slots.clone().acquire_owned().await;
+            // Whatever its estimate, a precompute takes at most the whole
+            // bound (a texture found at start may predate a lower one).
+            let units = entry
+                .precompute_estimate
+                .div_ceil(MEMORY_UNIT)
+                .clamp(1, memory_units(this.max_precompute_bytes));
+            let units = u32::try_from(units).unwrap_or(u32::MAX);
+            let memory = this
+                .precompute_memory
+                .clone()
+                .acquire_many_owned(units)
+                .await;
+            let worker = this.clone();
+            let e = entry.clone();
+            let done = tokio::task::spawn_blocking(move || {
+                let _permits = (permit, memory);
+                let _reserved = worker.reserve_memory(e.precompute_estimate);
+                worker.precompute(&e);
+            })
+            .await;
+            if let Err(err) = done {
+                entry.set_status(Status::Failed(format!("precompute aborted: {err}")));
+            }
+            this.release_precompute();
+            this.update_gauges();
+        });
+    }
+
+    /// Counts `bytes` as reserved by a running precompute until the guard
+    /// is dropped.
+    fn reserve_memory(&self, bytes: u64) -> Reserved<'_> {
+        let now = self.precompute_reserved.fetch_add(bytes, Ordering::SeqCst) + bytes;
+        self.precompute_reserved_peak
+            .fetch_max(now, Ordering::SeqCst);
+        self.metrics.precompute_reserved_bytes.set(now as i64);
+        Reserved {
+            registry: self,
+            bytes,
+        }
+    }
+
+    /// Candidates already in memory for the same pixels and analysis
+    /// parameters (a texture that differs in synthesis parameters only).
+    fn shared_candidates(&self, entry: &Entry) -> Option<Arc<Candidates>> {
+        self.map
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .filter(|e| e.analysis_hash == entry.analysis_hash)
+            .find_map(|e| e.candidates())
+    }
+
+    /// Runs one precompute to its end (blocking).
+    fn precompute(&self, entry: &Arc<Entry>) {
+        if entry.deleted.load(Ordering::SeqCst) {
+            return;
+        }
+        let span = tracing::info_span!("precompute", texture = %entry.id);
+        let _s = span.enter();
+        tracing::info!(
+            width = entry.exemplar.width,
+            height = entry.exemplar.height,
+            planes = entry.exemplar.planes,
+            "precompute started"
+        );
+        let t0 = Instant::now();
+        let shared = self.shared_candidates(entry);
+        let reused = shared.is_some();
+        let mut computed = false;
+        let baseline = self.meter.map(Meter::reset);
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            if let Some(c) = shared {
+                let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+                    .map_err(|e| e.to_string())?;
+                return Ok((c, t));
+            }
+            let set = entry.planes.to_set().map_err(|e| e.message)?;
+            let progress = |stage: Stage, f: f32| {
+                let (name, p) = overall_progress(stage, f);
+                entry.set_progress(name, p);
+            };
+            let c = match solidtex_core::bundled::candidates_for(&set, &entry.params.analysis) {
+                Some(c) => c,
+                None => {
+                    computed = true;
+                    self.pool
+                        .install(|| Candidates::compute(&set, &entry.params.analysis, &progress))
+                        .map_err(|e| e.to_string())?
+                }
+            };
+            let c = Arc::new(c);
+            let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+                .map_err(|e| e.to_string())?;
+            Ok::<_, String>((c, t))
+        }))
+        .unwrap_or_else(|p| {
+            Err(format!(
+                "precompute panicked: {}",
+                panic_message(p.as_ref())
+            ))
+        });
+        let seconds = t0.elapsed().as_secs_f64();
+        *entry
+            .precompute_seconds
+            .lock()
+            .unwrap_or_else(|e| e.into_inner()) = Some(seconds);
+        if !reused {
+            self.metrics.precompute_seconds.observe(seconds);
+        }
+        // Only counts of the counting allocator, and only of a real
+        // computation (not the bundled or shared candidates), are kept.
+        let peak = match (self.meter, baseline) {
+            (Some(m), Some(b)) if computed && peak_alloc::installed() => Some(m.peak_above(b)),
+            _ => None,
+        };
+        if let Some(bytes) = peak {
+            *entry
+                .precompute_peak
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = Some(bytes);
+            self.metrics.precompute_peak_bytes.observe(bytes as f64);
+        }
+        let _g = self.store.lock();
+        if entry.deleted.load(Ordering::SeqCst) {
+            tracing::info!("texture deleted during its precompute; result dropped");
+            return;
+        }
+        match result {
+            Ok((c, t)) => {
+                // Progress and counters are final before the status turns
+                // ready, so no reader sees a ready texture in progress.
+                entry.set_progress("done", 1.0);
+                if reused {
+                    self.count_precompute("reused");
+                    tracing::info!("candidates shared with a texture of the same exemplars");
+                } else {
+                    self.count_precompute("ok");
+                    tracing::info!(
+                        seconds,
+                        peak_bytes = peak,
+                        estimated_bytes = entry.precompute_estimate,
+                        "precompute finished"
+                    );
+                }
+                if let Err(e) = self.store.write_candidates(&entry.id, &c) {
+                    // Still served from memory; the next start recomputes.
+                    tracing::error!(error = %e, "could not store candidates");
+                    entry.set_ready(c, t);
+                } else {
+                    entry.on_disk.store(true, Ordering::Relaxed);
+                    // Durable as ready before anyone sees it ready: a
+                    // restart right after must not compute it again.
+                    let meta = StoredMeta {
+                        status: StoredStatus::Ready,
+                        reason: None,
+                        ..entry.meta()
+                    };
+                    if let Err(e) = self.store.write_meta(&meta) {
+                        tracing::error!(error = %e, "could not store texture metadata");
+                    }
+                    entry.set_ready(c, t);
+                }
+                self.keep_within_memory(&entry.id);
+            }
+            Err(why) => {
+                tracing::error!(reason = %why, "precompute failed");
+                entry.set_status(Status::Failed(why));
+                entry.set_progress("failed", entry.progress());
+                if let Err(e) = self.store.write_meta(&entry.meta()) {
+                    tracing::error!(error = %e, "could not store texture metadata");
+                }
+                self.count_precompute("failed");
+            }
+        }
+    }
+
+    fn count_precompute(&self, outcome: &str) {
+        self.metrics
+            .precomputes
+            .get_or_create(&OutcomeLabels {
+                outcome: outcome.into(),
+            })
+            .inc();
+    }
+
+    /// Brings back every texture of the data directory (blocking): ready
+    /// ones are loaded from their `.stx` without recomputation, interrupted
+    /// or unreadable ones are queued for a new precompute (or marked failed
+    /// when their exemplars are gone), failed ones stay failed. Returns the
+    /// entries to precompute; start them with [`Registry::resume`].
+    pub fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
+        let mut todo = Vec::new();
+        for Found { meta, dir } in self.store.scan()? {
+            let params = match TextureParams::from_stored(&meta.params) {
+                Ok(p) => p,
+                Err(e) => {
+                    tracing::warn!(dir = %dir.display(), error = %e, "skipping texture with unreadable parameters");
+                    continue;
+                }
+            };
+            let planes = match self.store.read_planes(&meta) {
+                Ok(p) => p,
+                Err(e) => {
+                    tracing::warn!(id = %meta.id, error = %e, "texture exemplars unreadable; marking failed");
+                    // Keep something to report: a 16×16 black placeholder.
+                    let blank = solidtex_core::Exemplar::from_rgb(16, 16, &[0; 16 * 16 * 3])
+                        .expect("valid placeholder");
+                    let entry = Arc::new(
+                        Entry::new(
+                            meta.id.clone(),
+                            meta.content_hash.clone(),
+                            meta.created,
+                            TextureSpec {
+                                planes: Planes::Single(blank),
+                                params,
+                            },
+                        )
+                        .named(meta.name.clone()),
+                    );
+                    let why = format!("stored exemplars unreadable: {e}");
+                    entry.set_status(Status::Failed(why));
+                    let _ = self.store.write_meta(&StoredMeta {
+                        exemplar: meta.exemplar,
+                        ..entry.meta()
+                    });
+                    self.insert(entry);
+                    continue;
+                }
+            };
+            let spec = TextureSpec { planes, params };
+            // What is served must be what the id names: recompute it from
+            // the pixels and parameters as loaded (a tampered exemplar or
+            // metadata is refused, and never shares its candidates).
+            let hash = spec.content_hash_as_stored(&meta.params);
+            if hash != meta.content_hash
+                || (meta.id != meta.content_hash && meta.id != super::DEFAULT_ID)
+            {
+                tracing::error!(
+                    id = %meta.id,
+                    content_hash = %meta.content_hash,
+                    computed = %hash,
+                    "stored texture does not match its id; not served"
+                );
+                self.metrics.textures_refused.inc();
+                continue;
+            }
+            let entry = Arc::new(
+                Entry::new(
+                    meta.id.clone(),
+                    meta.content_hash.clone(),
+                    meta.created,
+                    spec,
+                )
+                .named(meta.name.clone()),
+            );
+            *entry
+                .precompute_seconds
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = meta.precompute_seconds;
+            *entry
+                .precompute_peak
+                .lock()
+                .unwrap_or_else(|e| e.into_inner()) = meta.precompute_peak_bytes;
+            match meta.status {
+                StoredStatus::Ready => match self.load_ready(&entry) {
+                    Ok((c, t)) => {
+                        entry.set_progress("done", 1.0);
+                        entry.on_disk.store(true, Ordering::Relaxed);
+                        entry.set_ready(c, t);
+                        self.metrics.textures_loaded.inc();
+                        tracing::info!(id = %meta.id, "texture loaded");
+                    }
+                    Err(e) => {
+                        tracing::warn!(id = %meta.id, error = %e, "stored candidates unusable; recomputing");
+                        todo.push(entry.clone());
+                    }
+                },
+                StoredStatus::Pending => {
+                    tracing::info!(id = %meta.id, "precompute was interrupted; recomputing");
+                    todo.push(entry.clone());
+                }
+                StoredStatus::Failed => {
+                    entry.set_status(Status::Failed(
+                        meta.reason
+                            .clone()
+                            .unwrap_or_else(|| "precompute failed".into()),
+                    ));
+                }
+            }
+            self.insert(entry);
+            // A data directory larger than the memory bound loads one
+            // texture at a time past it.
+            self.keep_within_memory("");
+        }
+        self.update_gauges();
+        Ok(todo)
+    }
+
+    fn load_ready(&self, entry: &Entry) -> Result<(Arc<Candidates>, Texture), String> {
+        if let Some(c) = self.shared_candidates(entry) {
+            let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+                .map_err(|e| e.to_string())?;
+            return Ok((c, t));
+        }
+        let bytes = self
+            .store
+            .read_candidates(&entry.id)
+            .map_err(|e| e.to_string())?;
+        let c = Candidates::load(&bytes).map_err(|e| e.to_string())?;
+        if c.params() != &entry.params.analysis {
+            return Err("stored candidates were made with other parameters".into());
+        }
+        let set = entry.planes.to_set().map_err(|e| e.message)?;
+        if c.exemplars() != &set {
+            return Err("stored candidates were made from other exemplars".into());
+        }
+        if Some(c.layout().arrangement) != entry.layout.map(|l| l.arrangement) {
+            return Err(
+                "stored candidates were made with another arrangement of the planes".into(),
+            );
+        }
+        let c = Arc::new(c);
+        let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+            .map_err(|e| e.to_string())?;
+        Ok((c, t))
+    }
+
+    fn insert(&self, entry: Arc<Entry>) {
+        self.map
+            .write()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(entry.id.clone(), entry);
+    }
+
+    /// Starts the precomputes [`Registry::recover`] found necessary.
+    pub fn resume(self: &Arc<Self>, todo: Vec<Arc<Entry>>) {
+        for e in todo {
+            self.reserve_precompute();
+            self.start_precompute(e);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_is_monotone_over_stages() {
+        let mut last = -1.0;
+        for s in [
+            Stage::Analysis,
+            Stage::Search,
+            Stage::Coherence,
+            Stage::Finish,
+        ] {
+            for f in [0.0, 0.5, 1.0] {
+                let (_, p) = overall_progress(s, f);
+                assert!(p >= last - 1e-6);
+                assert!(p < 1.0);
+                last = p;
+            }
+        }
+    }
+}

@@ -1,0 +1,423 @@
+//! `/v1/textures`: upload exemplars, list, inspect and delete textures.
+
+use super::AppState;
+use super::voxels::{body_response, etag, not_modified, not_modified_response};
+use crate::error::ApiError;
+use crate::query::Query;
+use crate::registry::{Entry, Status, Submitted};
+use crate::spec::{Planes, TextureParams, TextureSpec, params_object, valid_id};
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Multipart, Path, Request, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde_json::{Map, Value, json};
+use solidtex_core::Exemplar;
+use solidtex_core::Layout;
+use std::sync::Arc;
+
+/// The JSON view of a texture.
+pub fn view(e: &Entry, brick_size: u32) -> Value {
+    let mut v = json!({
+        "id": e.id,
+        "name": e.name,
+        "status": "pending",
+        "progress": e.progress(),
+        "stage": e.stage(),
+        "created": e.created,
+        "exemplar": e.exemplar,
+        "params": Value::Object(e.params.to_flat()),
+        "brick_size": brick_size,
+    });
+    if let Some(l) = &e.layout {
+        v["orientation"] = layout_view(l);
+    }
+    match e.status() {
+        Status::Pending => {}
+        Status::Ready(_) | Status::Stored => {
+            v["status"] = "ready".into();
+            v["max_lod"] = e.max_lod().into();
+        }
+        Status::Failed(r) => {
+            v["status"] = "failed".into();
+            v["reason"] = r.into();
+        }
+    }
+    if let Some(s) = e.precompute_seconds() {
+        v["precompute_seconds"] = s.into();
+    }
+    v["precompute_estimated_bytes"] = e.precompute_estimate.into();
+    if let Some(b) = e.precompute_peak() {
+        v["precompute_peak_bytes"] = b.into();
+    }
+    v
+}
+
+/// What the `orientation` parameter resolved to, and what was measured.
+fn layout_view(l: &Layout) -> Value {
+    let round = |x: f32, places: i32| {
+        let s = 10f64.powi(places);
+        (x as f64 * s).round() / s
+    };
+    let a = &l.arrangement;
+    json!({
+        "rotate": a.rotate,
+        "weights": a.weights.map(|w| round(w, 3)),
+        "detected": l.detected,
+        "coherence": round(l.grain.coherence, 3),
+        "grain_degrees": round(l.grain.degrees, 1),
+    })
+}
+
+/// `GET /v1/textures`.
+pub async fn list(State(s): State<AppState>) -> Json<Value> {
+    let all: Vec<Value> = s
+        .registry
+        .list()
+        .iter()
+        .map(|e| view(e, s.brick_size))
+        .collect();
+    Json(json!({ "textures": all }))
+}
+
+fn checked_id(id: &str) -> Result<(), ApiError> {
+    if valid_id(id) {
+        Ok(())
+    } else {
+        Err(ApiError::unknown_texture(id))
+    }
+}
+
+/// The texture `id`, in any status; the span records its id.
+fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
+    checked_id(id)?;
+    tracing::Span::current().record("texture", id);
+    s.registry
+        .get(id)
+        .ok_or_else(|| ApiError::unknown_texture(id))
+}
+
+/// `GET /v1/textures/{id}`.
+pub async fn show(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, ApiError> {
+    let e = known(&s, &id)?;
+    Ok(Json(view(&e, s.brick_size)))
+}
+
+/// `DELETE /v1/textures/{id}`.
+pub async fn remove(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    checked_id(&id)?;
+    tracing::Span::current().record("texture", id.as_str());
+    s.registry.delete(&id).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Exemplar images as uploaded, before decoding.
+enum RawPlanes {
+    Single(Bytes),
+    Triple([Bytes; 3]),
+}
+
+/// Longest texture name kept, in characters.
+const MAX_NAME_CHARS: usize = 120;
+
+/// A display name from an uploaded file's name: its last path component,
+/// without control characters, at most [`MAX_NAME_CHARS`] long; none when
+/// nothing printable is left.
+fn display_name(raw: &str) -> Option<String> {
+    let base = raw.rsplit(['/', '\\']).next().unwrap_or("");
+    let clean: String = base
+        .chars()
+        .filter(|c| !c.is_control())
+        .take(MAX_NAME_CHARS)
+        .collect();
+    let clean = clean.trim();
+    (!clean.is_empty()).then(|| clean.to_string())
+}
+
+/// `POST /v1/textures`: a PNG body, or multipart `xy`/`yz`/`zx` (or one
+/// `image`) with optional JSON `params`; parameters may also be given in
+/// the query string.
+pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response, ApiError> {
+    let query = Query::parse(req.uri().query())?;
+    // `name` labels the texture; it is not a parameter and not in the id.
+    let mut name = query.raw("name").and_then(display_name);
+    let mut flat = TextureParams::flat_from_pairs(query.pairs().filter(|(k, _)| *k != "name"));
+    let content_type = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string();
+    let essence = content_type
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    let limit = s.max_upload_bytes;
+    let raw = match essence.as_str() {
+        "image/png" | "image/jpeg" => RawPlanes::Single(read_body(req, limit).await?),
+        "multipart/form-data" => read_multipart(req, &mut flat, &mut name).await?,
+        "" => {
+            return Err(unsupported(
+                "missing Content-Type (send image/png, image/jpeg or multipart/form-data)",
+            ));
+        }
+        other => {
+            return Err(unsupported(&format!(
+                "unsupported Content-Type `{other}` (send image/png, image/jpeg or multipart/form-data)"
+            )));
+        }
+    };
+    let params = TextureParams::from_flat(&flat)?;
+    let (spec, notes) = tokio::task::spawn_blocking(move || decode(raw, params))
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))??;
+    let submitted = s.registry.submit(None, spec, name).await?;
+    let (entry, status) = match submitted {
+        Submitted::Known(e) => (e, StatusCode::CREATED),
+        Submitted::Pending(e) => (e, StatusCode::ACCEPTED),
+    };
+    tracing::Span::current().record("texture", entry.id.as_str());
+    Ok(created_response(&entry, status, s.brick_size, &notes))
+}
+
+fn created_response(
+    entry: &Arc<Entry>,
+    status: StatusCode,
+    brick_size: u32,
+    notes: &[String],
+) -> Response {
+    let mut body = view(entry, brick_size);
+    if !notes.is_empty() {
+        body["notes"] = json!(notes);
+    }
+    let mut res = (status, Json(body)).into_response();
+    if let Ok(loc) = HeaderValue::from_str(&format!("/v1/textures/{}", entry.id)) {
+        res.headers_mut().insert(header::LOCATION, loc);
+    }
+    if status == StatusCode::ACCEPTED {
+        res.headers_mut()
+            .insert(header::RETRY_AFTER, HeaderValue::from_static("1"));
+    }
+    res
+}
+
+fn unsupported(message: &str) -> ApiError {
+    ApiError::new(
+        StatusCode::UNSUPPORTED_MEDIA_TYPE,
+        "unsupported_media_type",
+        message,
+    )
+}
+
+fn too_large(limit: usize) -> ApiError {
+    ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "payload_too_large",
+        format!("upload larger than {limit} bytes"),
+    )
+}
+
+async fn read_body(req: Request, limit: usize) -> Result<Bytes, ApiError> {
+    let declared = req
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    if declared.is_some_and(|n| n > limit as u64) {
+        return Err(too_large(limit));
+    }
+    axum::body::to_bytes(req.into_body(), limit)
+        .await
+        .map_err(|_| too_large(limit))
+}
+
+fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
+    let status = e.status();
+    let code = match status {
+        StatusCode::PAYLOAD_TOO_LARGE => "payload_too_large",
+        _ => "malformed_multipart",
+    };
+    ApiError::new(status, code, e.body_text())
+}
+
+async fn read_multipart(
+    req: Request,
+    flat: &mut Map<String, Value>,
+    label: &mut Option<String>,
+) -> Result<RawPlanes, ApiError> {
+    let mut mp = Multipart::from_request(req, &()).await.map_err(|e| {
+        ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "malformed_multipart",
+            e.body_text(),
+        )
+    })?;
+    let (mut single, mut xy, mut yz, mut zx) = (None, None, None, None);
+    let mut params_given = false;
+    while let Some(field) = mp.next_field().await.map_err(multipart_error)? {
+        let name = field.name().unwrap_or("").to_string();
+        if matches!(name.as_str(), "image" | "exemplar" | "xy") && label.is_none() {
+            *label = field.file_name().and_then(display_name);
+        }
+        let data = field.bytes().await.map_err(multipart_error)?;
+        let slot = match name.as_str() {
+            "image" | "exemplar" => &mut single,
+            "xy" => &mut xy,
+            "yz" => &mut yz,
+            "zx" => &mut zx,
+            "params" => {
+                if std::mem::replace(&mut params_given, true) {
+                    return Err(ApiError::new(
+                        StatusCode::BAD_REQUEST,
+                        "invalid_request",
+                        "form field `params` given more than once",
+                    ));
+                }
+                let text = std::str::from_utf8(&data).map_err(|_| {
+                    ApiError::new(
+                        StatusCode::BAD_REQUEST,
+                        "invalid_params",
+                        "`params` is not UTF-8",
+                    )
+                })?;
+                for (k, v) in params_object(text)? {
+                    if flat.contains_key(&k) {
+                        return Err(ApiError::new(
+                            StatusCode::BAD_REQUEST,
+                            "invalid_params",
+                            format!("parameter `{k}` given both in the query and in `params`"),
+                        ));
+                    }
+                    flat.insert(k, v);
+                }
+                continue;
+            }
+            other => {
+                return Err(ApiError::new(
+                    StatusCode::BAD_REQUEST,
+                    "invalid_request",
+                    format!(
+                        "unknown form field `{other}` (expected xy, yz, zx or image, and params)"
+                    ),
+                ));
+            }
+        };
+        if slot.replace(data).is_some() {
+            return Err(ApiError::new(
+                StatusCode::BAD_REQUEST,
+                "invalid_request",
+                format!("form field `{name}` given more than once"),
+            ));
+        }
+    }
+    match (single, xy, yz, zx) {
+        (Some(one), None, None, None) => Ok(RawPlanes::Single(one)),
+        (None, Some(a), Some(b), Some(c)) => Ok(RawPlanes::Triple([a, b, c])),
+        (None, None, None, None) => Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "missing_exemplar",
+            "no exemplar: send fields xy, yz and zx, or one field image",
+        )),
+        _ => Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "missing_exemplar",
+            "send either all of xy, yz and zx, or one field image",
+        )),
+    }
+}
+
+/// Decodes one uploaded image; a photo larger than the exemplar limit is
+/// downscaled, and a note says so.
+fn decode_one(name: &str, bytes: &[u8], notes: &mut Vec<String>) -> Result<Exemplar, ApiError> {
+    if bytes.is_empty() {
+        return Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "malformed_image",
+            format!("{name}: empty image"),
+        ));
+    }
+    let (e, original) = Exemplar::decode_fitting(bytes).map_err(|e| {
+        let mut a = ApiError::from(e);
+        a.message = format!("{name}: {}", a.message);
+        a
+    })?;
+    if let Some((w, h)) = original {
+        notes.push(format!(
+            "{name}: downscaled from {w}x{h} to {}x{} (exemplars are at most {} pixels per side)",
+            e.width(),
+            e.height(),
+            solidtex_core::Exemplar::MAX_SIDE
+        ));
+    }
+    Ok(e)
+}
+
+fn decode(raw: RawPlanes, params: TextureParams) -> Result<(TextureSpec, Vec<String>), ApiError> {
+    let mut notes = Vec::new();
+    let planes = match raw {
+        RawPlanes::Single(b) => Planes::Single(decode_one("image", &b, &mut notes)?),
+        RawPlanes::Triple([a, b, c]) => {
+            let t = [
+                decode_one("xy", &a, &mut notes)?,
+                decode_one("yz", &b, &mut notes)?,
+                decode_one("zx", &c, &mut notes)?,
+            ];
+            let p = Planes::Triple(Box::new(t));
+            p.to_set()?;
+            p
+        }
+    };
+    let spec = TextureSpec { planes, params };
+    spec.layout()?;
+    Ok((spec, notes))
+}
+
+/// `GET /v1/textures/{id}/exemplar.png`: the texture's xy exemplar, for a
+/// thumbnail beside its slices.
+pub async fn exemplar(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let e = known(&s, &id)?;
+    let tag = etag(&e, "exemplar.png");
+    if not_modified(&headers, &tag) {
+        return Ok(not_modified_response(&tag));
+    }
+    let xy = e.exemplar_xy().clone();
+    let png = tokio::task::spawn_blocking(move || {
+        solidtex_core::png::encode(xy.width(), xy.height(), &xy.to_rgb_bytes())
+    })
+    .await
+    .map_err(|e| ApiError::internal(e.to_string()))?
+    .map_err(|e| ApiError::internal(e.to_string()))?;
+    Ok(body_response(png, "image/png", &tag))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn display_names_are_a_printable_file_name_of_bounded_length() {
+        assert_eq!(
+            display_name("../dir\\sub/leaf.png").as_deref(),
+            Some("leaf.png")
+        );
+        assert_eq!(display_name(" a\u{1}b\n.jpg ").as_deref(), Some("ab.jpg"));
+        assert_eq!(display_name("dir/"), None);
+        assert_eq!(display_name("\u{7}"), None);
+        let at = "x".repeat(MAX_NAME_CHARS);
+        assert_eq!(display_name(&at).as_deref(), Some(at.as_str()));
+        let past = "é".repeat(MAX_NAME_CHARS + 1);
+        assert_eq!(display_name(&past).unwrap().chars().count(), MAX_NAME_CHARS);
+    }
+}

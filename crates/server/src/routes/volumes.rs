@@ -1,0 +1,437 @@
+//! The texture as a standard volume: Neuroglancer precomputed and Zarr v3,
+//! so that existing viewers and array libraries read it with no adapter.
+//!
+//! Both formats describe finite arrays, so each level of detail k is
+//! presented as a window of 2^(20−k) voxels per side centred on the origin:
+//! array index i along an axis is texture coordinate i − 2^(19−k) at that
+//! level. The precomputed `voxel_offset` says exactly that, so precomputed
+//! clients see the texture's own coordinates; Zarr has no offsets, so Zarr
+//! indices are shifted by 2^(19−k) (the group's attributes repeat it).
+//!
+//! Chunks are cubes of the configured edge (a power of two, so they tile
+//! every window exactly and there are no partial chunks). Each chunk is a
+//! region request: synthesized on the job queue through the shared tile
+//! cache, with a strong ETag, 304 on `If-None-Match`, and immutable caching.
+//! The metadata documents carry an ETag too but are revalidated
+//! (`no-cache`), because they name the server's chunk size.
+
+use super::AppState;
+use super::voxels::{
+    body_response, check_budget, check_work, etag, not_modified, not_modified_response, raw_job,
+    texture,
+};
+use crate::error::ApiError;
+use crate::registry::Entry;
+use axum::body::Body;
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::Response;
+use serde_json::{Value, json};
+use solidtex_core::Region;
+
+/// log2 of the window side at level of detail 0.
+pub const WINDOW_LOG2: u32 = 20;
+
+/// The served window of level of detail `lod` along one axis: its side and
+/// the texture coordinate of array index 0.
+pub fn window(lod: u32) -> (i64, i64) {
+    let side = 1i64 << (WINDOW_LOG2 - lod);
+    (side, -side / 2)
+}
+
+/// `Cache-Control` of the metadata documents.
+const REVALIDATE: &str = "no-cache";
+
+/// A JSON metadata document with its ETag, or 304.
+fn metadata_response(entry: &Entry, key: &str, headers: &HeaderMap, doc: &Value) -> Response {
+    let tag = etag(entry, key);
+    let mut res = if not_modified(headers, &tag) {
+        let mut r = Response::new(Body::empty());
+        *r.status_mut() = StatusCode::NOT_MODIFIED;
+        r
+    } else {
+        let mut r = Response::new(Body::from(doc.to_string()));
+        r.headers_mut().insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/json"),
+        );
+        r
+    };
+    let h = res.headers_mut();
+    if let Ok(v) = HeaderValue::from_str(&tag) {
+        h.insert(header::ETAG, v);
+    }
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static(REVALIDATE));
+    res
+}
+
+/// 404 for a path that is well formed but names no chunk or array.
+fn no_chunk(what: impl std::fmt::Display) -> ApiError {
+    ApiError::new(StatusCode::NOT_FOUND, "no_chunk", format!("{what}"))
+}
+
+/// A level of detail named in a path: a plain decimal up to `max_lod`.
+fn path_lod(s: &str, max_lod: u32) -> Result<u32, ApiError> {
+    let lod = (!s.is_empty() && s.len() <= 2 && s.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| s.parse::<u32>().ok())
+        .flatten()
+        .filter(|&l| l <= max_lod && l.to_string() == s);
+    lod.ok_or_else(|| no_chunk(format_args!("no level of detail `{s}` (0..={max_lod})")))
+}
+
+/// Synthesizes the cube of edge `edge` at `origin` (texture coordinates of
+/// level `lod`) as RGB8, x fastest, then y, z, channel interleaved.
+async fn chunk_rgb(
+    s: &AppState,
+    tex: solidtex_core::Texture,
+    origin: [i64; 3],
+    lod: u32,
+) -> Result<Vec<u8>, ApiError> {
+    let edge = s.chunk_size;
+    check_budget(s, "chunk", u64::from(edge).pow(3))?;
+    let region = Region {
+        origin,
+        size: [edge; 3],
+    };
+    check_work(s, tex.estimate(&region, lod, s.max_request_work))?;
+    raw_job(s, move || tex.region(&region, lod)).await
+}
+
+/// Reorders interleaved RGB8 (channel fastest) into planes (channel
+/// slowest), as precomputed `raw` chunks are laid out.
+fn planar(rgb: &[u8]) -> Vec<u8> {
+    let n = rgb.len() / 3;
+    let mut out = vec![0u8; rgb.len()];
+    for (i, px) in rgb.chunks_exact(3).enumerate() {
+        out[i] = px[0];
+        out[n + i] = px[1];
+        out[2 * n + i] = px[2];
+    }
+    out
+}
+
+// ---------------------------------------------------------------------
+// Neuroglancer precomputed
+
+/// The `info` document: one scale per level of detail, finest first.
+fn precomputed_info(max_lod: u32, chunk: u32) -> Value {
+    let scales: Vec<Value> = (0..=max_lod)
+        .map(|lod| {
+            let (side, offset) = window(lod);
+            let res = 1u64 << lod;
+            json!({
+                "key": lod.to_string(),
+                "size": [side, side, side],
+                "voxel_offset": [offset, offset, offset],
+                "resolution": [res, res, res],
+                "chunk_sizes": [[chunk, chunk, chunk]],
+                "encoding": "raw",
+            })
+        })
+        .collect();
+    json!({
+        "@type": "neuroglancer_multiscale_volume",
+        "type": "image",
+        "data_type": "uint8",
+        "num_channels": 3,
+        "scales": scales,
+    })
+}
+
+/// `GET /v1/textures/{id}/precomputed/info`
+pub async fn precomputed_info_route(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let (entry, tex) = texture(&s, &id).await?;
+    let doc = precomputed_info(tex.max_lod(), s.chunk_size);
+    let key = format!("precomputed/info/{}", s.chunk_size);
+    Ok(metadata_response(&entry, &key, &headers, &doc))
+}
+
+/// Parses one `start-end` bound of a chunk name; `start` may be negative
+/// (`-64--32`), so the separator is the first `-` after the first byte.
+fn parse_bound(part: &str) -> Option<(i64, i64)> {
+    let sep = part.get(1..)?.find('-')? + 1;
+    let (a, b) = (&part[..sep], &part[sep + 1..]);
+    let ok = |t: &str| {
+        let digits = t.strip_prefix('-').unwrap_or(t);
+        !digits.is_empty() && digits.len() <= 12 && digits.bytes().all(|c| c.is_ascii_digit())
+    };
+    if !ok(a) || !ok(b) {
+        return None;
+    }
+    Some((a.parse().ok()?, b.parse().ok()?))
+}
+
+/// The lowest corner of the chunk named `x0-x1_y0-y1_z0-z1` in the grid of
+/// level `lod`, or why it names none.
+fn precomputed_chunk_origin(name: &str, lod: u32, edge: u32) -> Result<[i64; 3], ApiError> {
+    let parts: Vec<&str> = name.split('_').collect();
+    if parts.len() != 3 {
+        return Err(ApiError::invalid_parameter(
+            "chunk",
+            format_args!("`{name}` is not x0-x1_y0-y1_z0-z1"),
+        ));
+    }
+    let (side, offset) = window(lod);
+    let e = i64::from(edge);
+    let mut origin = [0i64; 3];
+    for (a, part) in parts.iter().enumerate() {
+        let (lo, hi) = parse_bound(part).ok_or_else(|| {
+            ApiError::invalid_parameter(
+                "chunk",
+                format_args!("`{part}` is not two integers start-end"),
+            )
+        })?;
+        let inside = lo >= offset && hi <= offset + side;
+        if !inside || hi - lo != e || (lo - offset) % e != 0 {
+            return Err(no_chunk(format_args!(
+                "`{name}` is not a chunk of scale {lod} (edge {edge}, window {offset}..{})",
+                offset + side
+            )));
+        }
+        origin[a] = lo;
+    }
+    Ok(origin)
+}
+
+/// `GET /v1/textures/{id}/precomputed/{scale}/{chunk}`: raw chunk, x
+/// fastest, then y, then z, then channel.
+pub async fn precomputed_chunk(
+    State(s): State<AppState>,
+    Path((id, scale, name)): Path<(String, String, String)>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let (entry, tex) = texture(&s, &id).await?;
+    let lod = path_lod(&scale, tex.max_lod())?;
+    let origin = precomputed_chunk_origin(&name, lod, s.chunk_size)?;
+    let [x, y, z] = origin;
+    let tag = etag(
+        &entry,
+        &format!("precomputed/{lod}/{x}/{y}/{z}/{}", s.chunk_size),
+    );
+    if not_modified(&headers, &tag) {
+        return Ok(not_modified_response(&tag));
+    }
+    let rgb = chunk_rgb(&s, tex, origin, lod).await?;
+    Ok(body_response(
+        planar(&rgb),
+        "application/octet-stream",
+        &tag,
+    ))
+}
+
+// ---------------------------------------------------------------------
+// Zarr v3
+
+/// The root group: attributes say how array indices map to texture
+/// coordinates.
+fn zarr_group(max_lod: u32, chunk: u32) -> Value {
+    let levels: Vec<Value> = (0..=max_lod)
+        .map(|lod| {
+            let (side, offset) = window(lod);
+            json!({
+                "path": lod.to_string(),
+                "lod": lod,
+                "voxel_size": 1u64 << lod,
+                "shape": [side, side, side, 3],
+                "origin_zyx": [offset, offset, offset],
+            })
+        })
+        .collect();
+    json!({
+        "zarr_format": 3,
+        "node_type": "group",
+        "attributes": {
+            "solidtex": {
+                "description": "An infinite solid texture shown through a finite window per level of detail: index i along z, y or x of array `lod` is texture coordinate i + origin at that level (voxels 2^lod finest voxels wide).",
+                "axes": ["z", "y", "x", "c"],
+                "chunk_size": chunk,
+                "levels": levels,
+            }
+        }
+    })
+}
+
+/// The array of one level of detail: (z, y, x, c) uint8, regular chunks.
+fn zarr_array(lod: u32, chunk: u32) -> Value {
+    let (side, offset) = window(lod);
+    json!({
+        "zarr_format": 3,
+        "node_type": "array",
+        "shape": [side, side, side, 3],
+        "data_type": "uint8",
+        "chunk_grid": {
+            "name": "regular",
+            "configuration": { "chunk_shape": [chunk, chunk, chunk, 3] }
+        },
+        "chunk_key_encoding": {
+            "name": "default",
+            "configuration": { "separator": "/" }
+        },
+        "fill_value": 0,
+        "codecs": [
+            { "name": "bytes", "configuration": { "endian": "little" } }
+        ],
+        "dimension_names": ["z", "y", "x", "c"],
+        "attributes": {
+            "solidtex": {
+                "lod": lod,
+                "voxel_size": 1u64 << lod,
+                "origin_zyx": [offset, offset, offset],
+            }
+        }
+    })
+}
+
+/// `GET /v1/textures/{id}/zarr/zarr.json`
+pub async fn zarr_group_route(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let (entry, tex) = texture(&s, &id).await?;
+    let doc = zarr_group(tex.max_lod(), s.chunk_size);
+    let key = format!("zarr/group/{}", s.chunk_size);
+    Ok(metadata_response(&entry, &key, &headers, &doc))
+}
+
+/// `GET /v1/textures/{id}/zarr/{lod}/zarr.json`
+pub async fn zarr_array_route(
+    State(s): State<AppState>,
+    Path((id, lod)): Path<(String, String)>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let (entry, tex) = texture(&s, &id).await?;
+    let lod = path_lod(&lod, tex.max_lod())?;
+    let doc = zarr_array(lod, s.chunk_size);
+    let key = format!("zarr/array/{lod}/{}", s.chunk_size);
+    Ok(metadata_response(&entry, &key, &headers, &doc))
+}
+
+/// A chunk index named in a Zarr key: a plain decimal below `count`.
+fn chunk_index(s: &str, count: i64) -> Result<i64, ApiError> {
+    let i = (!s.is_empty() && s.len() <= 12 && s.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| s.parse::<i64>().ok())
+        .flatten()
+        .filter(|&i| i < count && i.to_string() == s);
+    i.ok_or_else(|| no_chunk(format_args!("no chunk index `{s}` (0..{count})")))
+}
+
+/// `GET /v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}`: the chunk as
+/// C-order bytes of shape (edge, edge, edge, 3).
+pub async fn zarr_chunk(
+    State(s): State<AppState>,
+    Path((id, lod, cz, cy, cx, cc)): Path<(String, String, String, String, String, String)>,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let (entry, tex) = texture(&s, &id).await?;
+    let lod = path_lod(&lod, tex.max_lod())?;
+    let (side, offset) = window(lod);
+    let edge = i64::from(s.chunk_size);
+    let count = side / edge;
+    let (iz, iy, ix) = (
+        chunk_index(&cz, count)?,
+        chunk_index(&cy, count)?,
+        chunk_index(&cx, count)?,
+    );
+    chunk_index(&cc, 1)?;
+    let origin = [offset + ix * edge, offset + iy * edge, offset + iz * edge];
+    let tag = etag(
+        &entry,
+        &format!("zarr/{lod}/{ix}/{iy}/{iz}/{}", s.chunk_size),
+    );
+    if not_modified(&headers, &tag) {
+        return Ok(not_modified_response(&tag));
+    }
+    // Region bytes are x fastest, then y, then z, channel interleaved:
+    // exactly C order over (z, y, x, c).
+    let rgb = chunk_rgb(&s, tex, origin, lod).await?;
+    Ok(body_response(rgb, "application/octet-stream", &tag))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn windows_are_centred_and_nest() {
+        assert_eq!(window(0), (1 << 20, -(1 << 19)));
+        assert_eq!(window(3), (1 << 17, -(1 << 16)));
+        // Every level starts at the same physical place.
+        for lod in 0..6 {
+            let (_, offset) = window(lod);
+            assert_eq!(offset << lod, -(1 << 19));
+        }
+    }
+
+    #[test]
+    fn chunk_bounds_parse_with_negatives() {
+        assert_eq!(parse_bound("0-32"), Some((0, 32)));
+        assert_eq!(parse_bound("-64--32"), Some((-64, -32)));
+        assert_eq!(parse_bound("-32-0"), Some((-32, 0)));
+        for bad in ["", "-", "5", "1-", "-1-", "a-b", "1--", "1-2-3", "+1-2"] {
+            assert_eq!(parse_bound(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn chunk_names_must_lie_on_the_grid() {
+        assert_eq!(
+            precomputed_chunk_origin("0-32_-32-0_64-96", 0, 32).unwrap(),
+            [0, -32, 64]
+        );
+        let first = -(1i64 << 19);
+        let name = format!("{first}-{}_0-32_0-32", first + 32);
+        assert_eq!(
+            precomputed_chunk_origin(&name, 0, 32).unwrap(),
+            [first, 0, 0]
+        );
+        for bad in [
+            "1-33_0-32_0-32",
+            "0-64_0-32_0-32",
+            "0-32_0-32",
+            "0-32_0-32_0-32_0-32",
+            "x_y_z",
+        ] {
+            assert!(precomputed_chunk_origin(bad, 0, 32).is_err(), "{bad}");
+        }
+        // Outside the window of a coarser level.
+        let edge = (1i64 << 18) - 32;
+        let name = format!("{edge}-{}_0-32_0-32", edge + 32);
+        assert!(precomputed_chunk_origin(&name, 0, 32).is_ok());
+        assert!(precomputed_chunk_origin(&name, 2, 32).is_err());
+    }
+
+    #[test]
+    fn planar_puts_channels_last() {
+        assert_eq!(planar(&[1, 2, 3, 4, 5, 6]), vec![1, 4, 2, 5, 3, 6]);
+    }
+
+    #[test]
+    fn lod_and_index_paths() {
+        assert_eq!(path_lod("2", 3).unwrap(), 2);
+        for bad in ["4", "", "-1", "+1", "01x", "999", "00", "01"] {
+            assert!(path_lod(bad, 3).is_err(), "{bad}");
+        }
+        assert_eq!(chunk_index("5", 6).unwrap(), 5);
+        assert!(chunk_index("6", 6).is_err());
+        assert!(chunk_index("-1", 6).is_err());
+        assert!(chunk_index("05", 6).is_err());
+    }
+
+    #[test]
+    fn documents_describe_every_level() {
+        let info = precomputed_info(2, 32);
+        assert_eq!(info["scales"].as_array().unwrap().len(), 3);
+        assert_eq!(info["scales"][2]["resolution"], json!([4, 4, 4]));
+        assert_eq!(info["scales"][2]["voxel_offset"][0], -(1i64 << 17));
+        let a = zarr_array(1, 16);
+        assert_eq!(a["shape"], json!([1 << 19, 1 << 19, 1 << 19, 3]));
+        assert_eq!(a["chunk_grid"]["configuration"]["chunk_shape"][0], 16);
+        let g = zarr_group(2, 16);
+        assert_eq!(g["attributes"]["solidtex"]["levels"][2]["path"], "2");
+    }
+}

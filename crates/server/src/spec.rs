@@ -1,0 +1,765 @@
+//! What a texture is made of: its exemplars and parameters, and the content
+//! id derived from them.
+//!
+//! Clients give parameters as one flat JSON object (`{"seed": 7,
+//! "neighbourhood": 5, "scheme": "dual-grid"}`); each key belongs either to
+//! the analysis ([`AnalysisParams`]) or to the synthesis ([`SynthParams`]).
+//! The id hashes the decoded pixels and the *complete* parameters after
+//! defaults are filled in, so an upload is idempotent whatever the encoding
+//! of the PNG and whichever defaults were spelled out.
+
+use super::error::ApiError;
+use axum::http::StatusCode;
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+use sha2::{Digest, Sha256};
+use solidtex_core::Layout;
+use solidtex_core::{AnalysisParams, Exemplar, ExemplarSet, SynthParams};
+
+/// Analysis and synthesis parameters of one texture.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TextureParams {
+    /// Shapes the precomputed candidates.
+    pub analysis: AnalysisParams,
+    /// Shapes the voxels synthesized from them.
+    pub synth: SynthParams,
+}
+
+fn keys_of<T: Serialize + Default>() -> Vec<String> {
+    match serde_json::to_value(T::default()) {
+        Ok(Value::Object(m)) => m.keys().cloned().collect(),
+        _ => Vec::new(),
+    }
+}
+
+impl TextureParams {
+    /// Splits a flat object of parameters into analysis and synthesis
+    /// parameters, rejecting unknown keys, wrong types and out-of-range
+    /// values.
+    ///
+    /// `preset` names a set of synthesis parameters to start from instead
+    /// of the defaults (`preview`: [`SynthParams::preview`]); keys given
+    /// beside it win. It is not kept: the texture's parameters, and so its
+    /// id, are those the preset expands to.
+    pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, ApiError> {
+        let analysis_keys = keys_of::<AnalysisParams>();
+        let synth_keys = keys_of::<SynthParams>();
+        let mut a = Map::new();
+        let mut s = Map::new();
+        if let Some(preset) = obj.get("preset") {
+            let base = match preset.as_str() {
+                Some("default") => SynthParams::default(),
+                Some("preview") => SynthParams::preview(),
+                _ => {
+                    return Err(invalid_params(format!(
+                        "unknown preset {preset} (known: default, preview)"
+                    )));
+                }
+            };
+            if let Ok(Value::Object(m)) = serde_json::to_value(base) {
+                s = m;
+            }
+        }
+        for (k, v) in obj {
+            if k == "preset" {
+                continue;
+            }
+            if analysis_keys.contains(k) {
+                a.insert(k.clone(), v.clone());
+            } else if synth_keys.contains(k) {
+                s.insert(k.clone(), v.clone());
+            } else {
+                let preset = "preset".to_string();
+                let mut known: Vec<&String> = analysis_keys
+                    .iter()
+                    .chain(&synth_keys)
+                    .chain([&preset])
+                    .collect();
+                known.sort();
+                let known: Vec<&str> = known.iter().map(|k| k.as_str()).collect();
+                return Err(invalid_params(format!(
+                    "unknown parameter `{k}` (known: {})",
+                    known.join(", ")
+                )));
+            }
+        }
+        let analysis: AnalysisParams =
+            serde_json::from_value(Value::Object(a)).map_err(|e| invalid_params(e.to_string()))?;
+        let synth: SynthParams =
+            serde_json::from_value(Value::Object(s)).map_err(|e| invalid_params(e.to_string()))?;
+        analysis.validate()?;
+        synth.validate()?;
+        Ok(TextureParams { analysis, synth })
+    }
+
+    /// Parameters as a data directory stored them. Stored parameters are
+    /// complete, so a key added since they were written takes the value that
+    /// reproduces the texture's voxels as they were then, not today's
+    /// default: the same id keeps serving the same bytes across upgrades.
+    pub fn from_stored(obj: &Map<String, Value>) -> Result<TextureParams, ApiError> {
+        let mut obj = obj.clone();
+        for (key, then) in KEYS_ADDED_SINCE_VERSION_1 {
+            obj.entry(*key)
+                .or_insert_with(|| serde_json::from_str(then).expect("valid JSON"));
+        }
+        // Before `finest_passes`, the finest level had `passes` like the rest.
+        let passes = obj
+            .get("passes")
+            .cloned()
+            .unwrap_or(Value::from(SynthParams::default().passes));
+        obj.entry("finest_passes").or_insert(passes);
+        // Before `slab_thickness`, the slab was N (`neighbourhood`) thick.
+        let n = obj.get("neighbourhood").cloned().unwrap_or(Value::from(
+            solidtex_core::AnalysisParams::default().neighbourhood,
+        ));
+        obj.entry("slab_thickness").or_insert(n);
+        Self::from_flat(&obj)
+    }
+
+    /// Parses a JSON text holding a flat object of parameters.
+    pub fn from_json(text: &str) -> Result<TextureParams, ApiError> {
+        Self::from_flat(&params_object(text)?)
+    }
+
+    /// Parameters from query-string pairs: each value is read as a JSON
+    /// scalar when it is one (`seed=7`, `jitter=0.5`, `correct_init_level=false`)
+    /// and as a string otherwise (`scheme=dual-grid`).
+    pub fn flat_from_pairs<'a>(
+        pairs: impl Iterator<Item = (&'a str, &'a str)>,
+    ) -> Map<String, Value> {
+        pairs
+            .map(|(k, v)| {
+                let value = match serde_json::from_str::<Value>(v) {
+                    Ok(j) if !j.is_object() && !j.is_array() => j,
+                    _ => Value::String(v.to_string()),
+                };
+                (k.to_string(), value)
+            })
+            .collect()
+    }
+
+    /// All parameters as one flat object.
+    pub fn to_flat(&self) -> Map<String, Value> {
+        let mut m = Map::new();
+        for v in [
+            serde_json::to_value(&self.analysis),
+            serde_json::to_value(&self.synth),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            if let Value::Object(o) = v {
+                m.extend(o);
+            }
+        }
+        m
+    }
+}
+
+/// Synthesis keys added after the first stored layout, with the value that
+/// behaves as textures stored without them did (`finest_passes` and
+/// `slab_thickness`, whose old values are the texture's own `passes` and
+/// `neighbourhood`, are filled in by [`TextureParams::from_stored`]).
+/// Values are JSON texts. (`fine_levels` 1: `finest_passes` applied to
+/// level 0 alone.)
+const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
+    ("slices", r#""full""#),
+    ("consistency", "0"),
+    ("fine_levels", "1"),
+    ("correction", r#""colour""#),
+    ("orientation", r#""none""#),
+];
+
+/// The members of a JSON object in the order written, repeated keys kept.
+struct Members(Vec<(String, Value)>);
+
+impl<'de> Deserialize<'de> for Members {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Members, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = Members;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a JSON object")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut m: A,
+            ) -> Result<Members, A::Error> {
+                let mut out = Vec::new();
+                while let Some(kv) = m.next_entry::<String, Value>()? {
+                    out.push(kv);
+                }
+                Ok(Members(out))
+            }
+        }
+        d.deserialize_map(Visit)
+    }
+}
+
+/// Parses the JSON text of a `params` object. A key given twice is refused
+/// (a JSON parser would keep the last one silently).
+pub fn params_object(text: &str) -> Result<Map<String, Value>, ApiError> {
+    let Members(members) = serde_json::from_str(text)
+        .map_err(|e| invalid_params(format!("`params` must be a JSON object: {e}")))?;
+    let mut m = Map::new();
+    for (k, v) in members {
+        if m.contains_key(&k) {
+            return Err(invalid_params(format!(
+                "parameter `{k}` given more than once in `params`"
+            )));
+        }
+        m.insert(k, v);
+    }
+    Ok(m)
+}
+
+fn invalid_params(message: String) -> ApiError {
+    ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)
+}
+
+/// The exemplars of an upload: one image for all planes or three.
+#[derive(Clone, Debug)]
+pub enum Planes {
+    /// One exemplar for xy, yz and zx.
+    Single(Exemplar),
+    /// One exemplar per plane: xy, yz, zx.
+    Triple(Box<[Exemplar; 3]>),
+}
+
+impl Planes {
+    /// The exemplar set the engine works on.
+    pub fn to_set(&self) -> Result<ExemplarSet, ApiError> {
+        match self {
+            Planes::Single(e) => Ok(ExemplarSet::single(e.clone())),
+            Planes::Triple(t) => {
+                let [xy, yz, zx] = (**t).clone();
+                Ok(ExemplarSet::triple(xy, yz, zx)?)
+            }
+        }
+    }
+
+    /// Every stored image with its plane name.
+    pub fn named(&self) -> Vec<(&'static str, &Exemplar)> {
+        match self {
+            Planes::Single(e) => vec![("exemplar", e)],
+            Planes::Triple(t) => vec![("xy", &t[0]), ("yz", &t[1]), ("zx", &t[2])],
+        }
+    }
+
+    /// Width and height of every plane.
+    pub fn size(&self) -> (u32, u32) {
+        let e = self.named()[0].1;
+        (e.width(), e.height())
+    }
+}
+
+/// Everything a texture is made of.
+#[derive(Clone, Debug)]
+pub struct TextureSpec {
+    /// Exemplar images.
+    pub planes: Planes,
+    /// Parameters.
+    pub params: TextureParams,
+}
+
+impl TextureSpec {
+    /// The content hash: SHA-256 over a version tag, the pixels of the xy,
+    /// yz and zx exemplars (a single exemplar counts for all three) and the
+    /// canonical JSON of the complete parameters; 32 hex digits.
+    pub fn content_hash(&self) -> String {
+        let mut h = Sha256::new();
+        h.update(b"solidtex texture v1\0");
+        self.hash_planes(&mut h);
+        hash_json(&mut h, &self.params.analysis);
+        hash_json(&mut h, &self.params.synth);
+        hex(&h.finalize()[..16])
+    }
+
+    /// The content hash as it was computed when `stored`, the flat
+    /// parameters of a `meta.json`, were written: parameters added since
+    /// were not part of it (the hash is over each parameter struct's JSON,
+    /// and the structs had only the stored keys then, in today's order).
+    pub fn content_hash_as_stored(&self, stored: &Map<String, Value>) -> String {
+        let mut h = Sha256::new();
+        h.update(b"solidtex texture v1\0");
+        self.hash_planes(&mut h);
+        hash_json_keys(&mut h, &self.params.analysis, stored);
+        hash_json_keys(&mut h, &self.params.synth, stored);
+        hex(&h.finalize()[..16])
+    }
+
+    /// What the precomputed candidates depend on: the pixels and the
+    /// analysis parameters only. Textures that differ in synthesis
+    /// parameters alone share their candidates.
+    pub fn analysis_hash(&self) -> String {
+        let mut h = Sha256::new();
+        h.update(b"solidtex candidates v1\0");
+        self.hash_planes(&mut h);
+        hash_json(&mut h, &self.params.analysis);
+        hex(&h.finalize()[..16])
+    }
+
+    /// How the exemplars are laid on the planes (what the precompute will
+    /// use): refused when the orientation asks a quarter turn of a
+    /// non-square exemplar.
+    pub fn layout(&self) -> Result<Layout, ApiError> {
+        Ok(Layout::resolve(
+            &self.planes.to_set()?,
+            &self.params.analysis.orientation,
+        )?)
+    }
+
+    fn hash_planes(&self, h: &mut Sha256) {
+        let planes: [&Exemplar; 3] = match &self.planes {
+            Planes::Single(e) => [e, e, e],
+            Planes::Triple(t) => [&t[0], &t[1], &t[2]],
+        };
+        for e in planes {
+            h.update(e.width().to_le_bytes());
+            h.update(e.height().to_le_bytes());
+            for p in e.pixels() {
+                h.update(p);
+            }
+        }
+    }
+}
+
+fn hash_json<T: Serialize>(h: &mut Sha256, v: &T) {
+    let s = serde_json::to_string(v).unwrap_or_default();
+    h.update((s.len() as u64).to_le_bytes());
+    h.update(s.as_bytes());
+}
+
+/// [`hash_json`] of `v` restricted to the keys of `keep`, members in the
+/// order `v` writes them.
+fn hash_json_keys<T: Serialize>(h: &mut Sha256, v: &T, keep: &Map<String, Value>) {
+    let full = serde_json::to_string(v).unwrap_or_default();
+    let Ok(Members(members)) = serde_json::from_str::<Members>(&full) else {
+        return hash_json(h, v);
+    };
+    let kept: Vec<String> = members
+        .iter()
+        .filter(|(k, _)| keep.contains_key(k))
+        .map(|(k, v)| format!("{}:{v}", Value::String(k.clone())))
+        .collect();
+    let s = format!("{{{}}}", kept.join(","));
+    h.update((s.len() as u64).to_le_bytes());
+    h.update(s.as_bytes());
+}
+
+/// Lowercase hex of bytes.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// True for strings that can be a texture id: 1 to 64 characters of
+/// `[A-Za-z0-9_-]` (content ids are 32 hex digits; `default` is the other).
+pub fn valid_id(id: &str) -> bool {
+    (1..=64).contains(&id.len())
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+}
+
+/// Serializable form of an exemplar's size, for metadata.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+pub struct ExemplarInfo {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// 1 (one image for all planes) or 3.
+    pub planes: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn img(seed: u8) -> Exemplar {
+        let rgb: Vec<u8> = (0..16 * 16 * 3)
+            .map(|i| (i as u8).wrapping_mul(seed))
+            .collect();
+        Exemplar::from_rgb(16, 16, &rgb).unwrap()
+    }
+
+    #[test]
+    fn a_preset_expands_to_its_parameters_and_yields_to_explicit_keys() {
+        let flat = |text: &str| match serde_json::from_str::<Value>(text).unwrap() {
+            Value::Object(m) => TextureParams::from_flat(&m),
+            _ => unreachable!(),
+        };
+        let preview = flat(r#"{"preset": "preview", "seed": 7}"#).unwrap();
+        let spelled = flat(r#"{"passes": 1, "finest_passes": 0, "fine_levels": 1, "seed": 7}"#);
+        assert_eq!(preview, spelled.unwrap());
+        assert_eq!(preview.synth.seed, 7);
+        assert!(!preview.to_flat().contains_key("preset"));
+        let overridden = flat(r#"{"preset": "preview", "passes": 2}"#).unwrap();
+        assert_eq!(overridden.synth.passes, 2);
+        assert_eq!(overridden.synth.finest_passes, 0);
+        assert_eq!(
+            flat(r#"{"preset": "default"}"#).unwrap(),
+            TextureParams::default()
+        );
+        for bad in [r#"{"preset": "fast"}"#, r#"{"preset": 1}"#] {
+            let e = flat(bad).unwrap_err();
+            assert!(format!("{e:?}").contains("preset"), "{bad}: {e:?}");
+        }
+    }
+
+    #[test]
+    fn flat_params_split() {
+        let p =
+            TextureParams::from_json(r#"{"seed": 9, "neighbourhood": 7, "scheme": "standard"}"#)
+                .unwrap();
+        assert_eq!(p.synth.seed, 9);
+        assert_eq!(p.analysis.neighbourhood, 7);
+        assert_eq!(p.synth.scheme, solidtex_core::Scheme::Standard);
+        let flat = p.to_flat();
+        assert_eq!(flat["seed"], 9);
+        assert_eq!(flat["levels"], AnalysisParams::default().levels);
+        assert_eq!(TextureParams::from_flat(&flat).unwrap(), p);
+    }
+
+    #[test]
+    fn stored_params_without_a_newer_key_keep_their_old_meaning() {
+        let new = TextureParams::default().to_flat();
+        assert_eq!(new["slices"], "sparse");
+        let mut old = new.clone();
+        old.remove("slices");
+        // A fresh upload that omits the key gets today's default...
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.slices,
+            solidtex_core::Slices::Sparse
+        );
+        // ...but a stored texture written before the key existed was
+        // synthesized with full slices and must stay so.
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.slices,
+            solidtex_core::Slices::Full
+        );
+        assert_eq!(
+            TextureParams::from_stored(&new).unwrap(),
+            TextureParams::default()
+        );
+        // The finest level had the texture's own number of passes.
+        let mut old = new.clone();
+        old.remove("finest_passes");
+        old.insert("passes".into(), 3.into());
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.finest_passes,
+            1
+        );
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .finest_passes,
+            3
+        );
+        old.remove("passes");
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .finest_passes,
+            2
+        );
+        // Only level 0 took `finest_passes`.
+        old.remove("fine_levels");
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.fine_levels,
+            1
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.fine_levels,
+            SynthParams::default().fine_levels
+        );
+        // Nor did it penalise inconsistent triples.
+        old.remove("consistency");
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.consistency,
+            0.0
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.consistency,
+            SynthParams::default().consistency
+        );
+        // It matched colour neighbourhoods.
+        old.remove("correction");
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.correction,
+            solidtex_core::Correction::Colour
+        );
+        // Its slab was N thick.
+        old.remove("slab_thickness");
+        old.insert("neighbourhood".into(), 7.into());
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .slab_thickness,
+            7
+        );
+        old.remove("neighbourhood");
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .slab_thickness,
+            5
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.slab_thickness,
+            SynthParams::default().slab_thickness
+        );
+        // Nor did it turn any plane, whatever its exemplar.
+        old.remove("orientation");
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .analysis
+                .orientation,
+            solidtex_core::Orientation::None
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().analysis.orientation,
+            solidtex_core::Orientation::Auto
+        );
+    }
+
+    #[test]
+    fn bad_params() {
+        assert_eq!(
+            TextureParams::from_json(r#"{"sed": 1}"#).unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"seed": "x"}"#)
+                .unwrap_err()
+                .code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json("[1]").unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json("{").unwrap_err().code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"passes": 99}"#)
+                .unwrap_err()
+                .code,
+            "out_of_range"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"slices": "dense"}"#)
+                .unwrap_err()
+                .code,
+            "invalid_params"
+        );
+        assert_eq!(
+            TextureParams::from_json(r#"{"neighbourhood": 4}"#)
+                .unwrap_err()
+                .code,
+            "invalid_request"
+        );
+    }
+
+    #[test]
+    fn query_pairs_typed() {
+        let pairs = [
+            ("seed", "7"),
+            ("scheme", "dual-grid"),
+            ("jitter", "0.5"),
+            ("correct_init_level", "false"),
+            ("contrast", "1.25"),
+            ("slices", "full"),
+        ];
+        let flat = TextureParams::flat_from_pairs(pairs.into_iter());
+        let p = TextureParams::from_flat(&flat).unwrap();
+        assert_eq!(p.synth.slices, solidtex_core::Slices::Full);
+        assert_eq!(p.synth.seed, 7);
+        assert_eq!(p.synth.jitter, 0.5);
+        assert!(!p.synth.correct_init_level);
+        assert_eq!(p.synth.contrast, 1.25);
+    }
+
+    #[test]
+    fn ids_are_content_hashes() {
+        let spec = |e: Exemplar, seed| TextureSpec {
+            planes: Planes::Single(e),
+            params: TextureParams {
+                synth: SynthParams {
+                    seed,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+        };
+        let a = spec(img(3), 1).content_hash();
+        assert_eq!(a.len(), 32);
+        assert!(valid_id(&a));
+        assert_eq!(a, spec(img(3), 1).content_hash());
+        assert_ne!(a, spec(img(5), 1).content_hash());
+        assert_ne!(a, spec(img(3), 2).content_hash());
+        let triple = TextureSpec {
+            planes: Planes::Triple(Box::new([img(3), img(3), img(3)])),
+            params: spec(img(3), 1).params,
+        };
+        assert_eq!(a, triple.content_hash());
+        // Candidates depend on pixels and analysis parameters only.
+        assert_eq!(
+            spec(img(3), 1).analysis_hash(),
+            spec(img(3), 2).analysis_hash()
+        );
+        assert_ne!(
+            spec(img(3), 1).analysis_hash(),
+            spec(img(5), 1).analysis_hash()
+        );
+    }
+
+    /// The synthesis parameters as the first stored layout had them, in
+    /// their order then.
+    #[derive(Serialize)]
+    struct SynthParamsVersion1 {
+        seed: u64,
+        passes: u32,
+        subpass_side: u32,
+        scheme: Value,
+        grid: u32,
+        jitter: f32,
+        correct_init_level: bool,
+        contrast: f32,
+    }
+
+    #[test]
+    fn ids_are_recomputed_as_they_were_stored() {
+        let now = TextureSpec {
+            planes: Planes::Single(img(3)),
+            params: TextureParams {
+                synth: SynthParams {
+                    seed: 7,
+                    ..Default::default()
+                },
+                ..Default::default()
+            },
+        };
+        assert_eq!(
+            now.content_hash_as_stored(&now.params.to_flat()),
+            now.content_hash()
+        );
+        // A texture stored by the first layout: its parameters lack the
+        // keys added since, and its id hashed the structs of then.
+        let mut old = now.params.to_flat();
+        for k in [
+            "slices",
+            "consistency",
+            "fine_levels",
+            "correction",
+            "finest_passes",
+            "slab_thickness",
+        ] {
+            old.remove(k);
+        }
+        let d = SynthParams::default();
+        let then = SynthParamsVersion1 {
+            seed: 7,
+            passes: d.passes,
+            subpass_side: d.subpass_side,
+            scheme: old["scheme"].clone(),
+            grid: d.grid,
+            jitter: d.jitter,
+            correct_init_level: d.correct_init_level,
+            contrast: d.contrast,
+        };
+        let mut h = Sha256::new();
+        h.update(b"solidtex texture v1\0");
+        now.hash_planes(&mut h);
+        hash_json(&mut h, &now.params.analysis);
+        hash_json(&mut h, &then);
+        let id_then = hex(&h.finalize()[..16]);
+        let loaded = TextureSpec {
+            planes: now.planes.clone(),
+            params: TextureParams::from_stored(&old).unwrap(),
+        };
+        assert_ne!(loaded.content_hash(), id_then);
+        assert_eq!(loaded.content_hash_as_stored(&old), id_then);
+        // Another seed or other pixels do not match.
+        let mut other = old.clone();
+        other.insert("seed".into(), Value::from(8));
+        let loaded = TextureSpec {
+            planes: now.planes.clone(),
+            params: TextureParams::from_stored(&other).unwrap(),
+        };
+        assert_ne!(loaded.content_hash_as_stored(&other), id_then);
+    }
+
+    /// The analysis parameters before orientations, in their order then.
+    #[derive(Serialize)]
+    struct AnalysisParamsBeforeOrientation {
+        neighbourhood: u32,
+        pca_dims: u32,
+        strips: u32,
+        triples: u32,
+        max_candidates: u32,
+        levels: u32,
+        similar_coarse: u32,
+        similar_fine: u32,
+    }
+
+    #[test]
+    fn ids_of_textures_stored_before_orientations_are_kept() {
+        let now = TextureSpec {
+            planes: Planes::Single(img(3)),
+            params: TextureParams::default(),
+        };
+        let mut old = now.params.to_flat();
+        old.remove("orientation");
+        let a = AnalysisParams::default();
+        let then = AnalysisParamsBeforeOrientation {
+            neighbourhood: a.neighbourhood,
+            pca_dims: a.pca_dims,
+            strips: a.strips,
+            triples: a.triples,
+            max_candidates: a.max_candidates,
+            levels: a.levels,
+            similar_coarse: a.similar_coarse,
+            similar_fine: a.similar_fine,
+        };
+        let mut h = Sha256::new();
+        h.update(b"solidtex texture v1\0");
+        now.hash_planes(&mut h);
+        hash_json(&mut h, &then);
+        hash_json(&mut h, &now.params.synth);
+        let id_then = hex(&h.finalize()[..16]);
+        let loaded = TextureSpec {
+            planes: now.planes.clone(),
+            params: TextureParams::from_stored(&old).unwrap(),
+        };
+        assert_eq!(loaded.content_hash_as_stored(&old), id_then);
+        assert_ne!(now.content_hash(), id_then);
+    }
+
+    #[test]
+    fn params_objects_refuse_repeated_keys() {
+        assert_eq!(params_object(r#"{"seed": 1}"#).unwrap()["seed"], 1);
+        for bad in [r#"{"seed": 1, "seed": 1}"#, "[1]", "7", "{"] {
+            assert_eq!(
+                params_object(bad).unwrap_err().code,
+                "invalid_params",
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn id_syntax() {
+        assert!(valid_id("default"));
+        assert!(!valid_id(""));
+        assert!(!valid_id("../etc"));
+        assert!(!valid_id(&"a".repeat(65)));
+    }
+}

@@ -1,0 +1,513 @@
+//! The data directory: exemplars, metadata and `.stx` candidate files of
+//! every texture, so that a restart serves the same textures without
+//! recomputing them.
+//!
+//! ```text
+//! <data-dir>/textures/<id>/meta.json       status, params, exemplar size
+//!                         /exemplar.png    (or xy.png, yz.png, zx.png)
+//!                         /candidates.stx  written once the precompute ends
+//! ```
+//!
+//! Every file is written to a temporary name, fsynced, renamed over its
+//! final name and the directory fsynced, so a crash leaves either the old
+//! or the new file, never a torn one. `meta.json` is written last on
+//! creation (a directory without it is debris) and flips to `ready` only
+//! after `candidates.stx` is durable, so a texture whose precompute was
+//! interrupted is found `pending` at start and computed again. A mutex
+//! serialises directory-level changes (create, delete, final writes) so a
+//! delete racing a re-upload of the same content cannot remove the new
+//! files.
+//!
+//! `<data-dir>/solidtex.lock` is held locked while a server uses the
+//! directory, so that two servers never write it at once. Only files the
+//! server writes are ever removed: anything else found there is reported
+//! and left alone.
+
+use super::spec::{ExemplarInfo, Planes, valid_id};
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+use solidtex_core::{Candidates, Exemplar};
+use std::fs::{self, File};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
+
+/// Version of the metadata layout.
+pub const META_VERSION: u32 = 1;
+const TMP_SUFFIX: &str = ".tmp";
+/// Suffix of a texture directory being deleted.
+const DELETING_SUFFIX: &str = ".deleting.tmp";
+/// The file locked while a server uses the data directory.
+pub const LOCK_FILE: &str = "solidtex.lock";
+/// The files the server writes in a texture directory (besides their
+/// temporaries): only these are ever removed.
+const WRITTEN: [&str; 6] = [
+    "meta.json",
+    "exemplar.png",
+    "xy.png",
+    "yz.png",
+    "zx.png",
+    "candidates.stx",
+];
+
+/// Status as persisted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StoredStatus {
+    /// Precompute not finished (or interrupted).
+    Pending,
+    /// `candidates.stx` is complete.
+    Ready,
+    /// Precompute failed for good.
+    Failed,
+}
+
+/// The persisted `meta.json` of a texture.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct StoredMeta {
+    /// Layout version.
+    pub version: u32,
+    /// Texture id (the content hash, or `default`).
+    pub id: String,
+    /// The uploaded file's name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Content hash of exemplars and parameters.
+    pub content_hash: String,
+    /// Creation time, seconds since the Unix epoch.
+    pub created: u64,
+    /// Exemplar size and plane count.
+    pub exemplar: ExemplarInfo,
+    /// Complete flat parameters.
+    pub params: Map<String, Value>,
+    /// Status.
+    pub status: StoredStatus,
+    /// Why the precompute failed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// Seconds the precompute took.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub precompute_seconds: Option<f64>,
+    /// Heap bytes the precompute peaked at, when measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub precompute_peak_bytes: Option<u64>,
+}
+
+/// A texture found in the data directory at start.
+pub struct Found {
+    /// Its metadata.
+    pub meta: StoredMeta,
+    /// Its directory.
+    pub dir: PathBuf,
+}
+
+/// The data directory.
+pub struct Store {
+    root: PathBuf,
+    lock: Mutex<()>,
+    /// Holds the exclusive lock on [`LOCK_FILE`] while the store lives.
+    _owner: File,
+}
+
+impl Store {
+    /// Opens (creating) `root`, locks it against other servers, and clears
+    /// debris of interrupted writes: temporary files, texture directories
+    /// without metadata and deletions cut short. Only files the server
+    /// writes are removed; anything else is reported and left alone.
+    pub fn open(root: &Path) -> io::Result<Store> {
+        fs::create_dir_all(root)?;
+        let owner = lock_exclusive(root)?;
+        let textures = root.join("textures");
+        fs::create_dir_all(&textures)?;
+        let store = Store {
+            root: root.to_path_buf(),
+            lock: Mutex::new(()),
+            _owner: owner,
+        };
+        for entry in fs::read_dir(&textures)? {
+            let entry = entry?;
+            let path = entry.path();
+            let name = entry.file_name().to_string_lossy().to_string();
+            let is_dir = entry.file_type()?.is_dir();
+            let deleting = name.strip_suffix(DELETING_SUFFIX).is_some_and(valid_id);
+            if !is_dir || !(valid_id(&name) || deleting) {
+                tracing::warn!(path = %path.display(), "ignoring an entry the server did not write");
+                continue;
+            }
+            for f in fs::read_dir(&path)? {
+                let f = f?;
+                let n = f.file_name().to_string_lossy().to_string();
+                if f.file_type()?.is_file() && is_temporary(&n) {
+                    fs::remove_file(f.path())?;
+                }
+            }
+            if deleting || !path.join("meta.json").exists() {
+                tracing::warn!(path = %path.display(), "removing debris of an interrupted write or deletion");
+                remove_written(&path)?;
+            }
+        }
+        Ok(store)
+    }
+
+    /// The data directory.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// Bytes of the files under `textures/` (every texture's exemplars,
+    /// metadata and candidates).
+    pub fn bytes(&self) -> io::Result<u64> {
+        let mut total = 0u64;
+        for entry in fs::read_dir(self.root.join("textures"))? {
+            let entry = entry?;
+            if !entry.file_type()?.is_dir() {
+                continue;
+            }
+            for f in fs::read_dir(entry.path())? {
+                let m = f?.metadata()?;
+                if m.is_file() {
+                    total = total.saturating_add(m.len());
+                }
+            }
+        }
+        Ok(total)
+    }
+
+    /// The directory of texture `id`.
+    pub fn dir(&self, id: &str) -> PathBuf {
+        self.root.join("textures").join(id)
+    }
+
+    /// Serialises directory-level changes.
+    pub fn lock(&self) -> MutexGuard<'_, ()> {
+        self.lock.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Writes a new texture's exemplars then its metadata (replacing any
+    /// leftover directory of the same id). Caller holds [`Store::lock`].
+    pub fn create(&self, meta: &StoredMeta, planes: &Planes) -> io::Result<()> {
+        let dir = self.dir(&meta.id);
+        if dir.exists() && !remove_written(&dir)? {
+            return Err(io::Error::other(format!(
+                "{} holds files the server did not write",
+                dir.display()
+            )));
+        }
+        fs::create_dir_all(&dir)?;
+        for (name, e) in planes.named() {
+            let png = solidtex_core::png::encode(e.width(), e.height(), &e.to_rgb_bytes())
+                .map_err(io::Error::other)?;
+            write_atomic(&dir.join(format!("{name}.png")), &png)?;
+        }
+        self.write_meta(meta)?;
+        sync_dir(&self.root.join("textures"))
+    }
+
+    /// Replaces a texture's metadata atomically.
+    pub fn write_meta(&self, meta: &StoredMeta) -> io::Result<()> {
+        let json = serde_json::to_vec_pretty(meta).map_err(io::Error::other)?;
+        write_atomic(&self.dir(&meta.id).join("meta.json"), &json)
+    }
+
+    /// Writes `candidates.stx` atomically.
+    pub fn write_candidates(&self, id: &str, c: &Candidates) -> io::Result<()> {
+        write_atomic_with(&self.dir(id).join("candidates.stx"), |w| {
+            c.save(w).map_err(|e| match e {
+                solidtex_core::Error::Io(e) => e,
+                other => io::Error::other(other.to_string()),
+            })
+        })
+    }
+
+    /// Reads `candidates.stx`.
+    pub fn read_candidates(&self, id: &str) -> io::Result<Vec<u8>> {
+        fs::read(self.dir(id).join("candidates.stx"))
+    }
+
+    /// Reads a texture's exemplars back.
+    pub fn read_planes(&self, meta: &StoredMeta) -> solidtex_core::Result<Planes> {
+        let dir = self.dir(&meta.id);
+        let open = |n: &str| Exemplar::open(dir.join(format!("{n}.png")));
+        if meta.exemplar.planes == 1 {
+            Ok(Planes::Single(open("exemplar")?))
+        } else {
+            Ok(Planes::Triple(Box::new([
+                open("xy")?,
+                open("yz")?,
+                open("zx")?,
+            ])))
+        }
+    }
+
+    /// Removes a texture's directory. Caller holds [`Store::lock`]. Once
+    /// this returns `Ok` the texture is gone from the disk; on an error
+    /// nothing changed.
+    pub fn remove(&self, id: &str) -> io::Result<()> {
+        let dir = self.dir(id);
+        if !dir.exists() {
+            return Ok(());
+        }
+        // Rename first so that a crash mid-way leaves no half directory
+        // under a valid id (the trash is cleared at the next start).
+        let trash = self
+            .root
+            .join("textures")
+            .join(format!("{id}{DELETING_SUFFIX}"));
+        fs::rename(&dir, &trash)?;
+        sync_dir(&self.root.join("textures"))?;
+        match remove_written(&trash) {
+            Ok(true) => {}
+            Ok(false) => {
+                tracing::warn!(path = %trash.display(), "left files the server did not write")
+            }
+            Err(e) => {
+                tracing::warn!(path = %trash.display(), error = %e, "could not clear a deleted texture; retried at the next start")
+            }
+        }
+        Ok(())
+    }
+
+    /// Every texture with readable metadata. A directory whose metadata
+    /// cannot be read is reported and skipped.
+    pub fn scan(&self) -> io::Result<Vec<Found>> {
+        let mut out = Vec::new();
+        for entry in fs::read_dir(self.root.join("textures"))? {
+            let entry = entry?;
+            if !entry.file_type()?.is_dir() || !valid_id(&entry.file_name().to_string_lossy()) {
+                continue;
+            }
+            let dir = entry.path();
+            let meta_path = dir.join("meta.json");
+            let meta = fs::read(&meta_path)
+                .map_err(|e| e.to_string())
+                .and_then(|b| serde_json::from_slice::<StoredMeta>(&b).map_err(|e| e.to_string()));
+            match meta {
+                Ok(meta) if meta.version == META_VERSION && dir.ends_with(&meta.id) => {
+                    out.push(Found { meta, dir })
+                }
+                Ok(meta) => tracing::warn!(
+                    path = %meta_path.display(),
+                    version = meta.version,
+                    "skipping texture with foreign metadata"
+                ),
+                Err(e) => {
+                    tracing::warn!(path = %meta_path.display(), error = %e, "skipping unreadable texture metadata")
+                }
+            }
+        }
+        out.sort_by(|a, b| (a.meta.created, &a.meta.id).cmp(&(b.meta.created, &b.meta.id)));
+        Ok(out)
+    }
+}
+
+/// Takes the exclusive lock of the data directory `root`. A server still
+/// exiting gets two seconds to let go; then another one is assumed to use
+/// it and opening fails.
+fn lock_exclusive(root: &Path) -> io::Result<File> {
+    let path = root.join(LOCK_FILE);
+    let f = File::options()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)?;
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
+    loop {
+        match f.try_lock() {
+            Ok(()) => return Ok(f),
+            Err(fs::TryLockError::WouldBlock) if std::time::Instant::now() < deadline => {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            Err(fs::TryLockError::WouldBlock) => {
+                return Err(io::Error::new(
+                    io::ErrorKind::WouldBlock,
+                    format!(
+                        "{} is in use by another solidtex server (it holds {})",
+                        root.display(),
+                        path.display()
+                    ),
+                ));
+            }
+            Err(fs::TryLockError::Error(e)) => return Err(e),
+        }
+    }
+}
+
+/// A temporary of [`write_atomic_with`] for one of the [`WRITTEN`] files:
+/// `.NAME.PID.tmp`.
+fn is_temporary(name: &str) -> bool {
+    let Some(inner) = name
+        .strip_prefix('.')
+        .and_then(|n| n.strip_suffix(TMP_SUFFIX))
+    else {
+        return false;
+    };
+    inner.rsplit_once('.').is_some_and(|(file, pid)| {
+        WRITTEN.contains(&file) && !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit())
+    })
+}
+
+/// Removes a texture directory if it holds only files the server writes
+/// (true); leaves it untouched otherwise (false).
+fn remove_written(dir: &Path) -> io::Result<bool> {
+    let mut files = Vec::new();
+    for f in fs::read_dir(dir)? {
+        let f = f?;
+        let name = f.file_name().to_string_lossy().to_string();
+        if !f.file_type()?.is_file() || !(WRITTEN.contains(&name.as_str()) || is_temporary(&name)) {
+            tracing::warn!(path = %f.path().display(), "not written by the server; left in place");
+            return Ok(false);
+        }
+        files.push(f.path());
+    }
+    for f in files {
+        fs::remove_file(f)?;
+    }
+    fs::remove_dir(dir)?;
+    Ok(true)
+}
+
+/// Writes `bytes` to `path` atomically and durably.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    write_atomic_with(path, |w| w.write_all(bytes))
+}
+
+/// Writes `path` atomically and durably through `fill`: a temporary file in
+/// the same directory is written, fsynced and renamed over `path`, then the
+/// directory is fsynced.
+pub fn write_atomic_with(
+    path: &Path,
+    fill: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> io::Result<()> {
+    let dir = path
+        .parent()
+        .ok_or_else(|| io::Error::other("path has no parent"))?;
+    let name = path
+        .file_name()
+        .ok_or_else(|| io::Error::other("path has no file name"))?
+        .to_string_lossy();
+    let tmp = dir.join(format!(".{name}.{}{TMP_SUFFIX}", std::process::id()));
+    let result = (|| {
+        let mut w = BufWriter::new(File::create(&tmp)?);
+        fill(&mut w)?;
+        let f = w.into_inner().map_err(|e| e.into_error())?;
+        f.sync_all()?;
+        drop(f);
+        fs::rename(&tmp, path)?;
+        sync_dir(dir)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Fsyncs a directory so a rename in it is durable.
+pub fn sync_dir(dir: &Path) -> io::Result<()> {
+    #[cfg(unix)]
+    {
+        File::open(dir)?.sync_all()
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn meta(id: &str, status: StoredStatus) -> StoredMeta {
+        StoredMeta {
+            version: META_VERSION,
+            id: id.into(),
+            name: Some("marble.png".into()),
+            content_hash: id.into(),
+            created: 5,
+            exemplar: ExemplarInfo {
+                width: 16,
+                height: 16,
+                planes: 1,
+            },
+            params: Map::new(),
+            status,
+            reason: None,
+            precompute_seconds: None,
+            precompute_peak_bytes: None,
+        }
+    }
+
+    fn planes() -> Planes {
+        let rgb: Vec<u8> = (0..16 * 16 * 3).map(|i| (i * 7) as u8).collect();
+        Planes::Single(Exemplar::from_rgb(16, 16, &rgb).unwrap())
+    }
+
+    #[test]
+    fn atomic_write_replaces() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("f");
+        write_atomic(&p, b"one").unwrap();
+        write_atomic(&p, b"two").unwrap();
+        assert_eq!(fs::read(&p).unwrap(), b"two");
+        assert_eq!(
+            fs::read_dir(d.path()).unwrap().count(),
+            1,
+            "no temporary left"
+        );
+        let err = write_atomic_with(&p, |w| {
+            w.write_all(b"partial")?;
+            Err(io::Error::other("fail"))
+        });
+        assert!(err.is_err());
+        assert_eq!(
+            fs::read(&p).unwrap(),
+            b"two",
+            "failed write leaves the old file"
+        );
+        assert_eq!(fs::read_dir(d.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn create_scan_remove() {
+        let d = tempfile::tempdir().unwrap();
+        let s = Store::open(d.path()).unwrap();
+        let m = meta("abc", StoredStatus::Pending);
+        s.create(&m, &planes()).unwrap();
+        let found = s.scan().unwrap();
+        assert_eq!(found.len(), 1);
+        assert_eq!(found[0].meta, m);
+        let back = s.read_planes(&m).unwrap();
+        assert_eq!(back.named()[0].1, planes().named()[0].1);
+        s.remove("abc").unwrap();
+        assert!(s.scan().unwrap().is_empty());
+    }
+
+    #[test]
+    fn open_clears_debris() {
+        let d = tempfile::tempdir().unwrap();
+        let s = Store::open(d.path()).unwrap();
+        s.create(&meta("keep", StoredStatus::Ready), &planes())
+            .unwrap();
+        fs::write(s.dir("keep").join(".candidates.stx.1.tmp"), b"half").unwrap();
+        fs::create_dir_all(s.dir("nometa")).unwrap();
+        fs::write(s.dir("nometa").join("exemplar.png"), b"x").unwrap();
+        fs::create_dir_all(d.path().join("textures").join("x.deleting.tmp")).unwrap();
+        drop(s);
+        let s = Store::open(d.path()).unwrap();
+        let ids: Vec<String> = s.scan().unwrap().into_iter().map(|f| f.meta.id).collect();
+        assert_eq!(ids, vec!["keep".to_string()]);
+        assert!(!s.dir("keep").join(".candidates.stx.1.tmp").exists());
+        assert!(!s.dir("nometa").exists());
+    }
+
+    #[test]
+    fn unreadable_meta_is_skipped() {
+        let d = tempfile::tempdir().unwrap();
+        let s = Store::open(d.path()).unwrap();
+        fs::create_dir_all(s.dir("bad")).unwrap();
+        fs::write(s.dir("bad").join("meta.json"), b"{not json").unwrap();
+        assert!(s.scan().unwrap().is_empty());
+    }
+}
