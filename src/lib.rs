@@ -9,7 +9,6 @@
 
 mod bench;
 mod cli;
-mod evalcmd;
 pub mod loadtest;
 
 pub use cli::{Cli, run};

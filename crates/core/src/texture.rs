@@ -35,6 +35,12 @@ impl Texture {
         })
     }
 
+    /// The same candidates under other synthesis parameters, sharing what
+    /// was derived from them.
+    pub fn with_params(&self, params: SynthParams, cache: Arc<TileCache>) -> Result<Texture> {
+        Texture::new(self.engine.shared_candidates().clone(), params, cache)
+    }
+
     /// The precomputed candidates this texture synthesizes from.
     pub fn candidates(&self) -> &Candidates {
         self.engine.candidates()

@@ -206,6 +206,10 @@ impl Engine {
         self.radius
     }
 
+    pub(crate) fn shared_candidates(&self) -> &Arc<Candidates> {
+        &self.cands
+    }
+
     pub(crate) fn candidates(&self) -> &Candidates {
         &self.cands
     }

@@ -6,12 +6,62 @@
 //! same way: the slab initialisation without correction, and a per-pixel
 //! shuffle of the exemplar.
 
+use super::source::{SynthArgs, open_exemplar};
+use clap::Args;
 use solidtex_core::eval::{RgbView, SliceScores, anisotropy, score_slice, shuffled_exemplar};
 use solidtex_core::{
     AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Scheme, SynthParams,
     Texture, TileCache,
 };
+use std::path::PathBuf;
 use std::sync::Arc;
+
+#[derive(Args)]
+pub struct EvalArgs {
+    /// Exemplar images to evaluate.
+    #[arg(required = true)]
+    exemplars: Vec<PathBuf>,
+    /// Slice side.
+    #[arg(long, default_value_t = 128)]
+    side: u32,
+    /// Also score the standard scheme.
+    #[arg(long)]
+    standard: bool,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Parameters of the corrected slices (the slab baseline shares the
+    /// seed and jitter).
+    #[command(flatten)]
+    synth: SynthArgs,
+}
+
+/// Runs `solidtex eval`.
+pub fn run(a: EvalArgs) -> anyhow::Result<()> {
+    let mut all = Vec::new();
+    for path in &a.exemplars {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let e = open_exemplar(path)?;
+        let scores = evaluate(
+            &name,
+            &e,
+            a.side,
+            a.standard,
+            &a.synth.params(Scheme::DualGrid),
+        )?;
+        if !a.json {
+            print(&scores);
+        }
+        all.extend(scores);
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&all)?);
+    }
+    Ok(())
+}
 
 /// One scored slice.
 #[derive(serde::Serialize)]

@@ -1,0 +1,94 @@
+//! `solidtex bench`: times precomputation, synthesis and the service.
+
+use super::source::write_atomically;
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct BenchArgs {
+    /// Directory of exemplar PNGs.
+    #[arg(long, default_value = "../shared/exemplars")]
+    exemplars: PathBuf,
+    /// Small sizes only (seconds), for CI.
+    #[arg(long)]
+    quick: bool,
+    /// Skip a cold request whose plan predicts more seconds than this.
+    #[arg(long, default_value_t = 120.0)]
+    max_seconds: f64,
+    /// Also load a server in this process with `loadtest` runs.
+    #[arg(long)]
+    load: bool,
+    /// Level of detail of the mixed load runs.
+    #[arg(long, default_value_t = 0)]
+    load_lod: u32,
+    /// Level of detail of the sweep load run.
+    #[arg(long, default_value_t = 0)]
+    sweep_lod: u32,
+    /// Side of the slices, cuts and sweep planes of the load runs.
+    #[arg(long, default_value_t = 256)]
+    load_size: u32,
+    /// Side of the sweep's planes, when it differs from `--load-size` (the
+    /// sweep target is set at 256²).
+    #[arg(long)]
+    sweep_size: Option<u32>,
+    /// Clients of the concurrent load run.
+    #[arg(long, default_value_t = 32)]
+    load_clients: usize,
+    /// Duration of each load run.
+    #[arg(long, default_value = "60s", value_parser = crate::loadtest::parse_duration)]
+    load_duration: std::time::Duration,
+    /// The loaded server's `--max-queue-wait`, seconds: how long a job may
+    /// wait for a slot before it is answered 503.
+    #[arg(long, default_value_t = 1.0, value_parser = solidtex_server::config::parse_wait)]
+    load_max_wait: f64,
+    /// Write the results as a Markdown page (e.g. BENCHMARKS.md).
+    #[arg(long)]
+    markdown: Option<PathBuf>,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `solidtex bench`.
+pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    use crate::bench;
+    let quick = a.quick;
+    let opts = bench::Options {
+        exemplars: a.exemplars,
+        quick,
+        max_seconds: a.max_seconds,
+        load: a.load.then_some(bench::service::LoadOptions {
+            // Quick mode (2 levels) at lod 1 synthesizes the coarse level only.
+            lod: if quick { 1 } else { a.load_lod },
+            sweep_lod: if quick { 1 } else { a.sweep_lod },
+            // Quick mode shrinks the load too, so CI stays in seconds.
+            side: if quick { 32 } else { a.load_size },
+            sweep_side: if quick {
+                32
+            } else {
+                a.sweep_size.unwrap_or(a.load_size)
+            },
+            clients: a.load_clients,
+            duration: a.load_duration,
+            cache_bytes: 512 << 20,
+            brick_size: if quick { 16 } else { 64 },
+            max_queue_wait: a.load_max_wait,
+        }),
+    };
+    let results = bench::run(&opts)?;
+    if let Some(path) = &a.markdown {
+        let command = std::iter::once("solidtex".to_string())
+            .chain(std::env::args().skip(1))
+            .collect::<Vec<_>>()
+            .join(" ");
+        let page = bench::markdown::page(&results, &bench::machine::current(), &command);
+        write_atomically(path, page.as_bytes())?;
+        eprintln!("wrote {}", path.display());
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+    } else {
+        bench::print(&results);
+    }
+    Ok(())
+}

@@ -1,0 +1,224 @@
+//! What the synthesis commands share: where a texture comes from (a
+//! `.stx`, an exemplar image, or the bundled default), its synthesis
+//! parameters, and how results are written and summarised.
+
+use anyhow::Context;
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use solidtex_core::{
+    AnalysisParams, Candidates, Correction, Exemplar, ExemplarSet, Scheme, Slices, Stage,
+    SynthParams, SynthStats, Texture, TileCache,
+};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+#[derive(Args, Clone)]
+pub struct SourceArgs {
+    /// A `.stx` file, or an exemplar image (precomputed on the fly; the
+    /// bundled default exemplar when omitted).
+    pub source: Option<PathBuf>,
+    /// Correction scheme: standard or dual-grid.
+    #[arg(long, default_value = "dual-grid")]
+    pub scheme: Scheme,
+    #[command(flatten)]
+    pub synth: SynthArgs,
+    /// Level of detail (0 = finest).
+    #[arg(long, default_value_t = 0)]
+    pub lod: u32,
+}
+
+/// Synthesis parameters other than the scheme.
+#[derive(Args, Clone)]
+pub struct SynthArgs {
+    /// Random seed.
+    #[arg(long, default_value_t = SynthParams::default().seed)]
+    seed: u64,
+    /// Preview parameters: one correction pass per level and the finest
+    /// level upsampled without correction; cold slices 5–7× faster for
+    /// about 10 % worse patch coherence (docs/quality.md).
+    #[arg(long, conflicts_with_all = ["passes", "finest_passes", "fine_levels"])]
+    preview: bool,
+    /// Correction passes per level, the fine levels excepted.
+    #[arg(long, default_value_t = SynthParams::default().passes)]
+    passes: u32,
+    /// Correction passes at the finest levels (see `--fine-levels`).
+    #[arg(long, default_value_t = SynthParams::default().finest_passes)]
+    finest_passes: u32,
+    /// Levels, counted from the finest, corrected with `--finest-passes`
+    /// passes instead of `--passes`.
+    #[arg(long, default_value_t = SynthParams::default().fine_levels)]
+    fine_levels: u32,
+    /// Dual-grid cell side M.
+    #[arg(long, default_value_t = SynthParams::default().grid)]
+    grid: u32,
+    /// Jitter strength (0 disables).
+    #[arg(long, default_value_t = SynthParams::default().jitter)]
+    jitter: f32,
+    /// Subpass block side s (s³ subpasses per pass; 1 disables subpasses).
+    #[arg(long, default_value_t = SynthParams::default().subpass_side)]
+    subpass_side: u32,
+    /// Gain on correction queries around their mean colour (1 disables).
+    #[arg(long, default_value_t = SynthParams::default().contrast)]
+    contrast: f32,
+    /// Voxels the colour correction reads: sparse (direct neighbours, the rest of
+    /// each N×N slice extrapolated) or full (every voxel of the slices).
+    #[arg(long, default_value = "sparse")]
+    slices: Slices,
+    /// Penalty on coherent triples whose three exemplar colours disagree
+    /// (0 disables).
+    #[arg(long, default_value_t = SynthParams::default().consistency)]
+    consistency: f32,
+    /// Thickness of the candidate slab's layers, in voxels of the
+    /// initialisation level (Dong et al.: N).
+    #[arg(long, default_value_t = SynthParams::default().slab_thickness)]
+    slab_thickness: u32,
+    /// What a correction matches: appearance (sparse appearance-space
+    /// neighbourhoods, 12 diagonal locations) or colour (N×N colour
+    /// neighbourhoods).
+    #[arg(long, default_value_t = SynthParams::default().correction)]
+    correction: Correction,
+}
+
+impl SynthArgs {
+    pub fn params(&self, scheme: Scheme) -> SynthParams {
+        // The preview sets the passes (clap refuses them beside it).
+        let base = if self.preview {
+            SynthParams::preview()
+        } else {
+            SynthParams {
+                passes: self.passes,
+                finest_passes: self.finest_passes,
+                fine_levels: self.fine_levels,
+                ..SynthParams::default()
+            }
+        };
+        SynthParams {
+            seed: self.seed,
+            scheme,
+            grid: self.grid,
+            jitter: self.jitter,
+            subpass_side: self.subpass_side,
+            contrast: self.contrast,
+            slices: self.slices,
+            consistency: self.consistency,
+            slab_thickness: self.slab_thickness,
+            correction: self.correction,
+            ..base
+        }
+    }
+}
+
+/// One sentence on what a synthesis command wrote and what it cost.
+pub fn summary(what: &str, path: &Path, t0: Instant, stats: &SynthStats) -> String {
+    let corrections: u64 = stats.corrections_per_level.iter().sum();
+    format!(
+        "wrote {what} to {} in {:.2} s: {corrections} corrections over {} levels, \
+         {} tiles synthesized, {} from the cache",
+        path.display(),
+        t0.elapsed().as_secs_f64(),
+        stats.corrections_per_level.len(),
+        stats.tiles_computed,
+        stats.tiles_from_cache,
+    )
+}
+
+fn progress_bar() -> ProgressBar {
+    let bar = ProgressBar::new(1000);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {msg:12} [{bar:40}] {percent}% {elapsed}")
+            .expect("valid template"),
+    );
+    bar
+}
+
+pub fn precompute(
+    set: &ExemplarSet,
+    params: &AnalysisParams,
+    quiet: bool,
+) -> anyhow::Result<Candidates> {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        progress_bar()
+    };
+    let stages = [
+        Stage::Analysis,
+        Stage::Search,
+        Stage::Coherence,
+        Stage::Finish,
+    ];
+    let cb = |s: Stage, f: f32| {
+        let i = stages.iter().position(|&x| x == s).unwrap_or(0);
+        bar.set_message(format!("{s:?}").to_lowercase());
+        bar.set_position(((i as f32 + f) / 4.0 * 1000.0) as u64);
+    };
+    let c = Candidates::compute(set, params, &cb)?;
+    bar.finish_and_clear();
+    Ok(c)
+}
+
+pub fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
+    let cands = match &src.source {
+        Some(p) if p.extension().is_some_and(|e| e == "stx") => {
+            let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+            Candidates::load(&bytes)?
+        }
+        Some(p) => {
+            eprintln!(
+                "precomputing the candidates of {} (save them with `solidtex precompute` to skip this)",
+                p.display()
+            );
+            precompute(
+                &ExemplarSet::single(open_exemplar(p)?),
+                &AnalysisParams::default(),
+                false,
+            )?
+        }
+        None => {
+            let set = ExemplarSet::single(solidtex_core::bundled::exemplar());
+            match solidtex_core::bundled::candidates_for(&set, &AnalysisParams::default()) {
+                Some(c) => c,
+                None => precompute(&set, &AnalysisParams::default(), false)?,
+            }
+        }
+    };
+    let params = src.synth.params(src.scheme);
+    Ok(Texture::new(
+        Arc::new(cands),
+        params,
+        Arc::new(TileCache::new(1 << 30)),
+    )?)
+}
+
+/// Opens a PNG or JPEG exemplar; a photo larger than the exemplar limit is
+/// downscaled, and the user told so.
+pub fn open_exemplar(path: &Path) -> anyhow::Result<Exemplar> {
+    let (e, original) =
+        Exemplar::open_fitting(path).with_context(|| format!("reading {}", path.display()))?;
+    if let Some((w, h)) = original {
+        eprintln!(
+            "{}: downscaled from {w}x{h} to {}x{} (exemplars are at most {} pixels per side)",
+            path.display(),
+            e.width(),
+            e.height(),
+            solidtex_core::Exemplar::MAX_SIDE
+        );
+    }
+    Ok(e)
+}
+
+pub fn write_png(path: &Path, w: u32, h: u32, rgb: Vec<u8>) -> anyhow::Result<()> {
+    let img = image::RgbImage::from_raw(w, h, rgb).context("image size")?;
+    img.save(path)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Writes a file whole or not at all: readers never see half of it.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path)?;
+    Ok(())
+}
