@@ -2,6 +2,7 @@
 //! connections, wrong Host headers, malformed requests, and a data
 //! directory that is tampered with or shared.
 
+mod common;
 mod server_support;
 
 #[path = "abuse/connections.rs"]

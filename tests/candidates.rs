@@ -107,13 +107,6 @@ fn corrupt_and_truncated_files_are_errors() {
     }
 }
 
-fn png(w: u32, h: u32) -> Vec<u8> {
-    let img = image::RgbImage::from_pixel(w, h, image::Rgb([10, 20, 30]));
-    let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png).unwrap();
-    out.into_inner()
-}
-
 /// Rewrites a PNG's IHDR size (and its CRC) without touching the data.
 fn claim_size(mut png: Vec<u8>, w: u32, h: u32) -> Vec<u8> {
     png[16..20].copy_from_slice(&w.to_be_bytes());
@@ -126,7 +119,7 @@ fn claim_size(mut png: Vec<u8>, w: u32, h: u32) -> Vec<u8> {
 #[test]
 fn bad_images_give_clear_errors() {
     assert!(matches!(
-        Exemplar::decode(&png(1, 1)),
+        Exemplar::decode(&flat_png(1, 1)),
         Err(Error::ImageSize {
             width: 1,
             height: 1,
@@ -134,15 +127,15 @@ fn bad_images_give_clear_errors() {
         })
     ));
     assert!(matches!(
-        Exemplar::decode(&png(16, 600)),
+        Exemplar::decode(&flat_png(16, 600)),
         Err(Error::ImageSize { .. })
     ));
-    let bomb = claim_size(png(16, 16), 10000, 10000);
+    let bomb = claim_size(flat_png(16, 16), 10000, 10000);
     assert!(matches!(
         Exemplar::decode(&bomb),
         Err(Error::ImageSize { width: 10000, .. })
     ));
-    let zero = claim_size(png(16, 16), 0, 0);
+    let zero = claim_size(flat_png(16, 16), 0, 0);
     assert!(Exemplar::decode(&zero).is_err());
     assert!(matches!(
         Exemplar::decode(b"GIF89a not really"),
@@ -152,11 +145,11 @@ fn bad_images_give_clear_errors() {
         Exemplar::decode(b""),
         Err(Error::MalformedImage(_))
     ));
-    let truncated = png(32, 32);
+    let truncated = flat_png(32, 32);
     assert!(Exemplar::decode(&truncated[..truncated.len() - 20]).is_err());
-    assert!(Exemplar::decode(&png(16, 16)).is_ok());
-    let a = Exemplar::decode(&png(16, 16)).unwrap();
-    let b = Exemplar::decode(&png(32, 32)).unwrap();
+    assert!(Exemplar::decode(&flat_png(16, 16)).is_ok());
+    let a = Exemplar::decode(&flat_png(16, 16)).unwrap();
+    let b = Exemplar::decode(&flat_png(32, 32)).unwrap();
     assert!(matches!(
         ExemplarSet::triple(a.clone(), b, a),
         Err(Error::SizeMismatch(_))

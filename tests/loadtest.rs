@@ -1,6 +1,7 @@
 //! `solidtex loadtest` against a real server: the library entry point with
 //! a mixed workload, and the command line with a plane sweep and JSON.
 
+mod common;
 mod server_support;
 
 use serde_json::Value;

@@ -4,20 +4,18 @@
 //! each one's measured peak. This binary counts its allocations as the
 //! server binary does.
 
+mod common;
 mod server_support;
 
+use common::generated_exemplar;
 use serde_json::Value;
 use server_support::*;
 
-use solidtex_core::{AnalysisParams, Candidates, Exemplar, ExemplarSet};
+use solidtex_core::{AnalysisParams, Candidates, ExemplarSet};
 use solidtex_server::peak_alloc::{Meter, PeakAlloc};
 
 #[global_allocator]
 static ALLOC: PeakAlloc = PeakAlloc;
-
-fn exemplar(side: u32, seed: u32) -> Exemplar {
-    Exemplar::decode(&exemplar_png(side, seed)).unwrap()
-}
 
 #[test]
 fn the_estimate_bounds_the_measured_peak() {
@@ -29,21 +27,26 @@ fn the_estimate_bounds_the_measured_peak() {
         .start_handler(move |_| meter.attach())
         .build()
         .unwrap();
-    let three = ExemplarSet::triple(exemplar(40, 1), exemplar(40, 2), exemplar(40, 3)).unwrap();
+    let three = ExemplarSet::triple(
+        generated_exemplar(40, 1),
+        generated_exemplar(40, 2),
+        generated_exemplar(40, 3),
+    )
+    .unwrap();
     let cases = [
         (
-            ExemplarSet::single(exemplar(48, 4)),
+            ExemplarSet::single(generated_exemplar(48, 4)),
             AnalysisParams::default(),
         ),
         (
-            ExemplarSet::single(exemplar(40, 5)),
+            ExemplarSet::single(generated_exemplar(40, 5)),
             AnalysisParams {
                 triples: 300,
                 ..AnalysisParams::default()
             },
         ),
         (
-            ExemplarSet::single(exemplar(40, 6)),
+            ExemplarSet::single(generated_exemplar(40, 6)),
             AnalysisParams {
                 triples: 8,
                 levels: 2,
@@ -51,7 +54,7 @@ fn the_estimate_bounds_the_measured_peak() {
             },
         ),
         (
-            ExemplarSet::single(exemplar(40, 7)),
+            ExemplarSet::single(generated_exemplar(40, 7)),
             AnalysisParams {
                 neighbourhood: 9,
                 max_candidates: 32,

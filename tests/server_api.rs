@@ -1,6 +1,7 @@
 //! The HTTP API against a real server on a loopback port: every route,
 //! every error class, ETag/304, CORS, idempotent uploads and overload.
 
+mod common;
 mod server_support;
 
 use serde_json::Value;
@@ -430,18 +431,6 @@ async fn a_preset_upload_is_the_texture_it_spells_out() {
     let (st, v) = upload(&c, &s, png, "levels=3&preset=fast").await;
     assert_eq!(st, 400, "{v}");
     assert_eq!(v["error"]["code"], "invalid_params", "{v}");
-}
-
-/// Horizontal stripes with a little noise: grain along u.
-fn grain_png(w: u32, h: u32) -> Vec<u8> {
-    let rgb: Vec<u8> = (0..w * h)
-        .flat_map(|i| {
-            let (u, v) = (i % w, i / w);
-            let l = ((v % 6) * 35 + (u * 7 + v * 3) % 11) as u8;
-            [l, l / 2 + 60, 90]
-        })
-        .collect();
-    encode_png(w, h, &rgb)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

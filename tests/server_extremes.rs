@@ -3,6 +3,7 @@
 //! 503 with Retry-After), never a 5xx, a hang or a crash; sizes, counts
 //! and costs are multiplied with checked arithmetic.
 
+mod common;
 mod server_support;
 
 use serde_json::Value;

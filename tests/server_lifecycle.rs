@@ -2,6 +2,7 @@
 //! interrupted or damaged precomputes, graceful shutdown of the real binary
 //! on SIGTERM, and many concurrent clients.
 
+mod common;
 mod server_support;
 
 use serde_json::Value;

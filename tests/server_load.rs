@@ -2,6 +2,7 @@
 //! a burst beyond the queue is shed with 503 at once instead of waiting
 //! without bound, and the work of a client that hangs up is stopped.
 
+mod common;
 mod server_support;
 
 use server_support::*;

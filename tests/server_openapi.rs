@@ -1,6 +1,7 @@
 //! `openapi.yaml` is a valid OpenAPI 3 document and describes exactly the
 //! routes the router serves.
 
+mod common;
 mod server_support;
 
 use axum::body::Body;

@@ -3,6 +3,7 @@
 //! `region.raw`, in each format's layout. (The real clients read them in
 //! `tests/clients/`.)
 
+mod common;
 mod server_support;
 
 use serde_json::Value;

@@ -35,8 +35,8 @@ pub struct SynthArgs {
     #[arg(long, default_value_t = SynthParams::default().seed)]
     seed: u64,
     /// Preview parameters: one correction pass per level and the finest
-    /// level upsampled without correction; cold slices 5–7× faster for
-    /// about 10 % worse patch coherence (docs/quality.md).
+    /// level upsampled without correction: faster cold slices for worse
+    /// patch coherence (docs/quality.md).
     #[arg(long, conflicts_with_all = ["passes", "finest_passes", "fine_levels"])]
     preview: bool,
     /// Correction passes per level, the fine levels excepted.

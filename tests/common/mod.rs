@@ -1,5 +1,5 @@
-//! Shared fixtures: real exemplars from `tests/fixtures/exemplars`,
-//! precomputed once per test binary.
+//! Exemplars for every test: real ones from `tests/fixtures/exemplars`
+//! (precomputed once per test binary) and small generated ones.
 #![allow(dead_code)]
 
 use solidtex_core::{
@@ -31,6 +31,59 @@ pub fn small_exemplar() -> Exemplar {
         }
     }
     Exemplar::from_rgb(32, 32, &rgb).unwrap()
+}
+
+/// A small PNG with structure (blobs and stripes), different per seed.
+pub fn exemplar_png(side: u32, seed: u32) -> Vec<u8> {
+    let mut rgb = Vec::with_capacity((side * side * 3) as usize);
+    let mut state = seed.wrapping_mul(2654435761).wrapping_add(12345);
+    for y in 0..side {
+        for x in 0..side {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            let stripe = ((x + y * 2 + seed * 3) % 8 < 4) as u32;
+            let blob =
+                (((x as f32 * 0.4 + seed as f32).sin() * (y as f32 * 0.3).cos()) * 60.0) as i32;
+            rgb.push((60 + stripe * 120 + (state % 16)) as u8);
+            rgb.push((120 + blob).clamp(0, 255) as u8);
+            rgb.push((40 + (state >> 8) % 64 + seed * 20 % 100) as u8);
+        }
+    }
+    encode_png(side, side, &rgb)
+}
+
+/// Encodes RGB8 as PNG.
+pub fn encode_png(w: u32, h: u32, rgb: &[u8]) -> Vec<u8> {
+    solidtex_core::png::encode(w, h, rgb).unwrap()
+}
+
+/// Decodes a PNG to (width, height, RGB8).
+pub fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
+    let img = image::load_from_memory(bytes).unwrap().to_rgb8();
+    (img.width(), img.height(), img.into_raw())
+}
+
+/// Horizontal stripes with a little noise: grain along u.
+pub fn grain_png(w: u32, h: u32) -> Vec<u8> {
+    let rgb: Vec<u8> = (0..w * h)
+        .flat_map(|i| {
+            let (u, v) = (i % w, i / w);
+            let l = ((v % 6) * 35 + (u * 7 + v * 3) % 11) as u8;
+            [l, l / 2 + 60, 90]
+        })
+        .collect();
+    encode_png(w, h, &rgb)
+}
+
+/// A generated exemplar ([`exemplar_png`]).
+pub fn generated_exemplar(side: u32, seed: u32) -> Exemplar {
+    Exemplar::decode(&exemplar_png(side, seed)).unwrap()
+}
+
+/// One colour all over.
+pub fn flat_png(w: u32, h: u32) -> Vec<u8> {
+    encode_png(w, h, &[10, 20, 30].repeat((w * h) as usize))
 }
 
 pub fn small_params() -> AnalysisParams {

@@ -1,7 +1,10 @@
-//! Shared fixtures of the server tests: small generated exemplars, a real
-//! server on a free loopback port, and helpers to poll and read metrics.
+//! The HTTP side of the tests: a real server on a free loopback port, an
+//! HTTP client, and helpers to upload, poll, read answers and metrics.
+//! Exemplars come from `common`.
 #![allow(dead_code)]
 
+#[allow(unused_imports)]
+pub use crate::common::{decode_png, encode_png, exemplar_png, grain_png};
 use serde_json::Value;
 use solidtex_server::{ServeArgs, Server};
 use std::net::SocketAddr;
@@ -9,42 +12,6 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
-
-/// A small PNG with structure (blobs and stripes), different per seed.
-pub fn exemplar_png(side: u32, seed: u32) -> Vec<u8> {
-    let mut rgb = Vec::with_capacity((side * side * 3) as usize);
-    let mut state = seed.wrapping_mul(2654435761).wrapping_add(12345);
-    for y in 0..side {
-        for x in 0..side {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            let stripe = ((x + y * 2 + seed * 3) % 8 < 4) as u32;
-            let blob =
-                (((x as f32 * 0.4 + seed as f32).sin() * (y as f32 * 0.3).cos()) * 60.0) as i32;
-            rgb.push((60 + stripe * 120 + (state % 16)) as u8);
-            rgb.push((120 + blob).clamp(0, 255) as u8);
-            rgb.push((40 + (state >> 8) % 64 + seed * 20 % 100) as u8);
-        }
-    }
-    encode_png(side, side, &rgb)
-}
-
-/// Encodes RGB8 as PNG.
-pub fn encode_png(w: u32, h: u32, rgb: &[u8]) -> Vec<u8> {
-    use image::ImageEncoder;
-    let mut out = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut out)
-        .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)
-        .unwrap();
-    out
-}
-
-/// Decodes a PNG to (width, height, RGB8).
-pub fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
-    let img = image::load_from_memory(bytes).unwrap().to_rgb8();
-    (img.width(), img.height(), img.into_raw())
-}
 
 /// Fast analysis parameters for a 32² exemplar (precompute well under a
 /// second).

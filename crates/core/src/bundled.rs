@@ -4,10 +4,11 @@
 //!
 //! The candidates are exactly what [`Candidates::compute`] makes of the
 //! exemplar with the default analysis parameters (a test checks it; after a
-//! change to the analysis, regenerate them with
-//! `solidtex precompute assets/default.png -o assets/default.stx`). They
-//! are only used when the exemplar and parameters asked for are those, so
-//! they can never stand in for another texture's.
+//! change to the analysis, regenerate them from the repository root with
+//! `solidtex precompute crates/core/assets/default.png -o
+//! crates/core/assets/default.stx`). They are only used when the exemplar
+//! and parameters asked for are those, so they can never stand in for
+//! another texture's.
 
 use crate::{AnalysisParams, Candidates, Exemplar, ExemplarSet};
 
@@ -45,8 +46,8 @@ mod tests {
         let computed = Candidates::compute(&set, &params, &|_, _| {}).unwrap();
         assert!(
             computed.to_bytes() == CANDIDATES_STX,
-            "assets/default.stx is stale: regenerate it with \
-             `solidtex precompute assets/default.png -o assets/default.stx`"
+            "crates/core/assets/default.stx is stale: regenerate it with \
+             `solidtex precompute crates/core/assets/default.png -o crates/core/assets/default.stx`"
         );
         assert!(candidates_for(&set, &params).is_some());
         let other = AnalysisParams {

@@ -18,7 +18,7 @@ mod candidates;
 mod error;
 pub mod eval;
 mod exemplar;
-mod hash;
+pub mod hash;
 mod orientation;
 mod params;
 pub mod png;

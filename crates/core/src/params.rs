@@ -316,8 +316,8 @@ pub struct SynthParams {
     /// planes of each level, but every pass there chains through the
     /// subpasses into more planes of that level and of all coarser ones:
     /// level 1's two passes cost a cold 256² slice more corrections than
-    /// level 0. One pass at level 1 too makes cold slices 35–50 % faster
-    /// for about 2 % of patch coherence (docs/quality.md).
+    /// level 0. One pass at level 1 too makes cold slices much faster for
+    /// a little patch coherence (docs/quality.md).
     pub fine_levels: u32,
     /// Subpass block side s: s³ subpasses per pass (2 gives 8).
     pub subpass_side: u32,
@@ -400,10 +400,9 @@ impl SynthParams {
     /// Parameters for previews and interactive cutting: one correction
     /// pass per level, and the finest level upsampled from level 1 without
     /// correction. A cold slice needs about a quarter of the defaults'
-    /// corrections, which on the 2-core reference machine meets the speed
-    /// targets that the defaults miss (BENCHMARKS.md). The price is about
-    /// 10 % worse patch coherence and visibly more broken-up features on
-    /// spotted or blocky exemplars (docs/quality.md). Their voxels differ
+    /// corrections (BENCHMARKS.md). The price is worse patch coherence and
+    /// visibly more broken-up features on spotted or blocky exemplars
+    /// (docs/quality.md). Their voxels differ
     /// from the defaults', as any other parameter change makes them.
     pub fn preview() -> SynthParams {
         SynthParams {

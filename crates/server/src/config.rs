@@ -285,9 +285,9 @@ pub fn parse_pending_wait(s: &str) -> Result<f64, String> {
     }
 }
 
-/// Default `--max-jobs`: half the cores, at least one. On 2 cores, 32
-/// clients of mixed 64² requests got the same answers per second from one
-/// slot as from two, with p99 3.4 s instead of 5.7 s (docs/server.md).
+/// Default `--max-jobs`: half the cores, at least one. A job already uses
+/// every core through rayon; more slots than that add queueing inside the
+/// pool, not throughput, and lengthen the tail (docs/server.md).
 fn default_max_jobs() -> u32 {
     let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
     (cores / 2).max(1) as u32

@@ -6,11 +6,10 @@
 //! relaxed loads and a thread-local read. The binary installs it; a library
 //! user that does not gets no counts ([`installed`] is false).
 //!
-//! The allocator underneath is jemalloc: under 32 concurrent clients the
-//! server's peak resident memory was 673 MiB with it against 747 MiB with
-//! glibc's (same 60 s load, 444–449 MiB of cached tiles), whose per-thread
-//! arenas fragment as jobs come and go. Its options (transparent huge
-//! pages) are set by the binary.
+//! The allocator underneath is jemalloc: glibc's per-thread arenas
+//! fragment as jobs come and go, and the server's peak resident memory
+//! under load is lower with jemalloc (docs/server.md). Its options
+//! (transparent huge pages) are set by the binary.
 //!
 //! Unsafe code here, because `GlobalAlloc` is an unsafe trait; every method
 //! forwards to jemalloc unchanged.

@@ -6,9 +6,8 @@
 //! colour at its coordinate for p (the thesis's per-direction feature
 //! lookup). Means alone are flatter than any exemplar patch and pull the
 //! matches to bland regions; exemplar colours alone make the initial slab
-//! blocks a fixed point and leave their seams. On the marble and brick
-//! exemplars the blend lowers the histogram distance to the exemplar by
-//! 4–27 % against means alone.
+//! blocks a fixed point and leave their seams (docs/quality.md measures
+//! the blend against both).
 //!
 //! With sparse slices (the default, [`crate::Slices::Sparse`]) a correction
 //! reads only its direct neighbours: a slice voxel beyond them gets the
@@ -204,9 +203,8 @@ impl<'a> Corrector<'a> {
 
 /// Weight (out of 256) of a coherent triple's distance: favouring triples
 /// that continue their neighbours keeps exemplar patches together
-/// (Ashikhmin's and Lefebvre and Hoppe's coherence parameter). On the
-/// marble exemplar it raises the share of coherent neighbour pairs at the
-/// finest level from 18 % (no preference) to 35 %.
+/// (Ashikhmin's and Lefebvre and Hoppe's coherence parameter); its effect
+/// on the share of coherent neighbour pairs is in docs/quality.md.
 const COHERENT_WEIGHT: u32 = 128;
 
 /// 3D candidates tried per exemplar pixel at the finest level, where

@@ -29,6 +29,7 @@ mod colour;
 pub mod correction;
 pub mod estimate;
 pub mod grid;
+mod group;
 pub mod init;
 mod inspect;
 pub mod plan;
@@ -38,9 +39,8 @@ use crate::candidates::Candidates;
 use crate::error::Result;
 use crate::params::{Correction, Scheme, SynthParams};
 use crate::request::{CutPlane, Filter, Region};
-use cache::{Claim, Tile, TileCache, TileData, TileKey};
+use cache::{Claim, Tile, TileCache, TileKey};
 use colour::{colour, rgb8, triple_rgb8};
-use correction::{Corrector, Scratch, Work};
 use grid::{Box3, Grid};
 pub use inspect::SlabViews;
 use rayon::prelude::*;
@@ -59,9 +59,8 @@ type Wanted = BTreeMap<[i64; 3], u64>;
 
 /// Most tiles synthesized together in one group (bounds working memory).
 /// Neighbouring groups share their halos through the cached after-pass
-/// voxels, so smaller groups cost little: with 4096 rather than 8192, a
-/// 512² slice held 487 MB instead of 674 MB resident in the same time, and
-/// a 256² slice (more groups at coarse levels) took about 2.5 % longer.
+/// voxels, so smaller groups cost little time and save much resident
+/// memory on large slices (docs/quality.md, "Cost of a correction").
 const MAX_GROUP_TILES: usize = 4096;
 
 /// One correction step of a level: cells of side M shifted by `offset`,
@@ -362,224 +361,6 @@ impl Engine {
         out
     }
 
-    /// Synthesizes the wanted voxels of tiles of level `k` (no cache
-    /// lookups for them; their prerequisites go through the cache). Tiles
-    /// are processed in compact groups so memory stays bounded and
-    /// scattered tiles never pull in the space between them. Only the
-    /// wanted voxels and their exact dependency chain are computed.
-    fn compute(&self, k: usize, tiles: &[([i64; 3], u64)], acc: &Acc) -> HashMap<[i64; 3], Tile> {
-        let masks: HashMap<[i64; 3], u64> = tiles.iter().copied().collect();
-        let cells: Vec<[i64; 3]> = tiles.iter().map(|t| t.0).collect();
-        let mut out = HashMap::default();
-        for group in plan::group_cells(&cells, MAX_GROUP_TILES) {
-            let group: Vec<([i64; 3], u64)> = group.into_iter().map(|c| (c, masks[&c])).collect();
-            out.extend(self.compute_group(k, &group, acc));
-        }
-        out
-    }
-
-    fn compute_group(
-        &self,
-        k: usize,
-        tiles: &[([i64; 3], u64)],
-        acc: &Acc,
-    ) -> Vec<([i64; 3], Tile)> {
-        let mut targets = Vec::with_capacity(tiles.len() * (TILE * TILE * TILE) as usize);
-        for &(t, mask) in tiles {
-            targets.extend(tile_voxels(t, mask).map(|(_, p)| p));
-        }
-        let steps = self.steps_at(k);
-        let barrier_cell = match self.params.scheme {
-            Scheme::DualGrid => Some(self.cell),
-            Scheme::Standard => None,
-        };
-        let side = self.params.subpass_side as i64;
-        cancel::check(&acc.cancel);
-        // Values after a pass that earlier requests cached end the chain
-        // there (see `plan::backward`), so that overlapping requests (a
-        // sweeping cut) share their work instead of redoing it; by forward
-        // subpass.
-        let mut ends: HashMap<usize, Vec<KnownVoxel>> = HashMap::default();
-        let mut peeked: HashMap<([i64; 3], usize), Option<Tile>> = HashMap::default();
-        let chain = plan::backward(
-            &targets,
-            steps,
-            self.radius,
-            side,
-            barrier_cell,
-            |pass, forward, voxels| {
-                if acc.dry {
-                    return Vec::new();
-                }
-                // One lookup per tile (the voxels come in runs within one):
-                // on a cold cache nothing is found and nothing is filtered.
-                let mut any = false;
-                let mut last = None;
-                for &q in voxels.iter() {
-                    let t = Self::tile_of(q);
-                    if last != Some(t) {
-                        last = Some(t);
-                        any |= peeked
-                            .entry((t, pass))
-                            .or_insert_with(|| self.cache.peek(&self.after_pass_key(k, pass, t)))
-                            .is_some();
-                    }
-                }
-                if !any {
-                    return Vec::new();
-                }
-                let mut found = Vec::new();
-                voxels.retain(|&q| {
-                    let t = Self::tile_of(q);
-                    let tile = peeked
-                        .entry((t, pass))
-                        .or_insert_with(|| self.cache.peek(&self.after_pass_key(k, pass, t)));
-                    match tile {
-                        Some(tile) if tile.mask & Self::bit_of(q) != 0 => {
-                            found.push((q, tile.get(q)));
-                            false
-                        }
-                        _ => true,
-                    }
-                });
-                let removed = found.iter().map(|f| f.0).collect();
-                if !found.is_empty() {
-                    ends.insert(forward, found);
-                }
-                removed
-            },
-        );
-        drop(peeked);
-        cancel::check(&acc.cancel);
-        if !acc.dry {
-            cancel::charge(&acc.cancel, chain.need.count());
-        }
-        acc.voxels[k].fetch_add(chain.need.count(), Ordering::Relaxed);
-        acc.corrections[k].fetch_add(chain.corrections(), Ordering::Relaxed);
-        let known_box = ends
-            .values()
-            .flatten()
-            .map(|(p, _)| Box3::new(*p, [1, 1, 1]))
-            .reduce(|a, b| a.union(&b));
-        let triples = match known_box {
-            // Everything came from cached passes: no version 0 at all.
-            Some(kb) if chain.need.count() == 0 => Grid::new(kb),
-            Some(kb) => {
-                let v0 = self.version0(k, &chain.need, acc);
-                let mut wider = Grid::new(v0.bounds.union(&kb));
-                wider.copy_from(&v0);
-                wider
-            }
-            None => self.version0(k, &chain.need, acc),
-        };
-        // Voxels corrected in the current pass: their values after it,
-        // cached once it ends.
-        let mut ended: HashMap<[i64; 3], u64> = HashMap::default();
-        let triples = if acc.dry {
-            triples
-        } else {
-            let mut work = Work::new(&self.cands, k, triples);
-            let corrector = Corrector::new(&self.cands, k, &self.params);
-            let mut step_start: Option<(usize, Work)> = None;
-            let mut current_pass = 0;
-            let classes = (side * side * side) as usize;
-            for (forward, (si, voxels)) in chain.subpasses.iter().enumerate() {
-                cancel::check(&acc.cancel);
-                if forward / classes != current_pass {
-                    // The values after the pass just done.
-                    let done = self.version_after_pass(k, current_pass);
-                    self.publish_ended(k, done, &ended, &work.triples);
-                    ended.clear();
-                    current_pass = forward / classes;
-                }
-                if barrier_cell.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
-                    step_start = Some((*si, work.clone()));
-                }
-                let offset = steps[*si].offset;
-                let start = step_start.as_ref().map(|s| &s.1);
-                let w = &work;
-                let new: Vec<(usize, [u32; 3], [f32; 3])> = voxels
-                    .par_iter()
-                    .map_init(Scratch::default, |s, &p| {
-                        let barrier = barrier_cell.map(|m| {
-                            let c = p.map(|v| (v - offset).div_euclid(m) * m + offset);
-                            Box3::new(c, [m; 3])
-                        });
-                        let t = match (start, barrier) {
-                            (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p, s),
-                            _ => corrector.correct(w, None, p, s),
-                        };
-                        (w.triples.index(p), t, colour(&self.cands, k, t))
-                    })
-                    .collect();
-                for (i, t, c) in new {
-                    work.triples.data[i] = t;
-                    work.colours.data[i] = c;
-                }
-                for &(p, t) in ends.get(&forward).into_iter().flatten() {
-                    let i = work.triples.index(p);
-                    work.triples.data[i] = t;
-                    work.colours.data[i] = colour(&self.cands, k, t);
-                }
-                // Sorted voxels come in runs within one tile: one map update
-                // per run.
-                let mut run: Option<([i64; 3], u64)> = None;
-                for &p in voxels {
-                    let t = Self::tile_of(p);
-                    match &mut run {
-                        Some((rt, bits)) if *rt == t => *bits |= Self::bit_of(p),
-                        _ => {
-                            if let Some((rt, bits)) = run {
-                                *ended.entry(rt).or_default() |= bits;
-                            }
-                            run = Some((t, Self::bit_of(p)));
-                        }
-                    }
-                }
-                if let Some((rt, bits)) = run {
-                    *ended.entry(rt).or_default() |= bits;
-                }
-            }
-            work.triples
-        };
-        // Every voxel corrected in the last pass holds its final value,
-        // though only the wanted ones were asked for: the requested tiles
-        // keep theirs, the rest go to the cache as final voxels, so that a
-        // neighbouring request (the next plane of a sweeping cut) finds
-        // them instead of walking their chains again.
-        let own: Vec<([i64; 3], u64)> = tiles
-            .iter()
-            .map(|&(t, mask)| (t, mask | ended.remove(&t).unwrap_or(0)))
-            .collect();
-        self.publish_ended(k, 0, &ended, &triples);
-        own.par_iter()
-            .map(|&(t, mask)| (t, Self::tile_from(&triples, t, mask)))
-            .collect()
-    }
-
-    /// Caches the voxels of `ended` (tile masks) from `triples` as the
-    /// version of level `k` after `done` passes (0: final values).
-    fn publish_ended(
-        &self,
-        k: usize,
-        done: usize,
-        ended: &HashMap<[i64; 3], u64>,
-        triples: &Grid<[u32; 3]>,
-    ) {
-        let tiles: Vec<([i64; 3], Tile)> = ended
-            .par_iter()
-            .map(|(&t, &mask)| (t, Self::tile_from(triples, t, mask)))
-            .collect();
-        for (t, tile) in tiles {
-            self.cache.merge(self.version_key(k, done, t), tile);
-        }
-    }
-
-    /// Tile `t` of `triples`, holding the voxels of `mask`.
-    fn tile_from(triples: &Grid<[u32; 3]>, t: [i64; 3], mask: u64) -> Tile {
-        Arc::new(TileData::from_grid(triples, Self::tile_box(t).lo, mask))
-    }
-
     /// Key of the values after pass `pass` (counted over all steps from 0)
     /// of level `k` in tile `cell`: the version after `pass + 1` passes, or
     /// the final version after the last pass.
@@ -603,57 +384,6 @@ impl Engine {
             version: done as u8,
             cell,
         }
-    }
-
-    /// Version 0 of level `k` at the voxels of `need` (a grid over its
-    /// box; other voxels are left unset): the jittered slab at the initial
-    /// level, else the parent level's final triples upsampled.
-    fn version0(&self, k: usize, need: &plan::Mask, acc: &Acc) -> Grid<[u32; 3]> {
-        let b = need.bounds();
-        let mut g = Grid::new(b);
-        let zs: Vec<i64> = (b.lo[2]..b.hi[2]).collect();
-        let layer = (b.size()[0] * b.size()[1]) as usize;
-        if k == self.init_level {
-            if acc.dry {
-                return g;
-            }
-            let field =
-                init::JitterField::new(&self.cands, self.params.seed, self.params.jitter, k, &b);
-            g.data
-                .par_chunks_mut(layer)
-                .zip(zs.par_iter())
-                .for_each(|(dst, &z)| {
-                    for p in need.layer(z) {
-                        let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
-                        dst[i] = init::initial_triple(
-                            &self.cands,
-                            self.params.seed,
-                            self.params.slab_thickness,
-                            &field,
-                            k,
-                            p,
-                        );
-                    }
-                });
-            return g;
-        }
-        let parent_tiles = tile_masks(need, 2);
-        let parents = self.tiles(k + 1, parent_tiles, acc);
-        if acc.dry {
-            return g;
-        }
-        g.data
-            .par_chunks_mut(layer)
-            .zip(zs.par_iter())
-            .for_each(|(dst, &z)| {
-                for p in need.layer(z) {
-                    let q = p.map(|v| v.div_euclid(2));
-                    let parent = parents[&Self::tile_of(q)].get(q);
-                    let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
-                    dst[i] = init::upsample(&self.cands, parent, k, p);
-                }
-            });
-        g
     }
 
     pub(crate) fn new_acc(&self) -> Acc {
@@ -862,9 +592,6 @@ fn known_reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> pla
     lock().insert(key, r);
     r
 }
-
-/// A voxel whose value at some version is known, with that value.
-type KnownVoxel = ([i64; 3], [u32; 3]);
 
 /// The voxels of tile `cell` whose bits are set in `mask`, with their
 /// index in the tile.
