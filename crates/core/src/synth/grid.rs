@@ -9,6 +9,15 @@ pub struct Box3 {
     pub hi: [i64; 3],
 }
 
+/// A request's region as the engine's half-open box: the public type keeps
+/// the request's shape (corner and unsigned size, checked once), this one
+/// the arithmetic the planner and grids need.
+impl From<&crate::request::Region> for Box3 {
+    fn from(r: &crate::request::Region) -> Self {
+        Box3::new(r.origin, r.size.map(i64::from))
+    }
+}
+
 impl Box3 {
     /// The box of `size` voxels starting at `lo`.
     pub fn new(lo: [i64; 3], size: [i64; 3]) -> Self {

@@ -394,7 +394,7 @@ impl Engine {
     /// level, without computing it.
     pub(crate) fn plan_region(&self, r: &Region, lod: u32) -> SynthStats {
         let acc = Acc::new(self.init_level + 1, true);
-        let b = Box3::new(r.origin, r.size.map(|s| s as i64));
+        let b = Box3::from(r);
         self.dry().level_box(lod as usize, &b, &acc);
         acc.stats()
     }
@@ -487,7 +487,7 @@ impl Engine {
 
     pub(crate) fn region_rgb(&self, r: &Region, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
         let acc = self.new_acc();
-        let b = Box3::new(r.origin, r.size.map(|s| s as i64));
+        let b = Box3::from(r);
         let k = lod as usize;
         let g = self.level_box(k, &b, &acc);
         let mut rgb = vec![0u8; g.data.len() * 3];
