@@ -24,11 +24,14 @@
 //! 1. A deterministic sample of patches from both images (at most 2048 from
 //!    each) gives a covariance matrix; its 16 leading principal directions are
 //!    found by oversampled block power iteration followed by a Rayleigh–Ritz
-//!    step (a small Jacobi eigen solver).
+//!    step (nalgebra's symmetric eigen solver on the small projected matrix).
 //! 2. Every patch is reduced to its 16 principal coordinates plus the norm of
 //!    its residual outside them. Euclidean distance between reduced vectors is
 //!    a lower bound of the true patch distance. The database patches are
-//!    indexed by a kd-tree over the reduced vectors.
+//!    indexed by a kd-tree over the reduced vectors. The tree is our own rather
+//!    than kiddo's (used elsewhere in this crate): kiddo only answers exact
+//!    k-nearest queries, which in 17 dimensions visit most leaves for noisy
+//!    patches and make scoring several times slower than the leaf budget.
 //! 3. The match of the query's left neighbour, shifted one pixel to the right,
 //!    is tried first (synthesized textures are mostly coherent copies); a
 //!    perfect match ends the search, otherwise its distance bounds it.
@@ -52,6 +55,8 @@
 
 #![deny(unsafe_code)]
 
+use crate::hash::mix;
+use nalgebra::{DMatrix, SymmetricEigen};
 use rayon::prelude::*;
 use std::cmp::Ordering;
 
@@ -212,23 +217,15 @@ pub fn shuffled_exemplar(exemplar: RgbView, width: u32, height: u32, seed: u64) 
     if n == 0 || w == 0 {
         return out;
     }
-    let seed_hash = mix64(seed ^ 0x5851_f42d_4c95_7f2d);
+    let seed_hash = mix(seed ^ 0x5851_f42d_4c95_7f2d);
     out.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         for (x, px) in row.chunks_exact_mut(3).enumerate() {
             let key = ((x as u64) << 32) | y as u64;
-            let pick = (mix64(seed_hash ^ mix64(key)) % n) as usize;
+            let pick = (mix(seed_hash ^ mix(key)) % n) as usize;
             px.copy_from_slice(&exemplar.rgb[pick * 3..pick * 3 + 3]);
         }
     });
     out
-}
-
-/// SplitMix64 finaliser.
-fn mix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// Pixel distances at which [`directional_ratio`] compares pixels.
@@ -526,7 +523,7 @@ fn leading_eigenvectors(m: &[f64], n: usize, k: usize) -> Vec<Vec<f64>> {
         .map(|j| {
             (0..n)
                 .map(|i| {
-                    let h = mix64(((j as u64) << 32) | i as u64);
+                    let h = mix(((j as u64) << 32) | i as u64);
                     (h >> 11) as f64 / (1u64 << 53) as f64 - 0.5
                 })
                 .collect()
@@ -538,27 +535,27 @@ fn leading_eigenvectors(m: &[f64], n: usize, k: usize) -> Vec<Vec<f64>> {
         orthonormalise(&mut q);
     }
     let cq: Vec<Vec<f64>> = q.iter().map(|v| apply(v)).collect();
-    let b = block;
-    let mut h = vec![0f64; b * b];
-    for i in 0..b {
-        for j in i..b {
-            let s = 0.5
-                * (q[i].iter().zip(&cq[j]).map(|(x, y)| x * y).sum::<f64>()
-                    + q[j].iter().zip(&cq[i]).map(|(x, y)| x * y).sum::<f64>());
-            h[i * b + j] = s;
-            h[j * b + i] = s;
-        }
-    }
-    let (values, vectors) = jacobi_eigen(&mut h, b);
-    let mut order: Vec<usize> = (0..b).collect();
-    order.sort_by(|&x, &y| values[y].total_cmp(&values[x]).then(x.cmp(&y)));
+    // Symmetrised so that rounding cannot make the projected matrix
+    // asymmetric. The sign of each eigenvector is arbitrary; flipping a
+    // principal direction changes no reduced-space distance.
+    let h = DMatrix::<f64>::from_fn(block, block, |i, j| {
+        0.5 * (q[i].iter().zip(&cq[j]).map(|(x, y)| x * y).sum::<f64>()
+            + q[j].iter().zip(&cq[i]).map(|(x, y)| x * y).sum::<f64>())
+    });
+    let eig = SymmetricEigen::new(h);
+    let mut order: Vec<usize> = (0..block).collect();
+    order.sort_by(|&x, &y| {
+        eig.eigenvalues[y]
+            .total_cmp(&eig.eigenvalues[x])
+            .then(x.cmp(&y))
+    });
     order
         .iter()
         .take(k)
         .map(|&c| {
             let mut v = vec![0f64; n];
             for (j, qj) in q.iter().enumerate() {
-                let w = vectors[j * b + c];
+                let w = eig.eigenvectors[(j, c)];
                 for (x, &y) in v.iter_mut().zip(qj) {
                     *x += w * y;
                 }
@@ -594,54 +591,6 @@ fn orthonormalise(q: &mut [Vec<f64>]) {
             axis += 1;
         }
     }
-}
-
-/// Eigen-decomposition of the symmetric `n × n` matrix `a` (destroyed) by
-/// cyclic Jacobi rotations. Returns the eigenvalues and the eigenvectors as
-/// the columns of a row-major `n × n` matrix.
-fn jacobi_eigen(a: &mut [f64], n: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut v = vec![0f64; n * n];
-    for i in 0..n {
-        v[i * n + i] = 1.0;
-    }
-    let scale: f64 = a.iter().map(|x| x * x).sum::<f64>();
-    for _ in 0..64 {
-        let off: f64 = (0..n)
-            .flat_map(|p| (p + 1..n).map(move |q| (p, q)))
-            .map(|(p, q)| a[p * n + q] * a[p * n + q])
-            .sum();
-        if off <= 1e-30 * scale || off == 0.0 {
-            break;
-        }
-        for p in 0..n {
-            for q in p + 1..n {
-                let apq = a[p * n + q];
-                if apq == 0.0 {
-                    continue;
-                }
-                let theta = (a[q * n + q] - a[p * n + p]) / (2.0 * apq);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..n {
-                    let (kp, kq) = (a[k * n + p], a[k * n + q]);
-                    a[k * n + p] = c * kp - s * kq;
-                    a[k * n + q] = s * kp + c * kq;
-                }
-                for k in 0..n {
-                    let (pk, qk) = (a[p * n + k], a[q * n + k]);
-                    a[p * n + k] = c * pk - s * qk;
-                    a[q * n + k] = s * pk + c * qk;
-                }
-                for k in 0..n {
-                    let (kp, kq) = (v[k * n + p], v[k * n + q]);
-                    v[k * n + p] = c * kp - s * kq;
-                    v[k * n + q] = s * kp + c * kq;
-                }
-            }
-        }
-    }
-    ((0..n).map(|i| a[i * n + i]).collect(), v)
 }
 
 #[derive(Clone, Copy)]
@@ -939,7 +888,7 @@ mod tests {
         let cells = period / 8;
         let lattice = |i: usize, j: usize, c: usize| {
             let key = (((i % cells) as u64) << 40) | (((j % cells) as u64) << 20) | c as u64;
-            (mix64(seed ^ mix64(key)) >> 56) as f64 / 255.0
+            (mix(seed ^ mix(key)) >> 56) as f64 / 255.0
         };
         let smooth = |t: f64| t * t * (3.0 - 2.0 * t);
         let mut out = Vec::with_capacity(w * h * 3);
@@ -954,8 +903,7 @@ mod tests {
                     let bottom = lattice(i, j + 1, c) * (1.0 - fx) + lattice(i + 1, j + 1, c) * fx;
                     let noise = top * (1.0 - fy) + bottom * fy;
                     let stripes = 0.5 + 0.5 * (phase + c as f64).sin();
-                    let grain =
-                        (mix64(seed ^ ((u as u64) << 32 | v as u64) ^ c as u64) >> 61) as f64;
+                    let grain = (mix(seed ^ ((u as u64) << 32 | v as u64) ^ c as u64) >> 61) as f64;
                     let value = 160.0 * noise + 80.0 * stripes + grain;
                     out.push(value.clamp(0.0, 255.0) as u8);
                 }
@@ -1039,7 +987,7 @@ mod tests {
 
     #[test]
     fn duplicates_are_found_even_in_pure_noise() {
-        let ex: Vec<u8> = (0..48 * 48 * 3).map(|i| (mix64(i) >> 56) as u8).collect();
+        let ex: Vec<u8> = (0..48 * 48 * 3).map(|i| (mix(i) >> 56) as u8).collect();
         let tiled: Vec<u8> = (0..80 * 70)
             .flat_map(|i| {
                 let (x, y) = ((i % 80 + 17) % 48, (i / 80 + 5) % 48);
@@ -1187,26 +1135,6 @@ mod tests {
         assert_eq!(histogram_distance(b, w), 1.0);
         assert_eq!(histogram_distance(b, h), 0.5);
         assert_eq!(histogram_distance(h, h), 0.0);
-    }
-
-    #[test]
-    fn jacobi_diagonalises_a_symmetric_matrix() {
-        let n = 6;
-        let mut m = vec![0f64; n * n];
-        for i in 0..n {
-            for j in 0..=i {
-                let v = (mix64((i * n + j) as u64) >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
-                m[i * n + j] = v;
-                m[j * n + i] = v;
-            }
-        }
-        let (values, vectors) = jacobi_eigen(&mut m.clone(), n);
-        for c in 0..n {
-            for i in 0..n {
-                let mv: f64 = (0..n).map(|k| m[i * n + k] * vectors[k * n + c]).sum();
-                assert!((mv - values[c] * vectors[i * n + c]).abs() < 1e-10);
-            }
-        }
     }
 
     #[test]
