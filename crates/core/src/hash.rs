@@ -13,13 +13,13 @@ pub fn mix(mut z: u64) -> u64 {
 
 /// Hash of a seed and three integers.
 #[inline]
-pub fn hash3(seed: u64, a: u64, b: u64, c: u64) -> u64 {
+pub(crate) fn hash3(seed: u64, a: u64, b: u64, c: u64) -> u64 {
     mix(mix(mix(mix(seed) ^ a) ^ b) ^ c)
 }
 
 /// Hash of a seed, a level, a purpose tag and a 3D integer position.
 #[inline]
-pub fn hash_pos(seed: u64, level: u32, tag: u32, p: [i64; 3]) -> u64 {
+pub(crate) fn hash_pos(seed: u64, level: u32, tag: u32, p: [i64; 3]) -> u64 {
     let lt = ((level as u64) << 32) | tag as u64;
     mix(hash3(
         seed ^ lt.rotate_left(17),
@@ -31,12 +31,12 @@ pub fn hash_pos(seed: u64, level: u32, tag: u32, p: [i64; 3]) -> u64 {
 
 /// A hash mapped to [0, 1).
 #[inline]
-pub fn unit(h: u64) -> f32 {
+pub(crate) fn unit(h: u64) -> f32 {
     (h >> 40) as f32 / (1u64 << 24) as f32
 }
 
 /// A 64-bit fingerprint of a byte string (keys, not security).
-pub fn fingerprint(bytes: &[u8]) -> u64 {
+pub(crate) fn fingerprint(bytes: &[u8]) -> u64 {
     let mut h = 0xcbf2_9ce4_8422_2325u64;
     for chunk in bytes.chunks(8) {
         let mut b = [0u8; 8];

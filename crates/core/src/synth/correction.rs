@@ -663,25 +663,6 @@ fn prefetch<T>(data: &[T]) {
     let _ = data;
 }
 
-/// Calls `f` for each voxel of `b` whose coordinates are congruent to
-/// `phase` modulo `side`.
-pub fn for_class(b: &Box3, phase: [i64; 3], side: i64, mut f: impl FnMut([i64; 3])) {
-    let start = |a: usize| b.lo[a] + (phase[a] - b.lo[a]).rem_euclid(side);
-    let mut z = start(2);
-    while z < b.hi[2] {
-        let mut y = start(1);
-        while y < b.hi[1] {
-            let mut x = start(0);
-            while x < b.hi[0] {
-                f([x, y, z]);
-                x += side;
-            }
-            y += side;
-        }
-        z += side;
-    }
-}
-
 /// Squared L2 distance between quantised vectors, in integers.
 #[inline]
 fn sq_dist_u8(a: &[u8], b: &[u8]) -> u32 {

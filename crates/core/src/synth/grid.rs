@@ -27,6 +27,25 @@ impl Box3 {
         }
     }
 
+    /// Calls `f` for each voxel whose coordinates are congruent to `phase`
+    /// modulo `side`: one subpass class of the box.
+    pub fn for_class(&self, phase: [i64; 3], side: i64, mut f: impl FnMut([i64; 3])) {
+        let start = |a: usize| self.lo[a] + (phase[a] - self.lo[a]).rem_euclid(side);
+        let mut z = start(2);
+        while z < self.hi[2] {
+            let mut y = start(1);
+            while y < self.hi[1] {
+                let mut x = start(0);
+                while x < self.hi[0] {
+                    f([x, y, z]);
+                    x += side;
+                }
+                y += side;
+            }
+            z += side;
+        }
+    }
+
     /// Extent per axis.
     pub fn size(&self) -> [i64; 3] {
         [

@@ -281,7 +281,7 @@ pub fn backward(
             let class = t % classes;
             let phase = subpass_phase(class, side, radius);
             let mut corrected = Vec::new();
-            super::correction::for_class(&need.bounds(), phase, side, |v| {
+            need.bounds().for_class(phase, side, |v| {
                 if need.contains(v) {
                     corrected.push(v);
                 }
