@@ -17,10 +17,11 @@ pub mod scrape;
 pub mod workload;
 
 use anyhow::{Context, bail};
+use parking_lot::Mutex;
 use report::{Recorder, Report};
 use reqwest::header::{ETAG, IF_NONE_MATCH, RETRY_AFTER};
 use scrape::{Peaks, Scrape, ServerDelta};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use workload::{Kind, Mixed, Request, Shape, Sweep, SweepPlane};
 
@@ -305,7 +306,7 @@ pub async fn run(cfg: &LoadConfig) -> anyhow::Result<Report> {
     let before = scrape(&client, &base).await;
     let peaks = Arc::new(Mutex::new(Peaks::default()));
     if let Some(s) = &before {
-        peaks.lock().unwrap_or_else(|e| e.into_inner()).observe(s);
+        peaks.lock().observe(s);
     }
     let texture_url = format!("{base}/v1/textures/{}", cfg.texture);
     let t0 = Instant::now();
@@ -317,7 +318,7 @@ pub async fn run(cfg: &LoadConfig) -> anyhow::Result<Report> {
             loop {
                 tokio::time::sleep(Duration::from_millis(500)).await;
                 if let Some(s) = scrape(&client, &base).await {
-                    peaks.lock().unwrap_or_else(|e| e.into_inner()).observe(&s);
+                    peaks.lock().observe(&s);
                 }
             }
         })
@@ -380,7 +381,7 @@ pub async fn run(cfg: &LoadConfig) -> anyhow::Result<Report> {
     let after = scrape(&client, &base).await;
     let server = match (before, after) {
         (Some(b), Some(a)) => {
-            let mut p = *peaks.lock().unwrap_or_else(|e| e.into_inner());
+            let mut p = *peaks.lock();
             p.observe(&a);
             Some(ServerDelta::between(&b, &a, p))
         }

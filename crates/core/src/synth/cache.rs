@@ -9,8 +9,9 @@
 use super::TILE;
 use super::grid::Grid;
 use lru::LruCache;
+use parking_lot::{Condvar, Mutex, MutexGuard};
 use rustc_hash::FxHashMap as HashMap;
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::Arc;
 
 /// Identifies a tile: texture, level, version and cell position.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -273,10 +274,8 @@ impl TileCache {
         self.lock().stats
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, Inner> {
-        // A panic while holding the lock cannot leave the map inconsistent
-        // (every update is a single call), so poisoning is ignored.
-        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    fn lock(&self) -> MutexGuard<'_, Inner> {
+        self.inner.lock()
     }
 
     /// Looks up the voxels `want` of a tile, claiming the tile if it lacks
@@ -333,7 +332,7 @@ impl TileCache {
             g.flights.remove(&ticket.key);
             self.store(&mut g, ticket.key, tile)
         };
-        let mut done = ticket.flight.done.lock().unwrap_or_else(|e| e.into_inner());
+        let mut done = ticket.flight.done.lock();
         *done = Some(Some(tile));
         ticket.flight.cv.notify_all();
     }
@@ -382,9 +381,9 @@ impl TileCache {
     /// Blocks until the awaited tile is published; `None` if its computation
     /// failed (the caller then computes it itself).
     pub fn wait(&self, w: Waiter) -> Option<Tile> {
-        let mut done = w.flight.done.lock().unwrap_or_else(|e| e.into_inner());
+        let mut done = w.flight.done.lock();
         while done.is_none() {
-            done = w.flight.cv.wait(done).unwrap_or_else(|e| e.into_inner());
+            w.flight.cv.wait(&mut done);
         }
         done.clone().flatten()
     }
@@ -404,7 +403,7 @@ impl Drop for Ticket {
             return;
         }
         self.cache.lock().flights.remove(&self.key);
-        let mut done = self.flight.done.lock().unwrap_or_else(|e| e.into_inner());
+        let mut done = self.flight.done.lock();
         *done = Some(None);
         self.flight.cv.notify_all();
     }

@@ -581,10 +581,10 @@ impl Engine {
 /// set of steps: textures with the same synthesis parameters share it.
 fn known_reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> plan::Reach {
     type Key = (Vec<Step>, i64, i64, Option<i64>);
-    static KNOWN: std::sync::LazyLock<std::sync::Mutex<HashMap<Key, plan::Reach>>> =
+    static KNOWN: std::sync::LazyLock<parking_lot::Mutex<HashMap<Key, plan::Reach>>> =
         std::sync::LazyLock::new(Default::default);
     let key = (steps.to_vec(), radius, side, cell);
-    let lock = || KNOWN.lock().unwrap_or_else(|e| e.into_inner());
+    let lock = || KNOWN.lock();
     if let Some(r) = lock().get(&key) {
         return *r;
     }
