@@ -15,11 +15,12 @@ use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
 use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
 use crate::peak_alloc::{self, Meter};
 use axum::http::StatusCode;
+use parking_lot::{Mutex, RwLock};
 use solidtex_core::Layout;
 use solidtex_core::{Candidates, Stage, Texture, TileCache};
 use std::collections::HashMap;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, RwLock};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use tokio::sync::Semaphore;
 
@@ -141,22 +142,16 @@ impl Entry {
 
     /// Current status.
     pub fn status(&self) -> Status {
-        self.status
-            .read()
-            .unwrap_or_else(|e| e.into_inner())
-            .clone()
+        self.status.read().clone()
     }
 
     fn candidates(&self) -> Option<Arc<Candidates>> {
-        self.candidates
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .clone()
+        self.candidates.lock().clone()
     }
 
     fn set_ready(&self, c: Arc<Candidates>, t: Texture) {
         self.max_lod.store(t.max_lod(), Ordering::Relaxed);
-        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = Some(c);
+        *self.candidates.lock() = Some(c);
         self.set_status(Status::Ready(t));
     }
 
@@ -167,12 +162,12 @@ impl Entry {
 
     /// Drops its candidates from memory; requests in flight keep theirs.
     fn evict(&self) {
-        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        *self.candidates.lock() = None;
         self.set_status(Status::Stored);
     }
 
     fn set_status(&self, s: Status) {
-        *self.status.write().unwrap_or_else(|e| e.into_inner()) = s;
+        *self.status.write() = s;
         self.settled.notify_waiters();
     }
 
@@ -200,29 +195,23 @@ impl Entry {
 
     /// Current precompute stage name.
     pub fn stage(&self) -> &'static str {
-        *self.stage.lock().unwrap_or_else(|e| e.into_inner())
+        *self.stage.lock()
     }
 
     /// Seconds the precompute took, when it ran in this process or was
     /// recorded by an earlier one.
     pub fn precompute_seconds(&self) -> Option<f64> {
-        *self
-            .precompute_seconds
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
+        *self.precompute_seconds.lock()
     }
 
     /// Heap bytes the precompute peaked at, when it ran in this process
     /// under the counting allocator or was recorded by an earlier one.
     pub fn precompute_peak(&self) -> Option<u64> {
-        *self
-            .precompute_peak
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
+        *self.precompute_peak.lock()
     }
 
     fn set_progress(&self, stage: &'static str, fraction: f32) {
-        *self.stage.lock().unwrap_or_else(|e| e.into_inner()) = stage;
+        *self.stage.lock() = stage;
         // Never goes back (stages report their own fractions).
         let new = fraction.clamp(0.0, 1.0);
         let _ = self
@@ -423,7 +412,7 @@ impl Registry {
 
     /// Loads an evicted texture's candidates back from disk (blocking).
     fn reload(&self, entry: &Arc<Entry>) -> Result<(), ApiError> {
-        let _one = entry.loading.lock().unwrap_or_else(|e| e.into_inner());
+        let _one = entry.loading.lock();
         if !matches!(entry.status(), Status::Stored) {
             return Ok(());
         }
@@ -449,7 +438,6 @@ impl Registry {
         let mut resident: Vec<(u64, u64, Arc<Entry>)> = self
             .map
             .read()
-            .unwrap_or_else(|e| e.into_inner())
             .values()
             .filter(|e| matches!(e.status(), Status::Ready(_)))
             .filter_map(|e| {
@@ -475,7 +463,7 @@ impl Registry {
     /// Bytes of candidates in memory now (candidates shared by textures
     /// that differ in synthesis parameters only are counted once).
     pub fn resident_candidate_bytes(&self) -> u64 {
-        let map = self.map.read().unwrap_or_else(|e| e.into_inner());
+        let map = self.map.read();
         let mut seen = Vec::new();
         let mut total = 0;
         for c in map.values().filter_map(|e| e.candidates()) {
@@ -502,22 +490,12 @@ impl Registry {
 
     /// The texture `id`, if known.
     pub fn get(&self, id: &str) -> Option<Arc<Entry>> {
-        self.map
-            .read()
-            .unwrap_or_else(|e| e.into_inner())
-            .get(id)
-            .cloned()
+        self.map.read().get(id).cloned()
     }
 
     /// Every texture, oldest first.
     pub fn list(&self) -> Vec<Arc<Entry>> {
-        let mut v: Vec<Arc<Entry>> = self
-            .map
-            .read()
-            .unwrap_or_else(|e| e.into_inner())
-            .values()
-            .cloned()
-            .collect();
+        let mut v: Vec<Arc<Entry>> = self.map.read().values().cloned().collect();
         v.sort_by(|a, b| (a.created, &a.id).cmp(&(b.created, &b.id)));
         v
     }
@@ -557,7 +535,7 @@ impl Registry {
 
     fn update_gauges(&self) {
         let (mut p, mut r, mut f) = (0, 0, 0);
-        for e in self.map.read().unwrap_or_else(|e| e.into_inner()).values() {
+        for e in self.map.read().values() {
             match e.status() {
                 Status::Pending => p += 1,
                 Status::Ready(_) | Status::Stored => r += 1,
@@ -594,7 +572,7 @@ impl Registry {
                 .map_err(|e| ApiError::internal(format!("reading the data directory: {e}")))?
         };
         let entry = {
-            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            let mut map = self.map.write();
             if let Some(e) = map.get(&id).filter(|e| e.content_hash == hash) {
                 match e.status() {
                     Status::Ready(_) | Status::Stored => {
@@ -667,7 +645,7 @@ impl Registry {
             Err(e) => Some(e.to_string()),
         };
         if let Some(why) = failure {
-            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            let mut map = self.map.write();
             if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
                 map.remove(&id);
             }
@@ -696,7 +674,7 @@ impl Registry {
             // A concurrent delete or re-upload may have replaced it by now;
             // the new one owns the directory.
             let (present, current) = {
-                let map = this.map.read().unwrap_or_else(|e| e.into_inner());
+                let map = this.map.read();
                 let e = map.get(&id);
                 (e.is_some(), e.is_some_and(|e| Arc::ptr_eq(e, &entry)))
             };
@@ -704,7 +682,7 @@ impl Registry {
                 return Ok(present);
             }
             this.store.remove(&id)?;
-            let mut map = this.map.write().unwrap_or_else(|e| e.into_inner());
+            let mut map = this.map.write();
             if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
                 map.remove(&id);
             }
@@ -786,7 +764,6 @@ impl Registry {
     fn shared_candidates(&self, entry: &Entry) -> Option<Arc<Candidates>> {
         self.map
             .read()
-            .unwrap_or_else(|e| e.into_inner())
             .values()
             .filter(|e| e.analysis_hash == entry.analysis_hash)
             .find_map(|e| e.candidates())
@@ -842,10 +819,7 @@ impl Registry {
             ))
         });
         let seconds = t0.elapsed().as_secs_f64();
-        *entry
-            .precompute_seconds
-            .lock()
-            .unwrap_or_else(|e| e.into_inner()) = Some(seconds);
+        *entry.precompute_seconds.lock() = Some(seconds);
         if !reused {
             self.metrics.precompute_seconds.observe(seconds);
         }
@@ -856,10 +830,7 @@ impl Registry {
             _ => None,
         };
         if let Some(bytes) = peak {
-            *entry
-                .precompute_peak
-                .lock()
-                .unwrap_or_else(|e| e.into_inner()) = Some(bytes);
+            *entry.precompute_peak.lock() = Some(bytes);
             self.metrics.precompute_peak_bytes.observe(bytes as f64);
         }
         let _g = self.store.lock();
@@ -995,14 +966,8 @@ impl Registry {
                 )
                 .named(meta.name.clone()),
             );
-            *entry
-                .precompute_seconds
-                .lock()
-                .unwrap_or_else(|e| e.into_inner()) = meta.precompute_seconds;
-            *entry
-                .precompute_peak
-                .lock()
-                .unwrap_or_else(|e| e.into_inner()) = meta.precompute_peak_bytes;
+            *entry.precompute_seconds.lock() = meta.precompute_seconds;
+            *entry.precompute_peak.lock() = meta.precompute_peak_bytes;
             match meta.status {
                 StoredStatus::Ready => match self.load_ready(&entry) {
                     Ok((c, t)) => {
@@ -1068,10 +1033,7 @@ impl Registry {
     }
 
     fn insert(&self, entry: Arc<Entry>) {
-        self.map
-            .write()
-            .unwrap_or_else(|e| e.into_inner())
-            .insert(entry.id.clone(), entry);
+        self.map.write().insert(entry.id.clone(), entry);
     }
 
     /// Starts the precomputes [`Registry::recover`] found necessary.
