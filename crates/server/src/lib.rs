@@ -141,7 +141,9 @@ impl Server {
             registry
                 .submit(Some(DEFAULT_ID), spec, Some(DEFAULT_ID.to_string()))
                 .await
-                .map_err(|e| anyhow::anyhow!("registering the default texture: {e}"))?;
+                .map_err(|e| {
+                    anyhow::anyhow!("registering the default texture: {}", ApiError::from(e))
+                })?;
         }
         let jobs = jobs::Jobs::new(
             args.max_jobs,

@@ -9,12 +9,11 @@
 //! Uploading content that is already known returns the existing texture;
 //! uploading a failed one tries again.
 
-use super::error::{ApiError, panic_message};
+use super::error::panic_message;
 use super::metrics::{Metrics, OutcomeLabels};
 use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
 use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
 use crate::peak_alloc::{self, Meter};
-use axum::http::StatusCode;
 use parking_lot::{Mutex, RwLock};
 use solidtex_core::Layout;
 use solidtex_core::{Candidates, Stage, Texture, TileCache};
@@ -23,6 +22,51 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use tokio::sync::Semaphore;
+
+/// Why the registry refuses a request.
+#[derive(Debug, thiserror::Error)]
+pub enum RegistryError {
+    /// No texture has this id.
+    #[error("no texture with id `{0}`")]
+    UnknownTexture(String),
+    /// The texture is evicted from memory and being loaded back.
+    #[error("texture `{0}` is being loaded back into memory")]
+    Loading(String),
+    /// The texture is still being precomputed.
+    #[error("texture `{id}` is still being precomputed ({:.0}%)", .progress * 100.0)]
+    Pending {
+        /// Its id.
+        id: String,
+        /// Its precompute progress, 0..=1.
+        progress: f32,
+    },
+    /// The texture's precompute failed.
+    #[error("texture `{id}` failed to precompute: {reason}")]
+    Failed {
+        /// Its id.
+        id: String,
+        /// Why.
+        reason: String,
+    },
+    /// Too many precomputes wait already.
+    #[error("precompute queue is full")]
+    QueueFull,
+    /// The upload's precompute is estimated to need more memory than
+    /// precomputes may take.
+    #[error("precomputing this texture is estimated to take {estimated} bytes, over {bound}")]
+    PrecomputeTooLarge {
+        /// Estimated peak bytes.
+        estimated: u64,
+        /// The bound, bytes.
+        bound: u64,
+    },
+    /// No more textures are kept until some are deleted.
+    #[error("{0}")]
+    StorageFull(String),
+    /// Something failed inside the server (the data directory, a task).
+    #[error("{0}")]
+    Internal(String),
+}
 
 /// Where a texture stands.
 #[derive(Clone)]
@@ -394,7 +438,10 @@ impl Registry {
 
     /// The texture `id` ready to synthesize, loaded back from disk first
     /// when it was evicted from memory.
-    pub async fn loaded(self: &Arc<Self>, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
+    pub async fn loaded(
+        self: &Arc<Self>,
+        id: &str,
+    ) -> Result<(Arc<Entry>, Texture), RegistryError> {
         // A texture evicted again between its load and its use (memory
         // contended by many) is loaded again, a few times at most.
         for _ in 0..3 {
@@ -405,20 +452,20 @@ impl Registry {
             let this = self.clone();
             tokio::task::spawn_blocking(move || this.reload(&e))
                 .await
-                .map_err(|e| ApiError::internal(e.to_string()))??;
+                .map_err(|e| RegistryError::Internal(e.to_string()))??;
         }
         self.ready(id)
     }
 
     /// Loads an evicted texture's candidates back from disk (blocking).
-    fn reload(&self, entry: &Arc<Entry>) -> Result<(), ApiError> {
+    fn reload(&self, entry: &Arc<Entry>) -> Result<(), RegistryError> {
         let _one = entry.loading.lock();
         if !matches!(entry.status(), Status::Stored) {
             return Ok(());
         }
         let (c, t) = self
             .load_ready(entry)
-            .map_err(|e| ApiError::internal(format!("loading texture `{}`: {e}", entry.id)))?;
+            .map_err(|e| RegistryError::Internal(format!("loading texture `{}`: {e}", entry.id)))?;
         entry.set_ready(c, t);
         let now = self.uses.fetch_add(1, Ordering::Relaxed) + 1;
         entry.last_used.store(now, Ordering::Relaxed);
@@ -475,7 +522,7 @@ impl Registry {
         total
     }
 
-    /// The same registry, refusing uploads (507 `storage_full`) beyond
+    /// The same registry, refusing uploads ([`RegistryError::StorageFull`]) beyond
     /// `max_textures` textures or `max_stored_bytes` bytes on disk.
     pub fn with_storage_limits(mut self, max_textures: usize, max_stored_bytes: u64) -> Registry {
         self.max_textures = max_textures;
@@ -500,36 +547,26 @@ impl Registry {
         v
     }
 
-    /// The texture `id` ready to synthesize: 404 when unknown, 409 with
-    /// `Retry-After` while pending, 409 when failed.
-    pub fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
-        let e = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
+    /// The texture `id` ready to synthesize, or why it is not.
+    pub fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), RegistryError> {
+        let e = self
+            .get(id)
+            .ok_or_else(|| RegistryError::UnknownTexture(id.to_string()))?;
         match e.status() {
             Status::Ready(t) => {
                 let now = self.uses.fetch_add(1, Ordering::Relaxed) + 1;
                 e.last_used.store(now, Ordering::Relaxed);
                 Ok((e, t))
             }
-            Status::Stored => Err(ApiError::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "texture_loading",
-                format!("texture `{id}` is being loaded back into memory"),
-            )
-            .retry_after(1)),
-            Status::Pending => Err(ApiError::new(
-                StatusCode::CONFLICT,
-                "texture_pending",
-                format!(
-                    "texture `{id}` is still being precomputed ({:.0}%)",
-                    e.progress() * 100.0
-                ),
-            )
-            .retry_after(1)),
-            Status::Failed(r) => Err(ApiError::new(
-                StatusCode::CONFLICT,
-                "texture_failed",
-                format!("texture `{id}` failed to precompute: {r}"),
-            )),
+            Status::Stored => Err(RegistryError::Loading(id.to_string())),
+            Status::Pending => Err(RegistryError::Pending {
+                id: id.to_string(),
+                progress: e.progress(),
+            }),
+            Status::Failed(reason) => Err(RegistryError::Failed {
+                id: id.to_string(),
+                reason,
+            }),
         }
     }
 
@@ -547,13 +584,14 @@ impl Registry {
 
     /// Registers an upload under its content hash (or under `id` when
     /// given, as for `default`) and starts its precompute unless it is
-    /// known already. Fails with 503 when too many precomputes wait.
+    /// known already. Fails when too many precomputes wait, or when it
+    /// would not fit the memory or storage bounds.
     pub async fn submit(
         self: &Arc<Self>,
         id: Option<&str>,
         spec: TextureSpec,
         name: Option<String>,
-    ) -> Result<Submitted, ApiError> {
+    ) -> Result<Submitted, RegistryError> {
         let hash = spec.content_hash();
         let fixed_id = id.is_some();
         let id = id.map(str::to_string).unwrap_or_else(|| hash.clone());
@@ -568,8 +606,8 @@ impl Registry {
             let store = self.store.clone();
             tokio::task::spawn_blocking(move || store.bytes())
                 .await
-                .map_err(|e| ApiError::internal(e.to_string()))?
-                .map_err(|e| ApiError::internal(format!("reading the data directory: {e}")))?
+                .map_err(|e| RegistryError::Internal(e.to_string()))?
+                .map_err(|e| RegistryError::Internal(format!("reading the data directory: {e}")))?
         };
         let entry = {
             let mut map = self.map.write();
@@ -588,7 +626,7 @@ impl Registry {
             // them is counted.
             if !fixed_id && self.pending.load(Ordering::SeqCst) >= self.max_pending {
                 self.metrics.jobs_rejected.inc();
-                return Err(ApiError::overloaded("precompute queue is full"));
+                return Err(RegistryError::QueueFull);
             }
             if !fixed_id {
                 let need = solidtex_core::Candidates::estimated_peak_bytes(
@@ -598,14 +636,14 @@ impl Registry {
                     &spec.params.analysis,
                 );
                 if need > self.max_precompute_bytes {
-                    return Err(ApiError::precompute_too_large(
-                        need,
-                        self.max_precompute_bytes,
-                    ));
+                    return Err(RegistryError::PrecomputeTooLarge {
+                        estimated: need,
+                        bound: self.max_precompute_bytes,
+                    });
                 }
                 let uploaded = map.values().filter(|e| e.id == e.content_hash).count();
                 if uploaded >= self.max_textures {
-                    return Err(ApiError::storage_full(format!(
+                    return Err(RegistryError::StorageFull(format!(
                         "this server keeps at most {} textures (--max-textures); delete one first",
                         self.max_textures
                     )));
@@ -615,7 +653,7 @@ impl Registry {
                 let pending = self.pending.load(Ordering::SeqCst) as u64;
                 let needed = stored.saturating_add(estimate.saturating_mul(pending + 1));
                 if needed > self.max_stored_bytes {
-                    return Err(ApiError::storage_full(format!(
+                    return Err(RegistryError::StorageFull(format!(
                         "the textures take {stored} bytes on disk and this one would need about \
                          {estimate} more; the limit is {} (--max-stored-bytes); delete some first",
                         self.max_stored_bytes
@@ -652,7 +690,7 @@ impl Registry {
             drop(map);
             self.release_precompute();
             self.update_gauges();
-            return Err(ApiError::internal(format!(
+            return Err(RegistryError::Internal(format!(
                 "could not store the texture: {why}"
             )));
         }
@@ -660,10 +698,12 @@ impl Registry {
         Ok(Submitted::Pending(entry))
     }
 
-    /// Removes texture `id` and its files; 404 when unknown. The files go
-    /// first: when they cannot be removed the texture stays as it was.
-    pub async fn delete(self: &Arc<Self>, id: &str) -> Result<(), ApiError> {
-        let entry = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
+    /// Removes texture `id` and its files. The files go first: when they
+    /// cannot be removed the texture stays as it was.
+    pub async fn delete(self: &Arc<Self>, id: &str) -> Result<(), RegistryError> {
+        let entry = self
+            .get(id)
+            .ok_or_else(|| RegistryError::UnknownTexture(id.to_string()))?;
         let this = self.clone();
         let id_for_error = id.to_string();
         let id = id.to_string();
@@ -690,13 +730,15 @@ impl Registry {
             Ok::<_, std::io::Error>(true)
         })
         .await
-        .map_err(|e| ApiError::internal(e.to_string()))?
-        .map_err(|e| ApiError::internal(format!("could not remove the texture's files: {e}")))?;
+        .map_err(|e| RegistryError::Internal(e.to_string()))?
+        .map_err(|e| {
+            RegistryError::Internal(format!("could not remove the texture's files: {e}"))
+        })?;
         self.update_gauges();
         if found {
             Ok(())
         } else {
-            Err(ApiError::unknown_texture(&id_for_error))
+            Err(RegistryError::UnknownTexture(id_for_error))
         }
     }
 
@@ -793,7 +835,7 @@ impl Registry {
                     .map_err(|e| e.to_string())?;
                 return Ok((c, t));
             }
-            let set = entry.planes.to_set().map_err(|e| e.message)?;
+            let set = entry.planes.to_set().map_err(|e| e.to_string())?;
             let progress = |stage: Stage, f: f32| {
                 let (name, p) = overall_progress(stage, f);
                 entry.set_progress(name, p);
@@ -1017,7 +1059,7 @@ impl Registry {
         if c.params() != &entry.params.analysis {
             return Err("stored candidates were made with other parameters".into());
         }
-        let set = entry.planes.to_set().map_err(|e| e.message)?;
+        let set = entry.planes.to_set().map_err(|e| e.to_string())?;
         if c.exemplars() != &set {
             return Err("stored candidates were made from other exemplars".into());
         }

@@ -41,7 +41,7 @@ pub(super) async fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Textu
     {
         e.settle(tokio::time::Instant::now() + s.pending_wait).await;
     }
-    s.registry.loaded(id).await
+    Ok(s.registry.loaded(id).await?)
 }
 
 fn lod(q: &Query, t: &Texture) -> Result<u32, ApiError> {
