@@ -7,6 +7,7 @@
 //! queue, and shape responses; no synthesis logic lives here.
 
 mod ops;
+mod paths;
 mod textures;
 mod viewer;
 mod volumes;
