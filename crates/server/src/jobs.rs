@@ -216,7 +216,8 @@ impl Jobs {
     }
 
     /// Jobs waiting plus running.
-    pub fn in_flight(&self) -> usize {
+    #[cfg(test)]
+    fn in_flight(&self) -> usize {
         (self.metrics.jobs_queued.get() + self.metrics.jobs_running.get()) as usize
     }
 }

@@ -25,7 +25,7 @@ use tokio::sync::Semaphore;
 
 /// Why the registry refuses a request.
 #[derive(Debug, thiserror::Error)]
-pub enum RegistryError {
+pub(crate) enum RegistryError {
     /// No texture has this id.
     #[error("no texture with id `{0}`")]
     UnknownTexture(String),
@@ -70,7 +70,7 @@ pub enum RegistryError {
 
 /// Where a texture stands.
 #[derive(Clone)]
-pub enum Status {
+pub(crate) enum Status {
     /// Precompute queued or running.
     Pending,
     /// Ready to synthesize.
@@ -83,7 +83,7 @@ pub enum Status {
 }
 
 /// One texture.
-pub struct Entry {
+pub(crate) struct Entry {
     /// Id in URLs.
     pub id: String,
     /// The uploaded file's name, for people; not part of the id.
@@ -300,7 +300,7 @@ fn overall_progress(stage: Stage, f: f32) -> (&'static str, f32) {
 }
 
 /// What an upload found.
-pub enum Submitted {
+pub(crate) enum Submitted {
     /// The texture exists and is ready.
     Known(Arc<Entry>),
     /// The texture is (now) being precomputed.
@@ -378,7 +378,7 @@ fn now() -> u64 {
 
 impl Registry {
     /// An empty registry over `store`; precomputes run on `pool`.
-    pub fn new(
+    pub(crate) fn new(
         store: Arc<Store>,
         cache: Arc<TileCache>,
         metrics: Arc<Metrics>,
@@ -412,7 +412,7 @@ impl Registry {
     /// most `bytes`, refusing uploads whose own estimate is over it, and
     /// measuring each precompute's peak with `meter` (the precompute
     /// pool's threads must be attached to it).
-    pub fn with_precompute_memory(mut self, bytes: u64, meter: &'static Meter) -> Registry {
+    pub(crate) fn with_precompute_memory(mut self, bytes: u64, meter: &'static Meter) -> Registry {
         self.max_precompute_bytes = bytes;
         self.precompute_memory = Arc::new(Semaphore::new(memory_units(bytes) as usize));
         self.meter = Some(meter);
@@ -431,14 +431,14 @@ impl Registry {
     /// The same registry, keeping at most `bytes` of candidates in memory:
     /// beyond it, the least recently used textures are evicted and loaded
     /// again from disk when next asked for.
-    pub fn with_memory_limit(mut self, bytes: u64) -> Registry {
+    pub(crate) fn with_memory_limit(mut self, bytes: u64) -> Registry {
         self.max_resident_bytes = bytes;
         self
     }
 
     /// The texture `id` ready to synthesize, loaded back from disk first
     /// when it was evicted from memory.
-    pub async fn loaded(
+    pub(crate) async fn loaded(
         self: &Arc<Self>,
         id: &str,
     ) -> Result<(Arc<Entry>, Texture), RegistryError> {
@@ -509,7 +509,7 @@ impl Registry {
 
     /// Bytes of candidates in memory now (candidates shared by textures
     /// that differ in synthesis parameters only are counted once).
-    pub fn resident_candidate_bytes(&self) -> u64 {
+    pub(crate) fn resident_candidate_bytes(&self) -> u64 {
         let map = self.map.read();
         let mut seen = Vec::new();
         let mut total = 0;
@@ -524,31 +524,35 @@ impl Registry {
 
     /// The same registry, refusing uploads ([`RegistryError::StorageFull`]) beyond
     /// `max_textures` textures or `max_stored_bytes` bytes on disk.
-    pub fn with_storage_limits(mut self, max_textures: usize, max_stored_bytes: u64) -> Registry {
+    pub(crate) fn with_storage_limits(
+        mut self,
+        max_textures: usize,
+        max_stored_bytes: u64,
+    ) -> Registry {
         self.max_textures = max_textures;
         self.max_stored_bytes = max_stored_bytes;
         self
     }
 
     /// The shared tile cache.
-    pub fn cache(&self) -> &Arc<TileCache> {
+    pub(crate) fn cache(&self) -> &Arc<TileCache> {
         &self.cache
     }
 
     /// The texture `id`, if known.
-    pub fn get(&self, id: &str) -> Option<Arc<Entry>> {
+    pub(crate) fn get(&self, id: &str) -> Option<Arc<Entry>> {
         self.map.read().get(id).cloned()
     }
 
     /// Every texture, oldest first.
-    pub fn list(&self) -> Vec<Arc<Entry>> {
+    pub(crate) fn list(&self) -> Vec<Arc<Entry>> {
         let mut v: Vec<Arc<Entry>> = self.map.read().values().cloned().collect();
         v.sort_by(|a, b| (a.created, &a.id).cmp(&(b.created, &b.id)));
         v
     }
 
     /// The texture `id` ready to synthesize, or why it is not.
-    pub fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), RegistryError> {
+    pub(crate) fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), RegistryError> {
         let e = self
             .get(id)
             .ok_or_else(|| RegistryError::UnknownTexture(id.to_string()))?;
@@ -586,7 +590,7 @@ impl Registry {
     /// given, as for `default`) and starts its precompute unless it is
     /// known already. Fails when too many precomputes wait, or when it
     /// would not fit the memory or storage bounds.
-    pub async fn submit(
+    pub(crate) async fn submit(
         self: &Arc<Self>,
         id: Option<&str>,
         spec: TextureSpec,
@@ -700,7 +704,7 @@ impl Registry {
 
     /// Removes texture `id` and its files. The files go first: when they
     /// cannot be removed the texture stays as it was.
-    pub async fn delete(self: &Arc<Self>, id: &str) -> Result<(), RegistryError> {
+    pub(crate) async fn delete(self: &Arc<Self>, id: &str) -> Result<(), RegistryError> {
         let entry = self
             .get(id)
             .ok_or_else(|| RegistryError::UnknownTexture(id.to_string()))?;
@@ -943,7 +947,7 @@ impl Registry {
     /// or unreadable ones are queued for a new precompute (or marked failed
     /// when their exemplars are gone), failed ones stay failed. Returns the
     /// entries to precompute; start them with [`Registry::resume`].
-    pub fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
+    pub(crate) fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
         let mut todo = Vec::new();
         for Found { meta, dir } in self.store.scan()? {
             let params = match TextureParams::from_stored(&meta.params) {
@@ -1079,7 +1083,7 @@ impl Registry {
     }
 
     /// Starts the precomputes [`Registry::recover`] found necessary.
-    pub fn resume(self: &Arc<Self>, todo: Vec<Arc<Entry>>) {
+    pub(crate) fn resume(self: &Arc<Self>, todo: Vec<Arc<Entry>>) {
         for e in todo {
             self.reserve_precompute();
             self.start_precompute(e);

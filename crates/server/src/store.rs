@@ -149,11 +149,6 @@ impl Store {
         Ok(store)
     }
 
-    /// The data directory.
-    pub fn root(&self) -> &Path {
-        &self.root
-    }
-
     /// Bytes of the files under `textures/` (every texture's exemplars,
     /// metadata and candidates).
     pub fn bytes(&self) -> io::Result<u64> {
