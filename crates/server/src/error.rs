@@ -1,11 +1,16 @@
 //! Errors as the HTTP client sees them: a status, a stable machine-readable
 //! `code` and a message, always sent as `{"error": {"code", "message"}}`.
 //!
-//! Engine errors map onto this by kind; anything the server itself rejects
-//! (routing, parsing, overload) is built here too, and
+//! Engine errors and the server's own domain errors ([`SpecError`],
+//! [`RegistryError`], [`JobError`]) map onto this by kind, here and nowhere
+//! else; anything the HTTP layer itself rejects (routing, parsing) is built
+//! here too, and
 //! [`json_errors`] rewrites the few plain-text rejections of the framework,
 //! so that no error leaves the server in another shape.
 
+use crate::jobs::JobError;
+use crate::registry::RegistryError;
+use crate::spec::SpecError;
 use axum::body::Body;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -176,6 +181,55 @@ impl From<solidtex_core::Error> for ApiError {
     }
 }
 
+impl From<SpecError> for ApiError {
+    fn from(e: SpecError) -> Self {
+        match e {
+            SpecError::InvalidParams(message) => {
+                ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)
+            }
+            SpecError::Engine(e) => e.into(),
+        }
+    }
+}
+
+impl From<RegistryError> for ApiError {
+    fn from(e: RegistryError) -> Self {
+        use RegistryError as E;
+        let message = e.to_string();
+        match e {
+            E::UnknownTexture(id) => ApiError::unknown_texture(&id),
+            // Being loaded back is brief: worth a retry, unlike a conflict.
+            E::Loading(_) => {
+                ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "texture_loading", message)
+                    .retry_after(1)
+            }
+            E::Pending { .. } => {
+                ApiError::new(StatusCode::CONFLICT, "texture_pending", message).retry_after(1)
+            }
+            E::Failed { .. } => ApiError::new(StatusCode::CONFLICT, "texture_failed", message),
+            E::QueueFull => ApiError::overloaded("precompute queue is full"),
+            E::PrecomputeTooLarge { estimated, bound } => {
+                ApiError::precompute_too_large(estimated, bound)
+            }
+            E::StorageFull(message) => ApiError::storage_full(message),
+            E::Internal(message) => ApiError::internal(message),
+        }
+    }
+}
+
+impl From<JobError> for ApiError {
+    fn from(e: JobError) -> Self {
+        match e {
+            JobError::Overloaded {
+                reason,
+                retry_after,
+            } => ApiError::overloaded(reason).retry_after(retry_after),
+            JobError::OverBudget { budget } => ApiError::over_budget(budget),
+            JobError::Failed(message) => ApiError::internal(message),
+        }
+    }
+}
+
 /// The JSON body of an error.
 pub fn error_body(code: &str, message: &str) -> String {
     json!({ "error": { "code": code, "message": message } }).to_string()
@@ -315,6 +369,71 @@ mod tests {
         );
         let e: ApiError = solidtex_core::Error::Io(std::io::Error::other("disk")).into();
         assert_eq!(e.status, StatusCode::INTERNAL_SERVER_ERROR);
+    }
+
+    #[test]
+    fn domain_errors_map_to_statuses() {
+        let e: ApiError = RegistryError::UnknownTexture("t".into()).into();
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::NOT_FOUND, "unknown_texture")
+        );
+        assert_eq!(e.message, "no texture with id `t`");
+        let e: ApiError = RegistryError::Pending {
+            id: "t".into(),
+            progress: 0.426,
+        }
+        .into();
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::CONFLICT, "texture_pending")
+        );
+        assert_eq!(e.message, "texture `t` is still being precomputed (43%)");
+        assert_eq!(e.retry_after, Some(1));
+        let e: ApiError = RegistryError::Failed {
+            id: "t".into(),
+            reason: "r".into(),
+        }
+        .into();
+        assert_eq!((e.status, e.code), (StatusCode::CONFLICT, "texture_failed"));
+        assert_eq!(e.retry_after, None);
+        let e: ApiError = RegistryError::Loading("t".into()).into();
+        assert_eq!(
+            (e.status, e.code, e.retry_after),
+            (StatusCode::SERVICE_UNAVAILABLE, "texture_loading", Some(1))
+        );
+        let e: ApiError = RegistryError::QueueFull.into();
+        assert_eq!(e.message, "precompute queue is full; retry later");
+        let e: ApiError = RegistryError::PrecomputeTooLarge {
+            estimated: 3 << 20,
+            bound: 1 << 20,
+        }
+        .into();
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::PAYLOAD_TOO_LARGE, "precompute_too_large")
+        );
+        let e: ApiError = RegistryError::StorageFull("full".into()).into();
+        assert_eq!(e.status, StatusCode::INSUFFICIENT_STORAGE);
+        let e: ApiError = JobError::Overloaded {
+            reason: "synthesis queue is full",
+            retry_after: 7,
+        }
+        .into();
+        assert_eq!(
+            (e.status, e.code, e.retry_after),
+            (StatusCode::SERVICE_UNAVAILABLE, "overloaded", Some(7))
+        );
+        assert_eq!(e.message, "synthesis queue is full; retry later");
+        let e: ApiError = JobError::OverBudget { budget: 9 }.into();
+        assert_eq!((e.status, e.code), (StatusCode::BAD_REQUEST, "over_budget"));
+        let e: ApiError = JobError::Failed("boom".into()).into();
+        assert_eq!(e.status, StatusCode::INTERNAL_SERVER_ERROR);
+        let e: ApiError = SpecError::InvalidParams("p".into()).into();
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::BAD_REQUEST, "invalid_params")
+        );
     }
 
     #[test]

@@ -1,10 +1,10 @@
 //! Backpressure for synthesis: at most `max_jobs` jobs run at once and at
 //! most `queue` more wait for a slot; a request beyond that is refused at
-//! once with 503 and `Retry-After` instead of piling up memory or timing
-//! out.
+//! once as overloaded (503 with `Retry-After` to clients) instead of piling
+//! up memory or timing out.
 //!
 //! Waiting is bounded in time too: a job that has not started within
-//! `max_wait` is answered 503, and one whose predicted wait (the jobs ahead
+//! `max_wait` is refused too, and one whose predicted wait (the jobs ahead
 //! of it times the recent mean job time, over the running slots) already
 //! exceeds `max_wait` is refused on arrival. Latency under overload thus
 //! stays near `max_wait` plus one job, and `Retry-After` carries the
@@ -20,13 +20,36 @@
 //! actually stopped; its synthesis is cancelled (see
 //! [`solidtex_core::synth::cancel`]) and stops within a correction subpass.
 
-use super::error::{ApiError, panic_message};
+use super::error::panic_message;
 use super::metrics::Metrics;
 use solidtex_core::{CancelFlag, Cancelled, run_cancellable};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use tokio::sync::Semaphore;
+
+/// Why a job did not run to its end.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// Refused for now: the queue is full or too slow; a retry after
+    /// `retry_after` seconds may succeed.
+    #[error("{reason}; retry later")]
+    Overloaded {
+        /// What is overloaded.
+        reason: &'static str,
+        /// Seconds after which a retry may succeed.
+        retry_after: u32,
+    },
+    /// Stopped: it would synthesize more than `budget` voxels.
+    #[error("over the work budget of {budget} voxels")]
+    OverBudget {
+        /// The budget of one job, voxels.
+        budget: u64,
+    },
+    /// It panicked or was cancelled.
+    #[error("{0}")]
+    Failed(String),
+}
 
 /// The synthesis job queue.
 #[derive(Clone)]
@@ -62,8 +85,8 @@ impl Jobs {
     }
 
     /// The same queue, stopping any job that would synthesize more than
-    /// `voxels` voxels (all levels; cached ones are free) with 400
-    /// `over_budget`, so that no admitted request runs for long.
+    /// `voxels` voxels (all levels; cached ones are free) with
+    /// [`JobError::OverBudget`], so that no admitted request runs for long.
     pub fn with_work_budget(mut self, voxels: u64) -> Jobs {
         self.work_budget = Some(voxels);
         self
@@ -101,17 +124,18 @@ impl Jobs {
         ahead / self.max_jobs as f64 * self.mean_run_seconds()
     }
 
-    fn refuse(&self, reason: &str, retry_seconds: f64) -> ApiError {
+    fn refuse(&self, reason: &'static str, retry_seconds: f64) -> JobError {
         self.metrics.jobs_rejected.inc();
-        let mut e = ApiError::overloaded(reason);
-        e.retry_after = Some(retry_seconds.ceil().clamp(1.0, 3600.0) as u32);
-        e
+        JobError::Overloaded {
+            reason,
+            retry_after: retry_seconds.ceil().clamp(1.0, 3600.0) as u32,
+        }
     }
 
-    /// Runs `f` on a blocking thread once a slot is free. Fails with 503 if
-    /// the queue is full or the wait for a slot would exceed the limit, and
-    /// with 500 if `f` panics.
-    pub async fn run<T, F>(&self, f: F) -> Result<T, ApiError>
+    /// Runs `f` on a blocking thread once a slot is free. Fails overloaded
+    /// if the queue is full or the wait for a slot would exceed the limit,
+    /// and failed if `f` panics.
+    pub async fn run<T, F>(&self, f: F) -> Result<T, JobError>
     where
         T: Send + 'static,
         F: FnOnce() -> T + Send + 'static,
@@ -127,7 +151,7 @@ impl Jobs {
         let admitted_at = Instant::now();
         let running_slot =
             match tokio::time::timeout(self.max_wait, self.run.clone().acquire_owned()).await {
-                Ok(slot) => slot.map_err(|_| ApiError::internal("job queue closed"))?,
+                Ok(slot) => slot.map_err(|_| JobError::Failed("job queue closed".into()))?,
                 Err(_) => {
                     self.metrics.jobs_timed_out.inc();
                     return Err(self.refuse(
@@ -165,17 +189,19 @@ impl Jobs {
             Ok(Ok(v)) => Ok(v),
             Ok(Err(Cancelled)) if budget_flag.is_over_budget() => {
                 self.metrics.over_budget("running");
-                Err(ApiError::over_budget(self.work_budget.unwrap_or_default()))
+                Err(JobError::OverBudget {
+                    budget: self.work_budget.unwrap_or_default(),
+                })
             }
-            Ok(Err(Cancelled)) => Err(ApiError::internal("job cancelled")),
+            Ok(Err(Cancelled)) => Err(JobError::Failed("job cancelled".into())),
             Err(e) if e.is_panic() => {
                 let p = e.into_panic();
-                Err(ApiError::internal(format!(
+                Err(JobError::Failed(format!(
                     "internal error: {}",
                     panic_message(p.as_ref())
                 )))
             }
-            Err(_) => Err(ApiError::internal("job cancelled")),
+            Err(_) => Err(JobError::Failed("job cancelled".into())),
         }
     }
 
@@ -190,7 +216,8 @@ impl Jobs {
     }
 
     /// Jobs waiting plus running.
-    pub fn in_flight(&self) -> usize {
+    #[cfg(test)]
+    fn in_flight(&self) -> usize {
         (self.metrics.jobs_queued.get() + self.metrics.jobs_running.get()) as usize
     }
 }
@@ -270,13 +297,15 @@ mod tests {
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn a_job_waiting_past_the_limit_is_503() {
+    async fn a_job_waiting_past_the_limit_is_refused() {
         let j = jobs_waiting(1, 4, Duration::from_millis(150));
         let (tx, held) = hold_slots(&j, 1).await;
         let t = Instant::now();
         let e = j.run(|| ()).await.unwrap_err();
-        assert_eq!(e.status.as_u16(), 503);
-        assert!(e.retry_after.unwrap() >= 1);
+        assert!(
+            matches!(e, JobError::Overloaded { retry_after, .. } if retry_after >= 1),
+            "{e:?}"
+        );
         assert!(t.elapsed() >= Duration::from_millis(150));
         assert_eq!(j.metrics.jobs_timed_out.get(), 1);
         drop(tx);
@@ -308,8 +337,16 @@ mod tests {
         let t = Instant::now();
         let e = j.run(|| ()).await.unwrap_err();
         assert!(t.elapsed() < Duration::from_secs(1), "not refused at once");
-        assert_eq!(e.status.as_u16(), 503);
-        assert_eq!(e.retry_after, Some(10));
+        assert!(
+            matches!(
+                e,
+                JobError::Overloaded {
+                    retry_after: 10,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
         assert_eq!(j.metrics.jobs_timed_out.get(), 0);
         drop(tx);
         for h in held {
@@ -328,7 +365,7 @@ mod tests {
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn full_queue_is_503() {
+    async fn a_full_queue_refuses() {
         let j = jobs(1, 1);
         let (tx, rx) = mpsc::channel::<()>();
         let rx = Arc::new(std::sync::Mutex::new(rx));
@@ -351,8 +388,10 @@ mod tests {
             tokio::time::sleep(std::time::Duration::from_millis(5)).await;
         }
         let e = j.run(|| ()).await.unwrap_err();
-        assert_eq!(e.status.as_u16(), 503);
-        assert_eq!(e.retry_after, Some(1));
+        assert!(
+            matches!(e, JobError::Overloaded { retry_after: 1, .. }),
+            "{e:?}"
+        );
         tx.send(()).unwrap();
         tx.send(()).unwrap();
         for h in held {
@@ -372,11 +411,13 @@ mod tests {
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn panic_is_500_and_frees_the_slot() {
+    async fn a_panic_fails_the_job_and_frees_the_slot() {
         let j = jobs(1, 0);
         let e = j.run(|| panic!("kaboom")).await.unwrap_err();
-        assert_eq!(e.status.as_u16(), 500);
-        assert!(e.message.contains("kaboom"));
+        assert!(
+            matches!(&e, JobError::Failed(m) if m.contains("kaboom")),
+            "{e:?}"
+        );
         assert_eq!(j.run(|| 1).await.unwrap(), 1);
     }
 }

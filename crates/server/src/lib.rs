@@ -27,20 +27,20 @@
 //! requests in flight have been answered.
 
 pub mod config;
-pub mod conn_io;
-pub mod error;
-pub mod host;
-pub mod jobs;
-pub mod listen;
+pub(crate) mod conn_io;
+pub(crate) mod error;
+pub(crate) mod host;
+pub(crate) mod jobs;
+pub(crate) mod listen;
 pub mod memory;
 pub mod metrics;
 pub mod peak_alloc;
-pub mod process;
+pub(crate) mod process;
 pub mod query;
 pub mod registry;
 pub mod routes;
 pub mod spec;
-pub mod store;
+pub(crate) mod store;
 
 pub use config::{LogFormat, ServeArgs};
 pub use error::ApiError;
@@ -141,7 +141,9 @@ impl Server {
             registry
                 .submit(Some(DEFAULT_ID), spec, Some(DEFAULT_ID.to_string()))
                 .await
-                .map_err(|e| anyhow::anyhow!("registering the default texture: {e}"))?;
+                .map_err(|e| {
+                    anyhow::anyhow!("registering the default texture: {}", ApiError::from(e))
+                })?;
         }
         let jobs = jobs::Jobs::new(
             args.max_jobs,

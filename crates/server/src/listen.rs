@@ -19,10 +19,11 @@ use axum::Router;
 use axum::body::Body;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
+use parking_lot::Mutex;
 use std::collections::BTreeMap;
 use std::future::Future;
+use std::sync::Arc;
 use std::sync::atomic::Ordering;
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::Notify;
@@ -113,13 +114,9 @@ enum Admission {
 }
 
 impl Conns {
-    fn lock(&self) -> std::sync::MutexGuard<'_, BTreeMap<u64, Conn>> {
-        self.map.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
     /// Admits a connection, closing the oldest idle one when at the cap.
     fn admit(&self, id: u64, max: usize, metrics: &Metrics) -> Admission {
-        let mut map = self.lock();
+        let mut map = self.map.lock();
         // Connections already closing do not count: an idle one closes at
         // once, a busy one as soon as its response is sent.
         let open = map.values().filter(|c| !c.closing).count();
@@ -150,11 +147,11 @@ impl Conns {
     }
 
     fn remove(&self, id: u64) {
-        self.lock().remove(&id);
+        self.map.lock().remove(&id);
     }
 
     fn close_all(&self) {
-        for c in self.lock().values_mut() {
+        for c in self.map.lock().values_mut() {
             c.closing = true;
             c.close.notify_one();
         }

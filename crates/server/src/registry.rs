@@ -9,23 +9,68 @@
 //! Uploading content that is already known returns the existing texture;
 //! uploading a failed one tries again.
 
-use super::error::{ApiError, panic_message};
+use super::error::panic_message;
 use super::metrics::{Metrics, OutcomeLabels};
 use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
 use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
 use crate::peak_alloc::{self, Meter};
-use axum::http::StatusCode;
+use parking_lot::{Mutex, RwLock};
 use solidtex_core::Layout;
 use solidtex_core::{Candidates, Stage, Texture, TileCache};
 use std::collections::HashMap;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, RwLock};
 use std::time::{Instant, SystemTime, UNIX_EPOCH};
 use tokio::sync::Semaphore;
 
+/// Why the registry refuses a request.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum RegistryError {
+    /// No texture has this id.
+    #[error("no texture with id `{0}`")]
+    UnknownTexture(String),
+    /// The texture is evicted from memory and being loaded back.
+    #[error("texture `{0}` is being loaded back into memory")]
+    Loading(String),
+    /// The texture is still being precomputed.
+    #[error("texture `{id}` is still being precomputed ({:.0}%)", .progress * 100.0)]
+    Pending {
+        /// Its id.
+        id: String,
+        /// Its precompute progress, 0..=1.
+        progress: f32,
+    },
+    /// The texture's precompute failed.
+    #[error("texture `{id}` failed to precompute: {reason}")]
+    Failed {
+        /// Its id.
+        id: String,
+        /// Why.
+        reason: String,
+    },
+    /// Too many precomputes wait already.
+    #[error("precompute queue is full")]
+    QueueFull,
+    /// The upload's precompute is estimated to need more memory than
+    /// precomputes may take.
+    #[error("precomputing this texture is estimated to take {estimated} bytes, over {bound}")]
+    PrecomputeTooLarge {
+        /// Estimated peak bytes.
+        estimated: u64,
+        /// The bound, bytes.
+        bound: u64,
+    },
+    /// No more textures are kept until some are deleted.
+    #[error("{0}")]
+    StorageFull(String),
+    /// Something failed inside the server (the data directory, a task).
+    #[error("{0}")]
+    Internal(String),
+}
+
 /// Where a texture stands.
 #[derive(Clone)]
-pub enum Status {
+pub(crate) enum Status {
     /// Precompute queued or running.
     Pending,
     /// Ready to synthesize.
@@ -38,7 +83,7 @@ pub enum Status {
 }
 
 /// One texture.
-pub struct Entry {
+pub(crate) struct Entry {
     /// Id in URLs.
     pub id: String,
     /// The uploaded file's name, for people; not part of the id.
@@ -141,22 +186,16 @@ impl Entry {
 
     /// Current status.
     pub fn status(&self) -> Status {
-        self.status
-            .read()
-            .unwrap_or_else(|e| e.into_inner())
-            .clone()
+        self.status.read().clone()
     }
 
     fn candidates(&self) -> Option<Arc<Candidates>> {
-        self.candidates
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .clone()
+        self.candidates.lock().clone()
     }
 
     fn set_ready(&self, c: Arc<Candidates>, t: Texture) {
         self.max_lod.store(t.max_lod(), Ordering::Relaxed);
-        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = Some(c);
+        *self.candidates.lock() = Some(c);
         self.set_status(Status::Ready(t));
     }
 
@@ -167,12 +206,12 @@ impl Entry {
 
     /// Drops its candidates from memory; requests in flight keep theirs.
     fn evict(&self) {
-        *self.candidates.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        *self.candidates.lock() = None;
         self.set_status(Status::Stored);
     }
 
     fn set_status(&self, s: Status) {
-        *self.status.write().unwrap_or_else(|e| e.into_inner()) = s;
+        *self.status.write() = s;
         self.settled.notify_waiters();
     }
 
@@ -200,29 +239,23 @@ impl Entry {
 
     /// Current precompute stage name.
     pub fn stage(&self) -> &'static str {
-        *self.stage.lock().unwrap_or_else(|e| e.into_inner())
+        *self.stage.lock()
     }
 
     /// Seconds the precompute took, when it ran in this process or was
     /// recorded by an earlier one.
     pub fn precompute_seconds(&self) -> Option<f64> {
-        *self
-            .precompute_seconds
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
+        *self.precompute_seconds.lock()
     }
 
     /// Heap bytes the precompute peaked at, when it ran in this process
     /// under the counting allocator or was recorded by an earlier one.
     pub fn precompute_peak(&self) -> Option<u64> {
-        *self
-            .precompute_peak
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
+        *self.precompute_peak.lock()
     }
 
     fn set_progress(&self, stage: &'static str, fraction: f32) {
-        *self.stage.lock().unwrap_or_else(|e| e.into_inner()) = stage;
+        *self.stage.lock() = stage;
         // Never goes back (stages report their own fractions).
         let new = fraction.clamp(0.0, 1.0);
         let _ = self
@@ -267,7 +300,7 @@ fn overall_progress(stage: Stage, f: f32) -> (&'static str, f32) {
 }
 
 /// What an upload found.
-pub enum Submitted {
+pub(crate) enum Submitted {
     /// The texture exists and is ready.
     Known(Arc<Entry>),
     /// The texture is (now) being precomputed.
@@ -345,7 +378,7 @@ fn now() -> u64 {
 
 impl Registry {
     /// An empty registry over `store`; precomputes run on `pool`.
-    pub fn new(
+    pub(crate) fn new(
         store: Arc<Store>,
         cache: Arc<TileCache>,
         metrics: Arc<Metrics>,
@@ -379,7 +412,7 @@ impl Registry {
     /// most `bytes`, refusing uploads whose own estimate is over it, and
     /// measuring each precompute's peak with `meter` (the precompute
     /// pool's threads must be attached to it).
-    pub fn with_precompute_memory(mut self, bytes: u64, meter: &'static Meter) -> Registry {
+    pub(crate) fn with_precompute_memory(mut self, bytes: u64, meter: &'static Meter) -> Registry {
         self.max_precompute_bytes = bytes;
         self.precompute_memory = Arc::new(Semaphore::new(memory_units(bytes) as usize));
         self.meter = Some(meter);
@@ -398,14 +431,17 @@ impl Registry {
     /// The same registry, keeping at most `bytes` of candidates in memory:
     /// beyond it, the least recently used textures are evicted and loaded
     /// again from disk when next asked for.
-    pub fn with_memory_limit(mut self, bytes: u64) -> Registry {
+    pub(crate) fn with_memory_limit(mut self, bytes: u64) -> Registry {
         self.max_resident_bytes = bytes;
         self
     }
 
     /// The texture `id` ready to synthesize, loaded back from disk first
     /// when it was evicted from memory.
-    pub async fn loaded(self: &Arc<Self>, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
+    pub(crate) async fn loaded(
+        self: &Arc<Self>,
+        id: &str,
+    ) -> Result<(Arc<Entry>, Texture), RegistryError> {
         // A texture evicted again between its load and its use (memory
         // contended by many) is loaded again, a few times at most.
         for _ in 0..3 {
@@ -416,20 +452,20 @@ impl Registry {
             let this = self.clone();
             tokio::task::spawn_blocking(move || this.reload(&e))
                 .await
-                .map_err(|e| ApiError::internal(e.to_string()))??;
+                .map_err(|e| RegistryError::Internal(e.to_string()))??;
         }
         self.ready(id)
     }
 
     /// Loads an evicted texture's candidates back from disk (blocking).
-    fn reload(&self, entry: &Arc<Entry>) -> Result<(), ApiError> {
-        let _one = entry.loading.lock().unwrap_or_else(|e| e.into_inner());
+    fn reload(&self, entry: &Arc<Entry>) -> Result<(), RegistryError> {
+        let _one = entry.loading.lock();
         if !matches!(entry.status(), Status::Stored) {
             return Ok(());
         }
         let (c, t) = self
             .load_ready(entry)
-            .map_err(|e| ApiError::internal(format!("loading texture `{}`: {e}", entry.id)))?;
+            .map_err(|e| RegistryError::Internal(format!("loading texture `{}`: {e}", entry.id)))?;
         entry.set_ready(c, t);
         let now = self.uses.fetch_add(1, Ordering::Relaxed) + 1;
         entry.last_used.store(now, Ordering::Relaxed);
@@ -449,7 +485,6 @@ impl Registry {
         let mut resident: Vec<(u64, u64, Arc<Entry>)> = self
             .map
             .read()
-            .unwrap_or_else(|e| e.into_inner())
             .values()
             .filter(|e| matches!(e.status(), Status::Ready(_)))
             .filter_map(|e| {
@@ -474,8 +509,8 @@ impl Registry {
 
     /// Bytes of candidates in memory now (candidates shared by textures
     /// that differ in synthesis parameters only are counted once).
-    pub fn resident_candidate_bytes(&self) -> u64 {
-        let map = self.map.read().unwrap_or_else(|e| e.into_inner());
+    pub(crate) fn resident_candidate_bytes(&self) -> u64 {
+        let map = self.map.read();
         let mut seen = Vec::new();
         let mut total = 0;
         for c in map.values().filter_map(|e| e.candidates()) {
@@ -487,77 +522,61 @@ impl Registry {
         total
     }
 
-    /// The same registry, refusing uploads (507 `storage_full`) beyond
+    /// The same registry, refusing uploads ([`RegistryError::StorageFull`]) beyond
     /// `max_textures` textures or `max_stored_bytes` bytes on disk.
-    pub fn with_storage_limits(mut self, max_textures: usize, max_stored_bytes: u64) -> Registry {
+    pub(crate) fn with_storage_limits(
+        mut self,
+        max_textures: usize,
+        max_stored_bytes: u64,
+    ) -> Registry {
         self.max_textures = max_textures;
         self.max_stored_bytes = max_stored_bytes;
         self
     }
 
     /// The shared tile cache.
-    pub fn cache(&self) -> &Arc<TileCache> {
+    pub(crate) fn cache(&self) -> &Arc<TileCache> {
         &self.cache
     }
 
     /// The texture `id`, if known.
-    pub fn get(&self, id: &str) -> Option<Arc<Entry>> {
-        self.map
-            .read()
-            .unwrap_or_else(|e| e.into_inner())
-            .get(id)
-            .cloned()
+    pub(crate) fn get(&self, id: &str) -> Option<Arc<Entry>> {
+        self.map.read().get(id).cloned()
     }
 
     /// Every texture, oldest first.
-    pub fn list(&self) -> Vec<Arc<Entry>> {
-        let mut v: Vec<Arc<Entry>> = self
-            .map
-            .read()
-            .unwrap_or_else(|e| e.into_inner())
-            .values()
-            .cloned()
-            .collect();
+    pub(crate) fn list(&self) -> Vec<Arc<Entry>> {
+        let mut v: Vec<Arc<Entry>> = self.map.read().values().cloned().collect();
         v.sort_by(|a, b| (a.created, &a.id).cmp(&(b.created, &b.id)));
         v
     }
 
-    /// The texture `id` ready to synthesize: 404 when unknown, 409 with
-    /// `Retry-After` while pending, 409 when failed.
-    pub fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
-        let e = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
+    /// The texture `id` ready to synthesize, or why it is not.
+    pub(crate) fn ready(&self, id: &str) -> Result<(Arc<Entry>, Texture), RegistryError> {
+        let e = self
+            .get(id)
+            .ok_or_else(|| RegistryError::UnknownTexture(id.to_string()))?;
         match e.status() {
             Status::Ready(t) => {
                 let now = self.uses.fetch_add(1, Ordering::Relaxed) + 1;
                 e.last_used.store(now, Ordering::Relaxed);
                 Ok((e, t))
             }
-            Status::Stored => Err(ApiError::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "texture_loading",
-                format!("texture `{id}` is being loaded back into memory"),
-            )
-            .retry_after(1)),
-            Status::Pending => Err(ApiError::new(
-                StatusCode::CONFLICT,
-                "texture_pending",
-                format!(
-                    "texture `{id}` is still being precomputed ({:.0}%)",
-                    e.progress() * 100.0
-                ),
-            )
-            .retry_after(1)),
-            Status::Failed(r) => Err(ApiError::new(
-                StatusCode::CONFLICT,
-                "texture_failed",
-                format!("texture `{id}` failed to precompute: {r}"),
-            )),
+            Status::Stored => Err(RegistryError::Loading(id.to_string())),
+            Status::Pending => Err(RegistryError::Pending {
+                id: id.to_string(),
+                progress: e.progress(),
+            }),
+            Status::Failed(reason) => Err(RegistryError::Failed {
+                id: id.to_string(),
+                reason,
+            }),
         }
     }
 
     fn update_gauges(&self) {
         let (mut p, mut r, mut f) = (0, 0, 0);
-        for e in self.map.read().unwrap_or_else(|e| e.into_inner()).values() {
+        for e in self.map.read().values() {
             match e.status() {
                 Status::Pending => p += 1,
                 Status::Ready(_) | Status::Stored => r += 1,
@@ -569,13 +588,14 @@ impl Registry {
 
     /// Registers an upload under its content hash (or under `id` when
     /// given, as for `default`) and starts its precompute unless it is
-    /// known already. Fails with 503 when too many precomputes wait.
-    pub async fn submit(
+    /// known already. Fails when too many precomputes wait, or when it
+    /// would not fit the memory or storage bounds.
+    pub(crate) async fn submit(
         self: &Arc<Self>,
         id: Option<&str>,
         spec: TextureSpec,
         name: Option<String>,
-    ) -> Result<Submitted, ApiError> {
+    ) -> Result<Submitted, RegistryError> {
         let hash = spec.content_hash();
         let fixed_id = id.is_some();
         let id = id.map(str::to_string).unwrap_or_else(|| hash.clone());
@@ -590,11 +610,11 @@ impl Registry {
             let store = self.store.clone();
             tokio::task::spawn_blocking(move || store.bytes())
                 .await
-                .map_err(|e| ApiError::internal(e.to_string()))?
-                .map_err(|e| ApiError::internal(format!("reading the data directory: {e}")))?
+                .map_err(|e| RegistryError::Internal(e.to_string()))?
+                .map_err(|e| RegistryError::Internal(format!("reading the data directory: {e}")))?
         };
         let entry = {
-            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            let mut map = self.map.write();
             if let Some(e) = map.get(&id).filter(|e| e.content_hash == hash) {
                 match e.status() {
                     Status::Ready(_) | Status::Stored => {
@@ -610,7 +630,7 @@ impl Registry {
             // them is counted.
             if !fixed_id && self.pending.load(Ordering::SeqCst) >= self.max_pending {
                 self.metrics.jobs_rejected.inc();
-                return Err(ApiError::overloaded("precompute queue is full"));
+                return Err(RegistryError::QueueFull);
             }
             if !fixed_id {
                 let need = solidtex_core::Candidates::estimated_peak_bytes(
@@ -620,14 +640,14 @@ impl Registry {
                     &spec.params.analysis,
                 );
                 if need > self.max_precompute_bytes {
-                    return Err(ApiError::precompute_too_large(
-                        need,
-                        self.max_precompute_bytes,
-                    ));
+                    return Err(RegistryError::PrecomputeTooLarge {
+                        estimated: need,
+                        bound: self.max_precompute_bytes,
+                    });
                 }
                 let uploaded = map.values().filter(|e| e.id == e.content_hash).count();
                 if uploaded >= self.max_textures {
-                    return Err(ApiError::storage_full(format!(
+                    return Err(RegistryError::StorageFull(format!(
                         "this server keeps at most {} textures (--max-textures); delete one first",
                         self.max_textures
                     )));
@@ -637,7 +657,7 @@ impl Registry {
                 let pending = self.pending.load(Ordering::SeqCst) as u64;
                 let needed = stored.saturating_add(estimate.saturating_mul(pending + 1));
                 if needed > self.max_stored_bytes {
-                    return Err(ApiError::storage_full(format!(
+                    return Err(RegistryError::StorageFull(format!(
                         "the textures take {stored} bytes on disk and this one would need about \
                          {estimate} more; the limit is {} (--max-stored-bytes); delete some first",
                         self.max_stored_bytes
@@ -667,14 +687,14 @@ impl Registry {
             Err(e) => Some(e.to_string()),
         };
         if let Some(why) = failure {
-            let mut map = self.map.write().unwrap_or_else(|e| e.into_inner());
+            let mut map = self.map.write();
             if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
                 map.remove(&id);
             }
             drop(map);
             self.release_precompute();
             self.update_gauges();
-            return Err(ApiError::internal(format!(
+            return Err(RegistryError::Internal(format!(
                 "could not store the texture: {why}"
             )));
         }
@@ -682,10 +702,12 @@ impl Registry {
         Ok(Submitted::Pending(entry))
     }
 
-    /// Removes texture `id` and its files; 404 when unknown. The files go
-    /// first: when they cannot be removed the texture stays as it was.
-    pub async fn delete(self: &Arc<Self>, id: &str) -> Result<(), ApiError> {
-        let entry = self.get(id).ok_or_else(|| ApiError::unknown_texture(id))?;
+    /// Removes texture `id` and its files. The files go first: when they
+    /// cannot be removed the texture stays as it was.
+    pub(crate) async fn delete(self: &Arc<Self>, id: &str) -> Result<(), RegistryError> {
+        let entry = self
+            .get(id)
+            .ok_or_else(|| RegistryError::UnknownTexture(id.to_string()))?;
         let this = self.clone();
         let id_for_error = id.to_string();
         let id = id.to_string();
@@ -696,7 +718,7 @@ impl Registry {
             // A concurrent delete or re-upload may have replaced it by now;
             // the new one owns the directory.
             let (present, current) = {
-                let map = this.map.read().unwrap_or_else(|e| e.into_inner());
+                let map = this.map.read();
                 let e = map.get(&id);
                 (e.is_some(), e.is_some_and(|e| Arc::ptr_eq(e, &entry)))
             };
@@ -704,7 +726,7 @@ impl Registry {
                 return Ok(present);
             }
             this.store.remove(&id)?;
-            let mut map = this.map.write().unwrap_or_else(|e| e.into_inner());
+            let mut map = this.map.write();
             if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
                 map.remove(&id);
             }
@@ -712,13 +734,15 @@ impl Registry {
             Ok::<_, std::io::Error>(true)
         })
         .await
-        .map_err(|e| ApiError::internal(e.to_string()))?
-        .map_err(|e| ApiError::internal(format!("could not remove the texture's files: {e}")))?;
+        .map_err(|e| RegistryError::Internal(e.to_string()))?
+        .map_err(|e| {
+            RegistryError::Internal(format!("could not remove the texture's files: {e}"))
+        })?;
         self.update_gauges();
         if found {
             Ok(())
         } else {
-            Err(ApiError::unknown_texture(&id_for_error))
+            Err(RegistryError::UnknownTexture(id_for_error))
         }
     }
 
@@ -786,7 +810,6 @@ impl Registry {
     fn shared_candidates(&self, entry: &Entry) -> Option<Arc<Candidates>> {
         self.map
             .read()
-            .unwrap_or_else(|e| e.into_inner())
             .values()
             .filter(|e| e.analysis_hash == entry.analysis_hash)
             .find_map(|e| e.candidates())
@@ -816,7 +839,7 @@ impl Registry {
                     .map_err(|e| e.to_string())?;
                 return Ok((c, t));
             }
-            let set = entry.planes.to_set().map_err(|e| e.message)?;
+            let set = entry.planes.to_set().map_err(|e| e.to_string())?;
             let progress = |stage: Stage, f: f32| {
                 let (name, p) = overall_progress(stage, f);
                 entry.set_progress(name, p);
@@ -842,10 +865,7 @@ impl Registry {
             ))
         });
         let seconds = t0.elapsed().as_secs_f64();
-        *entry
-            .precompute_seconds
-            .lock()
-            .unwrap_or_else(|e| e.into_inner()) = Some(seconds);
+        *entry.precompute_seconds.lock() = Some(seconds);
         if !reused {
             self.metrics.precompute_seconds.observe(seconds);
         }
@@ -856,10 +876,7 @@ impl Registry {
             _ => None,
         };
         if let Some(bytes) = peak {
-            *entry
-                .precompute_peak
-                .lock()
-                .unwrap_or_else(|e| e.into_inner()) = Some(bytes);
+            *entry.precompute_peak.lock() = Some(bytes);
             self.metrics.precompute_peak_bytes.observe(bytes as f64);
         }
         let _g = self.store.lock();
@@ -930,7 +947,7 @@ impl Registry {
     /// or unreadable ones are queued for a new precompute (or marked failed
     /// when their exemplars are gone), failed ones stay failed. Returns the
     /// entries to precompute; start them with [`Registry::resume`].
-    pub fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
+    pub(crate) fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
         let mut todo = Vec::new();
         for Found { meta, dir } in self.store.scan()? {
             let params = match TextureParams::from_stored(&meta.params) {
@@ -995,14 +1012,8 @@ impl Registry {
                 )
                 .named(meta.name.clone()),
             );
-            *entry
-                .precompute_seconds
-                .lock()
-                .unwrap_or_else(|e| e.into_inner()) = meta.precompute_seconds;
-            *entry
-                .precompute_peak
-                .lock()
-                .unwrap_or_else(|e| e.into_inner()) = meta.precompute_peak_bytes;
+            *entry.precompute_seconds.lock() = meta.precompute_seconds;
+            *entry.precompute_peak.lock() = meta.precompute_peak_bytes;
             match meta.status {
                 StoredStatus::Ready => match self.load_ready(&entry) {
                     Ok((c, t)) => {
@@ -1052,7 +1063,7 @@ impl Registry {
         if c.params() != &entry.params.analysis {
             return Err("stored candidates were made with other parameters".into());
         }
-        let set = entry.planes.to_set().map_err(|e| e.message)?;
+        let set = entry.planes.to_set().map_err(|e| e.to_string())?;
         if c.exemplars() != &set {
             return Err("stored candidates were made from other exemplars".into());
         }
@@ -1068,14 +1079,11 @@ impl Registry {
     }
 
     fn insert(&self, entry: Arc<Entry>) {
-        self.map
-            .write()
-            .unwrap_or_else(|e| e.into_inner())
-            .insert(entry.id.clone(), entry);
+        self.map.write().insert(entry.id.clone(), entry);
     }
 
     /// Starts the precomputes [`Registry::recover`] found necessary.
-    pub fn resume(self: &Arc<Self>, todo: Vec<Arc<Entry>>) {
+    pub(crate) fn resume(self: &Arc<Self>, todo: Vec<Arc<Entry>>) {
         for e in todo {
             self.reserve_precompute();
             self.start_precompute(e);

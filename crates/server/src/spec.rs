@@ -8,13 +8,23 @@
 //! defaults are filled in, so an upload is idempotent whatever the encoding
 //! of the PNG and whichever defaults were spelled out.
 
-use super::error::ApiError;
-use axum::http::StatusCode;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use sha2::{Digest, Sha256};
 use solidtex_core::Layout;
 use solidtex_core::{AnalysisParams, Exemplar, ExemplarSet, SynthParams};
+
+/// Why parameters are refused.
+#[derive(Debug, thiserror::Error)]
+pub enum SpecError {
+    /// The parameters cannot be read: not an object, an unknown or
+    /// repeated key, a wrong type, an unknown preset.
+    #[error("{0}")]
+    InvalidParams(String),
+    /// The engine refuses their values.
+    #[error(transparent)]
+    Engine(#[from] solidtex_core::Error),
+}
 
 /// Analysis and synthesis parameters of one texture.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -41,7 +51,7 @@ impl TextureParams {
     /// of the defaults (`preview`: [`SynthParams::preview`]); keys given
     /// beside it win. It is not kept: the texture's parameters, and so its
     /// id, are those the preset expands to.
-    pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, ApiError> {
+    pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, SpecError> {
         let analysis_keys = keys_of::<AnalysisParams>();
         let synth_keys = keys_of::<SynthParams>();
         let mut a = Map::new();
@@ -96,7 +106,7 @@ impl TextureParams {
     /// complete, so a key added since they were written takes the value that
     /// reproduces the texture's voxels as they were then, not today's
     /// default: the same id keeps serving the same bytes across upgrades.
-    pub fn from_stored(obj: &Map<String, Value>) -> Result<TextureParams, ApiError> {
+    pub fn from_stored(obj: &Map<String, Value>) -> Result<TextureParams, SpecError> {
         let mut obj = obj.clone();
         for (key, then) in KEYS_ADDED_SINCE_VERSION_1 {
             obj.entry(*key)
@@ -117,7 +127,7 @@ impl TextureParams {
     }
 
     /// Parses a JSON text holding a flat object of parameters.
-    pub fn from_json(text: &str) -> Result<TextureParams, ApiError> {
+    pub fn from_json(text: &str) -> Result<TextureParams, SpecError> {
         Self::from_flat(&params_object(text)?)
     }
 
@@ -198,7 +208,7 @@ impl<'de> Deserialize<'de> for Members {
 
 /// Parses the JSON text of a `params` object. A key given twice is refused
 /// (a JSON parser would keep the last one silently).
-pub fn params_object(text: &str) -> Result<Map<String, Value>, ApiError> {
+pub fn params_object(text: &str) -> Result<Map<String, Value>, SpecError> {
     let Members(members) = serde_json::from_str(text)
         .map_err(|e| invalid_params(format!("`params` must be a JSON object: {e}")))?;
     let mut m = Map::new();
@@ -213,8 +223,8 @@ pub fn params_object(text: &str) -> Result<Map<String, Value>, ApiError> {
     Ok(m)
 }
 
-fn invalid_params(message: String) -> ApiError {
-    ApiError::new(StatusCode::BAD_REQUEST, "invalid_params", message)
+fn invalid_params(message: String) -> SpecError {
+    SpecError::InvalidParams(message)
 }
 
 /// The exemplars of an upload: one image for all planes or three.
@@ -228,12 +238,12 @@ pub enum Planes {
 
 impl Planes {
     /// The exemplar set the engine works on.
-    pub fn to_set(&self) -> Result<ExemplarSet, ApiError> {
+    pub fn to_set(&self) -> solidtex_core::Result<ExemplarSet> {
         match self {
             Planes::Single(e) => Ok(ExemplarSet::single(e.clone())),
             Planes::Triple(t) => {
                 let [xy, yz, zx] = (**t).clone();
-                Ok(ExemplarSet::triple(xy, yz, zx)?)
+                ExemplarSet::triple(xy, yz, zx)
             }
         }
     }
@@ -302,11 +312,8 @@ impl TextureSpec {
     /// How the exemplars are laid on the planes (what the precompute will
     /// use): refused when the orientation asks a quarter turn of a
     /// non-square exemplar.
-    pub fn layout(&self) -> Result<Layout, ApiError> {
-        Ok(Layout::resolve(
-            &self.planes.to_set()?,
-            &self.params.analysis.orientation,
-        )?)
+    pub fn layout(&self) -> solidtex_core::Result<Layout> {
+        Layout::resolve(&self.planes.to_set()?, &self.params.analysis.orientation)
     }
 
     fn hash_planes(&self, h: &mut Sha256) {
@@ -375,6 +382,11 @@ pub struct ExemplarInfo {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The error code a client would see.
+    fn code(e: SpecError) -> &'static str {
+        crate::error::ApiError::from(e).code
+    }
 
     fn img(seed: u8) -> Exemplar {
         let rgb: Vec<u8> = (0..16 * 16 * 3)
@@ -531,39 +543,31 @@ mod tests {
     #[test]
     fn bad_params() {
         assert_eq!(
-            TextureParams::from_json(r#"{"sed": 1}"#).unwrap_err().code,
+            code(TextureParams::from_json(r#"{"sed": 1}"#).unwrap_err()),
             "invalid_params"
         );
         assert_eq!(
-            TextureParams::from_json(r#"{"seed": "x"}"#)
-                .unwrap_err()
-                .code,
+            code(TextureParams::from_json(r#"{"seed": "x"}"#).unwrap_err()),
             "invalid_params"
         );
         assert_eq!(
-            TextureParams::from_json("[1]").unwrap_err().code,
+            code(TextureParams::from_json("[1]").unwrap_err()),
             "invalid_params"
         );
         assert_eq!(
-            TextureParams::from_json("{").unwrap_err().code,
+            code(TextureParams::from_json("{").unwrap_err()),
             "invalid_params"
         );
         assert_eq!(
-            TextureParams::from_json(r#"{"passes": 99}"#)
-                .unwrap_err()
-                .code,
+            code(TextureParams::from_json(r#"{"passes": 99}"#).unwrap_err()),
             "out_of_range"
         );
         assert_eq!(
-            TextureParams::from_json(r#"{"slices": "dense"}"#)
-                .unwrap_err()
-                .code,
+            code(TextureParams::from_json(r#"{"slices": "dense"}"#).unwrap_err()),
             "invalid_params"
         );
         assert_eq!(
-            TextureParams::from_json(r#"{"neighbourhood": 4}"#)
-                .unwrap_err()
-                .code,
+            code(TextureParams::from_json(r#"{"neighbourhood": 4}"#).unwrap_err()),
             "invalid_request"
         );
     }
@@ -748,7 +752,7 @@ mod tests {
         assert_eq!(params_object(r#"{"seed": 1}"#).unwrap()["seed"], 1);
         for bad in [r#"{"seed": 1, "seed": 1}"#, "[1]", "7", "{"] {
             assert_eq!(
-                params_object(bad).unwrap_err().code,
+                code(params_object(bad).unwrap_err()),
                 "invalid_params",
                 "{bad}"
             );

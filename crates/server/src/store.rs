@@ -24,13 +24,13 @@
 //! and left alone.
 
 use super::spec::{ExemplarInfo, Planes, valid_id};
+use parking_lot::{Mutex, MutexGuard};
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use solidtex_core::{Candidates, Exemplar};
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard};
 
 /// Version of the metadata layout.
 pub const META_VERSION: u32 = 1;
@@ -149,11 +149,6 @@ impl Store {
         Ok(store)
     }
 
-    /// The data directory.
-    pub fn root(&self) -> &Path {
-        &self.root
-    }
-
     /// Bytes of the files under `textures/` (every texture's exemplars,
     /// metadata and candidates).
     pub fn bytes(&self) -> io::Result<u64> {
@@ -180,7 +175,7 @@ impl Store {
 
     /// Serialises directory-level changes.
     pub fn lock(&self) -> MutexGuard<'_, ()> {
-        self.lock.lock().unwrap_or_else(|e| e.into_inner())
+        self.lock.lock()
     }
 
     /// Writes a new texture's exemplars then its metadata (replacing any

@@ -7,6 +7,7 @@
 //! queue, and shape responses; no synthesis logic lives here.
 
 mod ops;
+mod paths;
 mod textures;
 mod viewer;
 mod volumes;
@@ -62,32 +63,32 @@ pub struct Shared {
     /// The textures.
     pub registry: Arc<Registry>,
     /// The synthesis job queue.
-    pub jobs: Jobs,
+    pub(crate) jobs: Jobs,
     /// Metrics.
     pub metrics: Arc<Metrics>,
     /// Edge of served bricks.
-    pub brick_size: u32,
+    pub(crate) brick_size: u32,
     /// Edge of the chunks of the precomputed and Zarr views.
-    pub chunk_size: u32,
+    pub(crate) chunk_size: u32,
     /// Work budget of one voxel request (see [`crate::ServeArgs`]).
-    pub max_request_voxels: u64,
+    pub(crate) max_request_voxels: u64,
     /// Most voxels one request may synthesize (see `ServeArgs`).
-    pub max_request_work: u64,
+    pub(crate) max_request_work: u64,
     /// Largest accepted upload, bytes.
-    pub max_upload_bytes: usize,
+    pub(crate) max_upload_bytes: usize,
     /// Bearer token that mutating routes and `/metrics` require, if any.
-    pub token: Option<String>,
+    pub(crate) token: Option<String>,
     /// Origins allowed to upload and delete across origins.
-    pub cors_origins: Vec<axum::http::HeaderValue>,
+    pub(crate) cors_origins: Vec<axum::http::HeaderValue>,
     /// Whether the bundled texture is registered at start (`/readyz`
     /// waits for it and reports it missing).
-    pub default_texture: bool,
+    pub(crate) default_texture: bool,
     /// How long a voxel request waits for a pending texture before 409.
-    pub pending_wait: std::time::Duration,
+    pub(crate) pending_wait: std::time::Duration,
     /// Time a request body may take to arrive in full.
-    pub body_timeout: std::time::Duration,
+    pub(crate) body_timeout: std::time::Duration,
     /// Which `Host` headers are answered.
-    pub allowed_hosts: AllowedHosts,
+    pub(crate) allowed_hosts: AllowedHosts,
 }
 
 /// Longest request target (path and query) answered, bytes; longer: 414.

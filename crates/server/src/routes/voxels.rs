@@ -8,6 +8,7 @@
 //! The answer depends only on (texture, parameters, coordinates), so it is
 //! marked immutable.
 
+use super::paths::{Png, Raw, Stem, TypedPath};
 use super::{AppState, IMMUTABLE};
 use crate::error::ApiError;
 use crate::query::{Query, parse_int};
@@ -17,6 +18,7 @@ use axum::body::Body;
 use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
 use axum::response::Response;
+use serde::Deserialize;
 use sha2::{Digest, Sha256};
 use solidtex_core::png;
 use solidtex_core::{Axis, CutPlane, Filter, Region, SynthStats, Texture, WorkEstimate};
@@ -41,7 +43,7 @@ pub(super) async fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Textu
     {
         e.settle(tokio::time::Instant::now() + s.pending_wait).await;
     }
-    s.registry.loaded(id).await
+    Ok(s.registry.loaded(id).await?)
 }
 
 fn lod(q: &Query, t: &Texture) -> Result<u32, ApiError> {
@@ -197,23 +199,24 @@ fn parse_axis(s: &str) -> Result<Axis, ApiError> {
     }
 }
 
+/// The path of a slice: `/v1/textures/{id}/slices/{axis}/{at}.png`.
+#[derive(Deserialize)]
+pub(super) struct SlicePath {
+    id: String,
+    axis: String,
+    at: Stem<Png>,
+}
+
 /// `GET /v1/textures/{id}/slices/{axis}/{at}.png`
-pub async fn slice(
+pub(super) async fn slice(
     State(s): State<AppState>,
-    Path((id, axis, at)): Path<(String, String, String)>,
+    TypedPath(SlicePath { id, axis, at }): TypedPath<SlicePath>,
     RawQuery(raw): RawQuery,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let Some(at) = at.strip_suffix(".png") else {
-        return Err(ApiError::new(
-            StatusCode::NOT_FOUND,
-            "no_route",
-            "slices are served as `{at}.png`",
-        ));
-    };
     let (entry, tex) = texture(&s, &id).await?;
     let axis = parse_axis(&axis)?;
-    let at = parse_int("at", at, -COORD_LIMIT, COORD_LIMIT)?;
+    let at = parse_int("at", at.as_str(), -COORD_LIMIT, COORD_LIMIT)?;
     let q = Query::parse(raw.as_deref())?;
     let u0 = coord(&q, "u0")?;
     let v0 = coord(&q, "v0")?;
@@ -421,19 +424,21 @@ pub async fn region(
     region_response(&s, &entry, tex, region, lod, &headers).await
 }
 
+/// The path of a brick: `/v1/textures/{id}/bricks/{lod}/{bx}_{by}_{bz}.raw`.
+#[derive(Deserialize)]
+pub(super) struct BrickPath {
+    id: String,
+    lod: String,
+    brick: Stem<Raw>,
+}
+
 /// `GET /v1/textures/{id}/bricks/{lod}/{bx}_{by}_{bz}.raw`
-pub async fn brick(
+pub(super) async fn brick(
     State(s): State<AppState>,
-    Path((id, lod, name)): Path<(String, String, String)>,
+    TypedPath(BrickPath { id, lod, brick }): TypedPath<BrickPath>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let Some(stem) = name.strip_suffix(".raw") else {
-        return Err(ApiError::new(
-            StatusCode::NOT_FOUND,
-            "no_route",
-            "bricks are served as `{bx}_{by}_{bz}.raw`",
-        ));
-    };
+    let stem = brick.as_str();
     let (entry, tex) = texture(&s, &id).await?;
     let lod = parse_int("lod", &lod, 0u32, tex.max_lod())?;
     let e = s.brick_size as i64;
