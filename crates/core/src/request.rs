@@ -67,19 +67,25 @@ pub enum Axis {
 
 impl std::str::FromStr for Axis {
     type Err = Error;
+    /// An axis by name, in either case.
     fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "x" | "X" => Ok(Axis::X),
-            "y" | "Y" => Ok(Axis::Y),
-            "z" | "Z" => Ok(Axis::Z),
-            _ => Err(Error::InvalidRequest(format!(
-                "unknown axis `{s}` (expected x, y or z)"
-            ))),
-        }
+        Axis::from_name(&s.to_ascii_lowercase()).ok_or_else(|| {
+            Error::InvalidRequest(format!("unknown axis `{s}` (expected x, y or z)"))
+        })
     }
 }
 
 impl Axis {
+    /// The axis named exactly `x`, `y` or `z`.
+    pub fn from_name(name: &str) -> Option<Axis> {
+        match name {
+            "x" => Some(Axis::X),
+            "y" => Some(Axis::Y),
+            "z" => Some(Axis::Z),
+            _ => None,
+        }
+    }
+
     /// (normal axis index, u axis index, v axis index): u, v are (x, y) for
     /// z, (y, z) for x and (z, x) for y.
     pub fn frame(self) -> (usize, usize, usize) {

@@ -187,16 +187,13 @@ pub(super) async fn raw_job(
 }
 
 fn parse_axis(s: &str) -> Result<Axis, ApiError> {
-    match s {
-        "x" => Ok(Axis::X),
-        "y" => Ok(Axis::Y),
-        "z" => Ok(Axis::Z),
-        _ => Err(ApiError::new(
+    Axis::from_name(s).ok_or_else(|| {
+        ApiError::new(
             StatusCode::BAD_REQUEST,
             "invalid_axis",
             format!("unknown axis `{s}` (expected x, y or z)"),
-        )),
-    }
+        )
+    })
 }
 
 /// The path of a slice: `/v1/textures/{id}/slices/{axis}/{at}.png`.
