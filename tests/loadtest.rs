@@ -25,10 +25,7 @@ fn small(base: &str, id: &str) -> LoadConfig {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn mixed_load_is_measured_and_a_rerun_hits_the_cache() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let c = client();
-    let id = ready_texture(&c, &s, 30).await;
+    let (_dir, s, _c, id) = server_with_texture(30).await;
 
     let first = run(&small(&s.base, &id)).await.unwrap();
     let t = &first.total;
@@ -74,10 +71,7 @@ async fn mixed_load_is_measured_and_a_rerun_hits_the_cache() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn command_line_sweep_reports_json() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let c = client();
-    let id = ready_texture(&c, &s, 31).await;
+    let (_dir, s, _c, id) = server_with_texture(31).await;
     let base = s.base.clone();
     let out = tokio::task::spawn_blocking(move || {
         std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))

@@ -171,14 +171,7 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     .await;
     assert_ne!(a, b, "another seed, other voxels");
 
-    let list: Value = c
-        .get(s.url("/v1/textures"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let list: Value = get_json(&c, &s, "/v1/textures").await;
     let ids: Vec<&str> = list["textures"]
         .as_array()
         .unwrap()
@@ -630,15 +623,7 @@ async fn multipart_uploads() {
         ),
     ];
     for (form, status, code) in cases {
-        let r = c
-            .post(s.url("/v1/textures"))
-            .multipart(form)
-            .send()
-            .await
-            .unwrap();
-        let st = r.status().as_u16();
-        let h = r.headers().clone();
-        let b = r.bytes().await.unwrap();
+        let (st, h, b) = post_form(&c, &s.url("/v1/textures"), form).await;
         assert_error(st, &h, &b, status, code);
     }
     s.stop().await;
@@ -671,10 +656,7 @@ fn bomb_png() -> Vec<u8> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn every_error_class_is_json() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let c = client();
-    let id = ready_texture(&c, &s, 7).await;
+    let (_dir, s, c, id) = server_with_texture(7).await;
     let t = |p: &str| s.url(&format!("/v1/textures/{id}{p}"));
 
     let cases: Vec<(String, u16, &str)> = vec![

@@ -39,31 +39,14 @@ async fn fetch_all(
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn restart_serves_identical_bytes_without_recomputing() {
-    let dir = tempfile::tempdir().unwrap();
-    let c = client();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let id = ready_texture(&c, &s, 11).await;
+    let (dir, s, c, id) = server_with_texture(11).await;
     let before = fetch_all(&c, &s, &sample_paths(&id)).await;
-    let meta_before: Value = c
-        .get(s.url(&format!("/v1/textures/{id}")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let meta_before: Value = get_json(&c, &s, &format!("/v1/textures/{id}")).await;
     s.stop().await;
 
     let s = TestServer::start(test_args(dir.path())).await;
     // Ready from the first request on: no precompute ran.
-    let meta: Value = c
-        .get(s.url(&format!("/v1/textures/{id}")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let meta: Value = get_json(&c, &s, &format!("/v1/textures/{id}")).await;
     assert_eq!(meta["status"], "ready");
     assert_eq!(meta["params"], meta_before["params"]);
     assert_eq!(meta["created"], meta_before["created"]);
@@ -88,10 +71,7 @@ async fn restart_serves_identical_bytes_without_recomputing() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn interrupted_or_damaged_precomputes_are_redone() {
-    let dir = tempfile::tempdir().unwrap();
-    let c = client();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let a = ready_texture(&c, &s, 12).await;
+    let (dir, s, c, a) = server_with_texture(12).await;
     let b = ready_texture(&c, &s, 13).await;
     let f = ready_texture(&c, &s, 14).await;
     let ref_a = fetch_all(&c, &s, &sample_paths(&a)).await;
@@ -145,14 +125,7 @@ async fn interrupted_or_damaged_precomputes_are_redone() {
     assert_eq!(metric(&text, "solidtex_textures_loaded_total"), 0.0);
 
     // The failed one says why, and voxel requests get 409.
-    let v: Value = c
-        .get(s.url(&format!("/v1/textures/{f}")))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let v: Value = get_json(&c, &s, &format!("/v1/textures/{f}")).await;
     assert_eq!(v["status"], "failed");
     assert_eq!(v["reason"], "out of memory");
     let (st, h, body) = get(&c, &s.url(&sample_paths(&f)[0])).await;
@@ -176,10 +149,7 @@ async fn interrupted_or_damaged_precomputes_are_redone() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn concurrent_clients_match_a_sequential_client() {
-    let dir = tempfile::tempdir().unwrap();
-    let c = client();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let id = ready_texture(&c, &s, 15).await;
+    let (dir, s, c, id) = server_with_texture(15).await;
     // Overlapping slices and bricks at two levels of detail.
     let mut paths = Vec::new();
     for k in 0..4i64 {
@@ -265,14 +235,7 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
     let c = client();
 
     // The bundled exemplar is registered at start.
-    let v: Value = c
-        .get(format!("{base}/v1/textures/default"))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let v: Value = get_json_url(&c, &format!("{base}/v1/textures/default")).await;
     assert_eq!(v["id"], "default");
     assert_eq!(v["exemplar"]["width"], 128);
     assert_eq!(v["brick_size"], 32, "configured from the environment");
@@ -281,14 +244,7 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
     if r.status().as_u16() == 503 {
         assert_eq!(r.json::<Value>().await.unwrap()["status"], "starting");
     } else {
-        let v: Value = c
-            .get(format!("{base}/v1/textures/default"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let v: Value = get_json_url(&c, &format!("{base}/v1/textures/default")).await;
         assert_eq!(v["status"], "ready");
     }
 
@@ -306,14 +262,7 @@ async fn binary_shuts_down_gracefully_on_sigterm() {
         .to_string();
     let t0 = Instant::now();
     loop {
-        let v: Value = c
-            .get(format!("{base}/v1/textures/{id}"))
-            .send()
-            .await
-            .unwrap()
-            .json()
-            .await
-            .unwrap();
+        let v: Value = get_json_url(&c, &format!("{base}/v1/textures/{id}")).await;
         if v["status"] == "ready" {
             break;
         }

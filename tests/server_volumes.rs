@@ -43,14 +43,7 @@ async fn metadata_describes_a_centred_window_per_level() {
     let s = TestServer::start(args).await;
     let c = client();
     let id = ready_texture(&c, &s, 3).await;
-    let max_lod = c
-        .get(s.url(&format!("/v1/textures/{id}")))
-        .send()
-        .await
-        .unwrap()
-        .json::<Value>()
-        .await
-        .unwrap()["max_lod"]
+    let max_lod = get_json(&c, &s, &format!("/v1/textures/{id}")).await["max_lod"]
         .as_u64()
         .unwrap();
 

@@ -94,10 +94,7 @@ async fn tampered_textures_are_not_served_and_share_nothing() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn candidates_of_other_exemplars_are_not_loaded() {
-    let dir = tempfile::tempdir().unwrap();
-    let c = client();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let a = ready_texture(&c, &s, 24).await;
+    let (dir, s, c, a) = server_with_texture(24).await;
     let b = ready_texture(&c, &s, 25).await;
     let slice = |s: &TestServer| s.url(&format!("/v1/textures/{a}/slices/z/0.png?w=16&h=16"));
     let (_, _, before) = get(&c, &slice(&s)).await;
@@ -137,10 +134,7 @@ struct SynthParamsVersion1 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn data_directories_of_the_first_layout_still_load() {
-    let dir = tempfile::tempdir().unwrap();
-    let c = client();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let new_id = ready_texture(&c, &s, 26).await;
+    let (dir, s, c, new_id) = server_with_texture(26).await;
     s.stop().await;
 
     // Rewrite it as the first layout stored it: without the keys added
@@ -211,10 +205,7 @@ async fn data_directories_of_the_first_layout_still_load() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_second_server_on_the_same_data_directory_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let c = client();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let id = ready_texture(&c, &s, 27).await;
+    let (dir, s, c, id) = server_with_texture(27).await;
     let err = Server::bind(&test_args(dir.path()))
         .await
         .err()
@@ -285,10 +276,7 @@ async fn entries_the_server_did_not_write_are_left_alone() {
 /// directory already in the way of the rename that starts it does.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_delete_that_fails_on_disk_leaves_the_texture_served() {
-    let dir = tempfile::tempdir().unwrap();
-    let c = client();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let id = ready_texture(&c, &s, 28).await;
+    let (dir, s, c, id) = server_with_texture(28).await;
     let blocker = dir
         .path()
         .join("textures")

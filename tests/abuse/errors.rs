@@ -91,10 +91,7 @@ async fn requests_hyper_cannot_parse_get_json_errors() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn degenerate_cut_planes_are_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let c = client();
-    let id = ready_texture(&c, &s, 3).await;
+    let (_dir, s, c, id) = server_with_texture(3).await;
     let cut = |q: &str| s.url(&format!("/v1/textures/{id}/cut.png?w=8&h=8&{q}"));
     for q in [
         "u=0,0,0",
@@ -121,10 +118,7 @@ async fn degenerate_cut_planes_are_refused() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn cuts_reach_as_far_as_slices() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let c = client();
-    let id = ready_texture(&c, &s, 4).await;
+    let (_dir, s, c, id) = server_with_texture(4).await;
     let t = |p: &str| s.url(&format!("/v1/textures/{id}{p}"));
     // The plane x = 2^31, as a slice and as a cut sampling whole voxels.
     let (st, _, slice) = get(&c, &t("/slices/x/2147483648.png?u0=5&v0=6&w=4&h=4")).await;
@@ -152,10 +146,7 @@ async fn cuts_reach_as_far_as_slices() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn parameters_given_twice_are_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let s = TestServer::start(test_args(dir.path())).await;
-    let c = client();
-    let id = ready_texture(&c, &s, 5).await;
+    let (_dir, s, c, id) = server_with_texture(5).await;
     let (st, h, b) = get(
         &c,
         &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=4&h=4&w=8")),
@@ -172,52 +163,44 @@ async fn parameters_given_twice_are_refused() {
             .mime_str("image/png")
             .unwrap()
     };
-    let post = |form: reqwest::multipart::Form, query: &'static str| {
-        let c = c.clone();
-        let url = s.url(&format!("/v1/textures{query}"));
-        async move {
-            let r = c.post(url).multipart(form).send().await.unwrap();
-            let status = r.status().as_u16();
-            let v: serde_json::Value = r.json().await.unwrap();
-            (status, v)
-        }
+    let form = |params: &[&str]| {
+        params.iter().fold(
+            reqwest::multipart::Form::new().part("image", part()),
+            |f, p| f.text("params", p.to_string()),
+        )
     };
-    // Two `params` fields.
-    let form = reqwest::multipart::Form::new()
-        .part("image", part())
-        .text("params", r#"{"levels": 3}"#)
-        .text("params", r#"{"seed": 9}"#);
-    let (st, v) = post(form, "").await;
-    assert_eq!(
-        (st, v["error"]["code"].as_str()),
-        (400, Some("invalid_request")),
-        "{v}"
-    );
-    // A key twice in one `params`.
-    let form = reqwest::multipart::Form::new()
-        .part("image", part())
-        .text("params", r#"{"levels": 3, "seed": 1, "seed": 2}"#);
-    let (st, v) = post(form, "").await;
-    assert_eq!(
-        (st, v["error"]["code"].as_str()),
-        (400, Some("invalid_params")),
-        "{v}"
-    );
-    // A key in the query and in `params`.
-    let form = reqwest::multipart::Form::new()
-        .part("image", part())
-        .text("params", r#"{"levels": 3, "seed": 2}"#);
-    let (st, v) = post(form, "?seed=1").await;
-    assert_eq!(
-        (st, v["error"]["code"].as_str()),
-        (400, Some("invalid_params")),
-        "{v}"
-    );
+    let refused = [
+        // Two `params` fields.
+        (
+            form(&[r#"{"levels": 3}"#, r#"{"seed": 9}"#]),
+            "",
+            "invalid_request",
+        ),
+        // A key twice in one `params`.
+        (
+            form(&[r#"{"levels": 3, "seed": 1, "seed": 2}"#]),
+            "",
+            "invalid_params",
+        ),
+        // A key in the query and in `params`.
+        (
+            form(&[r#"{"levels": 3, "seed": 2}"#]),
+            "?seed=1",
+            "invalid_params",
+        ),
+    ];
+    for (f, query, code) in refused {
+        let (st, h, b) = post_form(&c, &s.url(&format!("/v1/textures{query}")), f).await;
+        assert_error(st, &h, &b, 400, code);
+    }
     // Each once: accepted.
-    let form = reqwest::multipart::Form::new()
-        .part("image", part())
-        .text("params", r#"{"levels": 3}"#);
-    let (st, v) = post(form, "?seed=1").await;
+    let (st, _, b) = post_form(
+        &c,
+        &s.url("/v1/textures?seed=1"),
+        form(&[r#"{"levels": 3}"#]),
+    )
+    .await;
+    let v: serde_json::Value = serde_json::from_slice(&b).unwrap();
     assert!(st == 201 || st == 202, "{st} {v}");
     assert_eq!(v["params"]["seed"], 1);
     s.stop().await;

@@ -107,25 +107,30 @@ pub async fn upload_form(
     s: &TestServer,
     form: reqwest::multipart::Form,
 ) -> (u16, Value) {
-    let r = c
-        .post(s.url("/v1/textures"))
-        .multipart(form)
-        .send()
-        .await
-        .unwrap();
+    let (status, _, body) = post_form(c, &s.url("/v1/textures"), form).await;
+    (status, serde_json::from_slice(&body).unwrap())
+}
+
+/// POSTs a multipart form and returns (status, headers, body).
+pub async fn post_form(
+    c: &reqwest::Client,
+    url: &str,
+    form: reqwest::multipart::Form,
+) -> (u16, reqwest::header::HeaderMap, Vec<u8>) {
+    let r = c.post(url).multipart(form).send().await.unwrap();
     let status = r.status().as_u16();
-    (status, r.json().await.unwrap())
+    let headers = r.headers().clone();
+    (status, headers, r.bytes().await.unwrap().to_vec())
 }
 
 /// GETs `path` and reads its JSON body, whatever the status.
 pub async fn get_json(c: &reqwest::Client, s: &TestServer, path: &str) -> Value {
-    c.get(s.url(path))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap()
+    get_json_url(c, &s.url(path)).await
+}
+
+/// GETs a URL and reads its JSON body, whatever the status.
+pub async fn get_json_url(c: &reqwest::Client, url: &str) -> Value {
+    c.get(url).send().await.unwrap().json().await.unwrap()
 }
 
 /// Polls a texture until it is ready (panics if it fails or takes too long).
@@ -144,6 +149,18 @@ pub async fn wait_ready(c: &reqwest::Client, s: &TestServer, id: &str) -> Value 
         );
         tokio::time::sleep(Duration::from_millis(25)).await;
     }
+}
+
+/// A server on a fresh data directory (kept while the directory lives)
+/// with one ready texture made from [`exemplar_png`] of `seed`, and a client.
+pub async fn server_with_texture(
+    seed: u32,
+) -> (tempfile::TempDir, TestServer, reqwest::Client, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let id = ready_texture(&c, &s, seed).await;
+    (dir, s, c, id)
 }
 
 /// Uploads a small exemplar and waits until it is ready; returns its id.

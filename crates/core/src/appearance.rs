@@ -270,46 +270,37 @@ fn has_avx() -> bool {
     false
 }
 
-/// Dot product with eight independent accumulators, so the compiler can
-/// keep it in SIMD registers; the summation order is fixed, so results do
-/// not depend on the caller.
-#[inline]
-pub fn dot(a: &[f32], b: &[f32]) -> f32 {
+/// Sum of `term` over paired elements with eight independent accumulators,
+/// so the compiler can keep it in SIMD registers; the summation order is
+/// fixed, so results do not depend on the caller.
+#[inline(always)]
+fn sum8(a: &[f32], b: &[f32], term: impl Fn(f32, f32) -> f32) -> f32 {
     let n = a.len().min(b.len());
     let (ca, ta) = a[..n].as_chunks::<8>();
     let (cb, tb) = b[..n].as_chunks::<8>();
     let mut acc = [0f32; 8];
     for (x, y) in ca.iter().zip(cb) {
         for l in 0..8 {
-            acc[l] += x[l] * y[l];
+            acc[l] += term(x[l], y[l]);
         }
     }
     let mut tail = 0f32;
     for (x, y) in ta.iter().zip(tb) {
-        tail += x * y;
+        tail += term(*x, *y);
     }
     ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
 }
 
-/// Squared L2 distance with eight independent accumulators (SIMD-friendly,
-/// fixed summation order so results do not depend on the caller).
+/// Dot product (see [`sum8`]).
+#[inline]
+pub fn dot(a: &[f32], b: &[f32]) -> f32 {
+    sum8(a, b, |x, y| x * y)
+}
+
+/// Squared L2 distance (see [`sum8`]).
 #[inline]
 pub fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
-    let n = a.len().min(b.len());
-    let (ca, ta) = a[..n].as_chunks::<8>();
-    let (cb, tb) = b[..n].as_chunks::<8>();
-    let mut acc = [0f32; 8];
-    for (x, y) in ca.iter().zip(cb) {
-        for l in 0..8 {
-            let e = x[l] - y[l];
-            acc[l] += e * e;
-        }
-    }
-    let mut tail = 0f32;
-    for (x, y) in ta.iter().zip(tb) {
-        tail += (x - y) * (x - y);
-    }
-    ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7])) + tail
+    sum8(a, b, |x, y| (x - y) * (x - y))
 }
 
 /// Gathers the N×N neighbourhood of (x, y) at level `k` (spacing 2^k) as

@@ -359,29 +359,20 @@ impl Candidates {
 
         progress(Stage::Analysis, 0.0);
         let stacks = build_stacks(exemplars, levels_n);
-        let appearance_pca = fit_appearance(&stacks, dims, params, single, progress);
+        let stages = Stages {
+            stacks: &stacks,
+            dims,
+            params,
+            single,
+            progress,
+        };
+        let appearance_pca = stages.fit_appearance();
         lap(&mut report, "analysis");
-        let raw_lists = search_levels(&stacks, dims, params, single, progress);
+        let raw_lists = stages.search_levels();
         lap(&mut report, "search");
-        let filtered_levels = filter_levels(
-            raw_lists,
-            &stacks,
-            dims,
-            params,
-            single,
-            &mut report,
-            progress,
-        );
+        let filtered_levels = stages.filter_levels(raw_lists, &mut report);
         lap(&mut report, "coherence");
-        let stored = finish_levels(
-            filtered_levels,
-            appearance_pca,
-            &stacks,
-            dims,
-            params,
-            single,
-            progress,
-        );
+        let stored = stages.finish_levels(filtered_levels, appearance_pca);
         let levels = derive_levels(&stacks, stored, n, single, layout.arrangement.weights);
         lap(&mut report, "finish");
         Ok(Candidates {
@@ -551,174 +542,167 @@ trait PopSingle {
     fn pop_single(self) -> PlaneCandidates;
 }
 
-/// Appearance PCA of every level's N×N neighbourhoods, per plane (fitted on
-/// a sample of pixels).
-fn fit_appearance(
-    stacks: &[GaussianStack; 3],
+/// What every precompute stage reads.
+#[derive(Clone, Copy)]
+struct Stages<'a> {
+    stacks: &'a [GaussianStack; 3],
     dims: Dims,
-    params: &AnalysisParams,
+    params: &'a AnalysisParams,
     single: bool,
-    progress: &(dyn Fn(Stage, f32) + Sync),
-) -> Vec<[Pca; 3]> {
-    let (levels_n, n) = (params.levels as usize, params.neighbourhood);
-    let mut appearance_pca: Vec<[Pca; 3]> = Vec::new();
-    for k in 0..levels_n {
-        let fit = |p: usize| {
-            let all = appearance::all_neighbourhoods(&stacks[p], k, n);
-            let stride = (dims.len() / 8192).max(1);
-            let len = (n * n * 3) as usize;
-            let sample: Vec<f32> = all
-                .chunks_exact(len)
-                .step_by(stride)
-                .flatten()
-                .copied()
-                .collect();
-            Pca::fit(&sample, len, params.pca_dims as usize)
-        };
-        let first = fit(0);
-        let pcas = if single {
-            [first.clone(), first.clone(), first]
-        } else {
-            [first, fit(1), fit(2)]
-        };
-        appearance_pca.push(pcas);
-        progress(Stage::Analysis, (k + 1) as f32 / levels_n as f32);
-    }
-    appearance_pca
+    progress: &'a (dyn Fn(Stage, f32) + Sync),
 }
 
-/// Per level and searched plane, every pixel's best triples by crossbar
-/// error (Dong et al.'s candidate search).
-fn search_levels(
-    stacks: &[GaussianStack; 3],
-    dims: Dims,
-    params: &AnalysisParams,
-    single: bool,
-    progress: &(dyn Fn(Stage, f32) + Sync),
-) -> Vec<Vec<Vec<Vec<Scored>>>> {
-    let (levels_n, n) = (params.levels as usize, params.neighbourhood);
-    let mut raw_lists: Vec<Vec<Vec<Vec<Scored>>>> = Vec::new();
-    for k in 0..levels_n {
-        let strips: Vec<Strips> = if single {
-            vec![Strips::new(&stacks[0], k, n)]
-        } else {
-            (0..3).map(|p| Strips::new(&stacks[p], k, n)).collect()
-        };
-        let refs: [&Strips; 3] = if single {
-            [&strips[0], &strips[0], &strips[0]]
-        } else {
-            [&strips[0], &strips[1], &strips[2]]
-        };
-        let planes = if single { 1 } else { 3 };
-        let per_plane: Vec<Vec<Vec<Scored>>> = (0..planes)
-            .map(|p| {
-                search::search_plane(
-                    p,
-                    refs,
-                    dims,
-                    params.strips as usize,
-                    params.triples as usize,
-                )
-            })
-            .collect();
-        raw_lists.push(per_plane);
-        progress(Stage::Search, (k + 1) as f32 / levels_n as f32);
-    }
-    raw_lists
-}
-
-/// The searched lists filtered for coherence, per level and plane, with
-/// each level's report.
-fn filter_levels(
-    raw_lists: Vec<Vec<Vec<Vec<Scored>>>>,
-    stacks: &[GaussianStack; 3],
-    dims: Dims,
-    params: &AnalysisParams,
-    single: bool,
-    report: &mut PrecomputeReport,
-    progress: &(dyn Fn(Stage, f32) + Sync),
-) -> Vec<[PlaneCandidates; 3]> {
-    let (levels_n, n) = (params.levels as usize, params.neighbourhood);
-    let mut filtered_levels: Vec<[PlaneCandidates; 3]> = Vec::new();
-    for (k, per_plane) in raw_lists.into_iter().enumerate() {
-        let h = spacing(k) as i64;
-        let mut level_report = LevelReport {
-            histogram: vec![0; params.max_candidates as usize + 1],
-            ..Default::default()
-        };
-        let mut planes: Vec<PlaneCandidates> = Vec::new();
-        for (p, lists) in per_plane.into_iter().enumerate() {
-            let f = coherence::filter(p, lists, dims, h, params.max_candidates as usize);
-            let copies = if single { 3 } else { 1 };
-            for l in &f.lists {
-                level_report.histogram[l.len()] += copies;
-            }
-            level_report.fallbacks += f.fallbacks as u64 * copies;
-            level_report.iterations = level_report.iterations.max(f.iterations as u32);
-            planes.push(PlaneCandidates::from_lists(&f.lists));
+impl Stages<'_> {
+    /// Appearance PCA of every level's N×N neighbourhoods, per plane (fitted on
+    /// a sample of pixels).
+    fn fit_appearance(&self) -> Vec<[Pca; 3]> {
+        let (levels_n, n) = (self.params.levels as usize, self.params.neighbourhood);
+        let mut appearance_pca: Vec<[Pca; 3]> = Vec::new();
+        for k in 0..levels_n {
+            let fit = |p: usize| {
+                let all = appearance::all_neighbourhoods(&self.stacks[p], k, n);
+                let stride = (self.dims.len() / 8192).max(1);
+                let len = (n * n * 3) as usize;
+                let sample: Vec<f32> = all
+                    .chunks_exact(len)
+                    .step_by(stride)
+                    .flatten()
+                    .copied()
+                    .collect();
+                Pca::fit(&sample, len, self.params.pca_dims as usize)
+            };
+            let first = fit(0);
+            let pcas = if self.single {
+                [first.clone(), first.clone(), first]
+            } else {
+                [first, fit(1), fit(2)]
+            };
+            appearance_pca.push(pcas);
+            (self.progress)(Stage::Analysis, (k + 1) as f32 / levels_n as f32);
         }
-        let planes: [PlaneCandidates; 3] = if single {
-            let base = planes.pop_single();
-            [base.clone(), base.rotated(1), base.rotated(2)]
-        } else {
-            planes.try_into().expect("three planes")
-        };
-        level_report.mean_best_error = mean_best_error(&planes);
-        level_report.mean_random_error = mean_random_error(stacks, k, n, dims);
-        report.levels.push(level_report);
-        filtered_levels.push(planes);
-        progress(Stage::Coherence, (k + 1) as f32 / levels_n as f32);
+        appearance_pca
     }
-    filtered_levels
-}
 
-/// What is stored per level: the candidates with their appearance PCA,
-/// similarity sets, and the joint projection of their neighbourhoods.
-fn finish_levels(
-    filtered_levels: Vec<[PlaneCandidates; 3]>,
-    appearance_pca: Vec<[Pca; 3]>,
-    stacks: &[GaussianStack; 3],
-    dims: Dims,
-    params: &AnalysisParams,
-    single: bool,
-    progress: &(dyn Fn(Stage, f32) + Sync),
-) -> Vec<StoredLevel> {
-    let (levels_n, n) = (params.levels as usize, params.neighbourhood);
-    let mut stored = Vec::new();
-    for (k, candidates) in filtered_levels.into_iter().enumerate() {
-        let pcas = appearance_pca[k].clone();
-        let appearance: Vec<AppearanceLevel> = (0..3)
-            .map(|p| appearance::project_all(&stacks[p], k, n, &pcas[p]))
-            .collect();
-        let k2 = if k == 0 {
-            params.similar_fine
-        } else {
-            params.similar_coarse
-        } as usize;
-        let similar_0 = similar_sets(&appearance[0], dims, k2, spacing(k) as i64);
-        let similar = if single {
-            [similar_0.clone(), similar_0.clone(), similar_0]
-        } else {
-            [
-                similar_0,
-                similar_sets(&appearance[1], dims, k2, spacing(k) as i64),
-                similar_sets(&appearance[2], dims, k2, spacing(k) as i64),
-            ]
-        };
-        let joint_dims = joint_dims(k, levels_n);
-        let joint_pca = fit_joint(&appearance, &candidates, joint_dims);
-        let quant_scale = quant_scale(&appearance, &candidates, &joint_pca);
-        stored.push(StoredLevel {
-            appearance_pca: pcas,
-            candidates,
-            similar,
-            k2,
-            joint_pca,
-            quant_scale,
-        });
-        progress(Stage::Finish, (k + 1) as f32 / levels_n as f32);
+    /// Per level and searched plane, every pixel's best triples by crossbar
+    /// error (Dong et al.'s candidate search).
+    fn search_levels(&self) -> Vec<Vec<Vec<Vec<Scored>>>> {
+        let (levels_n, n) = (self.params.levels as usize, self.params.neighbourhood);
+        let mut raw_lists: Vec<Vec<Vec<Vec<Scored>>>> = Vec::new();
+        for k in 0..levels_n {
+            let strips: Vec<Strips> = if self.single {
+                vec![Strips::new(&self.stacks[0], k, n)]
+            } else {
+                (0..3).map(|p| Strips::new(&self.stacks[p], k, n)).collect()
+            };
+            let refs: [&Strips; 3] = if self.single {
+                [&strips[0], &strips[0], &strips[0]]
+            } else {
+                [&strips[0], &strips[1], &strips[2]]
+            };
+            let planes = if self.single { 1 } else { 3 };
+            let per_plane: Vec<Vec<Vec<Scored>>> = (0..planes)
+                .map(|p| {
+                    search::search_plane(
+                        p,
+                        refs,
+                        self.dims,
+                        self.params.strips as usize,
+                        self.params.triples as usize,
+                    )
+                })
+                .collect();
+            raw_lists.push(per_plane);
+            (self.progress)(Stage::Search, (k + 1) as f32 / levels_n as f32);
+        }
+        raw_lists
     }
-    stored
+
+    /// The searched lists filtered for coherence, per level and plane, with
+    /// each level's report.
+    fn filter_levels(
+        &self,
+        raw_lists: Vec<Vec<Vec<Vec<Scored>>>>,
+        report: &mut PrecomputeReport,
+    ) -> Vec<[PlaneCandidates; 3]> {
+        let (levels_n, n) = (self.params.levels as usize, self.params.neighbourhood);
+        let mut filtered_levels: Vec<[PlaneCandidates; 3]> = Vec::new();
+        for (k, per_plane) in raw_lists.into_iter().enumerate() {
+            let h = spacing(k) as i64;
+            let mut level_report = LevelReport {
+                histogram: vec![0; self.params.max_candidates as usize + 1],
+                ..Default::default()
+            };
+            let mut planes: Vec<PlaneCandidates> = Vec::new();
+            for (p, lists) in per_plane.into_iter().enumerate() {
+                let f =
+                    coherence::filter(p, lists, self.dims, h, self.params.max_candidates as usize);
+                let copies = if self.single { 3 } else { 1 };
+                for l in &f.lists {
+                    level_report.histogram[l.len()] += copies;
+                }
+                level_report.fallbacks += f.fallbacks as u64 * copies;
+                level_report.iterations = level_report.iterations.max(f.iterations as u32);
+                planes.push(PlaneCandidates::from_lists(&f.lists));
+            }
+            let planes: [PlaneCandidates; 3] = if self.single {
+                let base = planes.pop_single();
+                [base.clone(), base.rotated(1), base.rotated(2)]
+            } else {
+                planes.try_into().expect("three planes")
+            };
+            level_report.mean_best_error = mean_best_error(&planes);
+            level_report.mean_random_error = mean_random_error(self.stacks, k, n, self.dims);
+            report.levels.push(level_report);
+            filtered_levels.push(planes);
+            (self.progress)(Stage::Coherence, (k + 1) as f32 / levels_n as f32);
+        }
+        filtered_levels
+    }
+
+    /// What is stored per level: the candidates with their appearance PCA,
+    /// similarity sets, and the joint projection of their neighbourhoods.
+    fn finish_levels(
+        &self,
+        filtered_levels: Vec<[PlaneCandidates; 3]>,
+        appearance_pca: Vec<[Pca; 3]>,
+    ) -> Vec<StoredLevel> {
+        let (levels_n, n) = (self.params.levels as usize, self.params.neighbourhood);
+        let mut stored = Vec::new();
+        for (k, candidates) in filtered_levels.into_iter().enumerate() {
+            let pcas = appearance_pca[k].clone();
+            let appearance: Vec<AppearanceLevel> = (0..3)
+                .map(|p| appearance::project_all(&self.stacks[p], k, n, &pcas[p]))
+                .collect();
+            let k2 = if k == 0 {
+                self.params.similar_fine
+            } else {
+                self.params.similar_coarse
+            } as usize;
+            let similar_0 = similar_sets(&appearance[0], self.dims, k2, spacing(k) as i64);
+            let similar = if self.single {
+                [similar_0.clone(), similar_0.clone(), similar_0]
+            } else {
+                [
+                    similar_0,
+                    similar_sets(&appearance[1], self.dims, k2, spacing(k) as i64),
+                    similar_sets(&appearance[2], self.dims, k2, spacing(k) as i64),
+                ]
+            };
+            let joint_dims = joint_dims(k, levels_n);
+            let joint_pca = fit_joint(&appearance, &candidates, joint_dims);
+            let quant_scale = quant_scale(&appearance, &candidates, &joint_pca);
+            stored.push(StoredLevel {
+                appearance_pca: pcas,
+                candidates,
+                similar,
+                k2,
+                joint_pca,
+                quant_scale,
+            });
+            (self.progress)(Stage::Finish, (k + 1) as f32 / levels_n as f32);
+        }
+        stored
+    }
 }
 
 impl PopSingle for Vec<PlaneCandidates> {
