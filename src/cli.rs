@@ -6,8 +6,8 @@ use anyhow::{Context, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use solidtex::{
-    AnalysisParams, Axis, Candidates, Correction, Exemplar, ExemplarSet, Region, Scheme, Slices,
-    Stage, SynthParams, Texture, TileCache,
+    AnalysisParams, Axis, Candidates, Correction, Exemplar, ExemplarSet, Region, Scheme,
+    SlabTiling, Slices, Stage, SynthParams, Texture, TileCache,
 };
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -265,6 +265,10 @@ struct SynthArgs {
     /// initialisation level (Dong et al.: N).
     #[arg(long, default_value_t = solidtex::params::DEFAULT_SLAB_THICKNESS)]
     slab_thickness: u32,
+    /// How the slab is cut for tiling: cells (a jittered grid, borders at
+    /// every angle) or blocks (axis-aligned squares).
+    #[arg(long, default_value_t = SynthParams::default().slab_tiling)]
+    slab_tiling: SlabTiling,
     /// What a correction matches: appearance (sparse appearance-space
     /// neighbourhoods, 12 diagonal locations) or colour (N×N colour
     /// neighbourhoods).
@@ -295,6 +299,7 @@ impl SynthArgs {
             slices: self.slices,
             consistency: self.consistency,
             slab_thickness: self.slab_thickness,
+            slab_tiling: self.slab_tiling,
             correction: self.correction,
             ..base
         }

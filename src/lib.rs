@@ -31,7 +31,7 @@ pub use candidates::{Candidates, PrecomputeReport, Stage};
 pub use error::{CorruptKind, Error, Result};
 pub use exemplar::{Exemplar, ExemplarSet};
 pub use params::{
-    AnalysisParams, Arrangement, Correction, Orientation, Scheme, Slices, SynthParams,
+    AnalysisParams, Arrangement, Correction, Orientation, Scheme, SlabTiling, Slices, SynthParams,
 };
 pub use synth::cache::{CacheStats, TileCache};
 pub use synth::cancel::{CancelFlag, Cancelled, run_cancellable};

@@ -168,6 +168,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("fine_levels", "1"),
     ("correction", r#""colour""#),
     ("orientation", r#""none""#),
+    ("slab_tiling", r#""blocks""#),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
@@ -526,6 +527,16 @@ mod tests {
             TextureParams::from_flat(&old).unwrap().analysis.orientation,
             crate::Orientation::Auto
         );
+        // Its slab was tiled in axis-aligned blocks.
+        old.remove("slab_tiling");
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.slab_tiling,
+            crate::SlabTiling::Blocks
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.slab_tiling,
+            crate::SlabTiling::Cells
+        );
     }
 
     #[test]
@@ -661,6 +672,7 @@ mod tests {
             "correction",
             "finest_passes",
             "slab_thickness",
+            "slab_tiling",
         ] {
             old.remove(k);
         }
