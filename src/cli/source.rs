@@ -6,8 +6,8 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use solidtex_core::{
-    AnalysisParams, Candidates, Correction, Exemplar, ExemplarSet, Scheme, Slices, Stage,
-    SynthParams, SynthStats, Texture, TileCache,
+    AnalysisParams, Candidates, Correction, Exemplar, ExemplarSet, Scheme, SlabTiling, Slices,
+    Stage, SynthParams, SynthStats, Texture, TileCache,
 };
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -73,6 +73,10 @@ pub struct SynthArgs {
     /// initialisation level (Dong et al.: N).
     #[arg(long, default_value_t = SynthParams::default().slab_thickness)]
     slab_thickness: u32,
+    /// How the slab is cut for tiling: cells (a jittered grid, borders at
+    /// every angle) or blocks (axis-aligned squares).
+    #[arg(long, default_value_t = SynthParams::default().slab_tiling)]
+    slab_tiling: SlabTiling,
     /// What a correction matches: appearance (sparse appearance-space
     /// neighbourhoods, 12 diagonal locations) or colour (N×N colour
     /// neighbourhoods).
@@ -103,6 +107,7 @@ impl SynthArgs {
             slices: self.slices,
             consistency: self.consistency,
             slab_thickness: self.slab_thickness,
+            slab_tiling: self.slab_tiling,
             correction: self.correction,
             ..base
         }

@@ -149,6 +149,7 @@ async fn data_directories_of_the_first_layout_still_load() {
         "correction",
         "finest_passes",
         "slab_thickness",
+        "slab_tiling",
     ] {
         params.remove(k).unwrap();
     }

@@ -32,7 +32,7 @@ pub use error::{CorruptKind, Error, Result};
 pub use exemplar::{Exemplar, ExemplarSet};
 pub use orientation::{Grain, Layout};
 pub use params::{
-    AnalysisParams, Arrangement, Correction, Orientation, Scheme, Slices, SynthParams,
+    AnalysisParams, Arrangement, Correction, Orientation, Scheme, SlabTiling, Slices, SynthParams,
 };
 pub use request::{Axis, COORD_LIMIT, CutPlane, Filter, MAX_REGION_VOXELS, MAX_SLICE_SIDE, Region};
 pub use synth::cache::{CacheStats, TileCache};

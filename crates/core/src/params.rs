@@ -289,6 +289,46 @@ impl std::str::FromStr for Correction {
     }
 }
 
+/// How the candidate slab is cut into pieces for tiling, each piece with
+/// its own hashed offset (see [`SynthParams::slab_tiling`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum SlabTiling {
+    /// Axis-aligned squares. Each copies one region of the exemplar, and
+    /// the correction mends their seams only locally: the squares, with
+    /// their straight borders and the brightness of the region each copied,
+    /// stay visible in the result (docs/quality.md). Textures stored before
+    /// cells keep them.
+    Blocks,
+    /// Cells of a jittered 3D grid as large as the blocks (a Voronoi
+    /// partition of hashed sites), cut by the slab layers: borders at
+    /// every angle, none on an axis.
+    #[default]
+    Cells,
+}
+
+impl std::fmt::Display for SlabTiling {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SlabTiling::Blocks => "blocks",
+            SlabTiling::Cells => "cells",
+        })
+    }
+}
+
+impl std::str::FromStr for SlabTiling {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "blocks" => Ok(SlabTiling::Blocks),
+            "cells" => Ok(SlabTiling::Cells),
+            _ => Err(Error::InvalidRequest(format!(
+                "unknown slab tiling `{s}` (expected cells or blocks)"
+            ))),
+        }
+    }
+}
+
 /// Default [`SynthParams::contrast`], measured on the shared exemplars
 /// (docs/quality.md).
 pub const DEFAULT_CONTRAST: f32 = 1.6;
@@ -359,6 +399,8 @@ pub struct SynthParams {
     /// removes. One-voxel layers start those slices isotropic
     /// (docs/quality.md).
     pub slab_thickness: u32,
+    /// How the slab is cut into pieces that are tiled with hashed offsets.
+    pub slab_tiling: SlabTiling,
     /// What a correction matches.
     pub correction: Correction,
 }
@@ -391,6 +433,7 @@ impl Default for SynthParams {
             slices: Slices::Sparse,
             consistency: DEFAULT_CONSISTENCY,
             slab_thickness: DEFAULT_SLAB_THICKNESS,
+            slab_tiling: SlabTiling::default(),
             correction: Correction::default(),
         }
     }

@@ -178,6 +178,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("fine_levels", "1"),
     ("correction", r#""colour""#),
     ("orientation", r#""none""#),
+    ("slab_tiling", r#""blocks""#),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
@@ -538,6 +539,16 @@ mod tests {
             TextureParams::from_flat(&old).unwrap().analysis.orientation,
             solidtex_core::Orientation::Auto
         );
+        // Its slab was tiled in axis-aligned blocks.
+        old.remove("slab_tiling");
+        assert_eq!(
+            TextureParams::from_stored(&old).unwrap().synth.slab_tiling,
+            solidtex_core::SlabTiling::Blocks
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.slab_tiling,
+            solidtex_core::SlabTiling::Cells
+        );
     }
 
     #[test]
@@ -665,6 +676,7 @@ mod tests {
             "correction",
             "finest_passes",
             "slab_thickness",
+            "slab_tiling",
         ] {
             old.remove(k);
         }

@@ -279,6 +279,7 @@ impl Engine {
                             &self.cands,
                             self.params.seed,
                             self.params.slab_thickness,
+                            self.params.slab_tiling,
                             &field,
                             k,
                             p,

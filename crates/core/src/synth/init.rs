@@ -4,11 +4,13 @@
 
 use crate::candidates::Candidates;
 use crate::candidates::geometry::offset_triple;
-use crate::hash::{hash_pos, unit as unit_f};
+use crate::hash::{hash_pos, mix, unit as unit_f};
+use crate::params::SlabTiling;
 use crate::stack::spacing;
 
 const TAG_SLAB: u32 = 1;
 const TAG_JITTER: u32 = 2;
+const TAG_CELL: u32 = 3;
 
 /// Gaussians per jitter cell; cells are a quarter of the exemplar period,
 /// so the density matches the slides' G = 200 per exemplar-sized volume.
@@ -16,30 +18,80 @@ const GAUSSIANS_PER_CELL: u64 = 3;
 
 /// The candidate slab (Dong et al.): every xy pixel's first candidate,
 /// thickened along z by its own neighbourhoods, `thickness` voxels thick
-/// (Dong et al.: N). It is tiled over space in blocks (half an exemplar
-/// period wide, one layer thick), each block shifted by a hashed offset, so
-/// the initialisation has no period at all; the seams between blocks are
-/// what the correction then repairs (Zhang et al.'s subpart initialisation,
-/// §4.1).
-pub fn slab_triple(c: &Candidates, seed: u64, thickness: u32, k: usize, p: [i64; 3]) -> [u32; 3] {
+/// (Dong et al.: N). It is tiled over space in pieces about half an exemplar
+/// period wide and one layer thick, each shifted by a hashed offset, so the
+/// initialisation has no period at all; the seams between pieces are what
+/// the correction then repairs (Zhang et al.'s subpart initialisation,
+/// §4.1). The pieces are `tiling`'s: the correction mends a seam only
+/// locally, so whatever shape the pieces have stays visible.
+pub fn slab_triple(
+    c: &Candidates,
+    seed: u64,
+    thickness: u32,
+    tiling: SlabTiling,
+    k: usize,
+    p: [i64; 3],
+) -> [u32; 3] {
     let n = thickness as i64;
     let r = n / 2;
     let h = spacing(k) as i64;
     let dims = c.dims();
-    let block_xy = (period(c, k) as i64 / 2).max(4);
-    let block = [
-        p[0].div_euclid(block_xy),
-        p[1].div_euclid(block_xy),
-        (p[2] + r).div_euclid(n),
-    ];
+    let side = (period(c, k) as i64 / 2).max(4);
+    let layer = (p[2] + r).div_euclid(n);
+    let o = match tiling {
+        SlabTiling::Blocks => {
+            let block = [p[0].div_euclid(side), p[1].div_euclid(side), layer];
+            hash_pos(seed, k as u32, TAG_SLAB, block)
+        }
+        SlabTiling::Cells => cell(seed, k, side, layer, p),
+    };
     let dz = (p[2] + r).rem_euclid(n) - r;
-    let o = hash_pos(seed, k as u32, TAG_SLAB, block);
     let ox = (o % dims.w as u64) as i64;
     let oy = ((o >> 32) % dims.h as u64) as i64;
     let pixel = dims.index(p[0] * h + ox, p[1] * h + oy);
     let cands = c.level(k).candidates(0);
     let first = cands.triples[cands.range(pixel).start];
     offset_triple(dims, first, [0, 0, dz], h)
+}
+
+/// Sub-voxel steps of a cell's site: voxel centres lie half a voxel off the
+/// sites' grid, so a voxel is almost never equally far from two sites.
+const SITE_STEPS: i64 = 256;
+
+/// The cell that holds `p`, and the hash of its slab offset in `layer`.
+/// Cubes of side `side` each own one site at a hashed position inside
+/// them, and a voxel belongs to the nearest site among its own cube's and
+/// the 26 around it (a jittered-grid Voronoi partition, in integers so
+/// every machine draws the same borders). Borders run at every angle, and
+/// they are the same in neighbouring layers, as the blocks' were: a seam
+/// scattered anew in every layer would spoil far more x and y slice
+/// neighbourhoods than one that continues across the layers.
+fn cell(seed: u64, k: usize, side: i64, layer: i64, p: [i64; 3]) -> u64 {
+    let span = side * SITE_STEPS;
+    let at = p.map(|v| v * SITE_STEPS + SITE_STEPS / 2);
+    let cube = at.map(|v| v.div_euclid(span));
+    let mut best = (i64::MAX, cube);
+    for dz in -1..=1 {
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let c = [cube[0] + dx, cube[1] + dy, cube[2] + dz];
+                let hs = hash_pos(seed, k as u32, TAG_CELL, c);
+                let hz = mix(hs);
+                let site = [
+                    c[0] * span + (hs % span as u64) as i64,
+                    c[1] * span + ((hs >> 32) % span as u64) as i64,
+                    c[2] * span + (hz % span as u64) as i64,
+                ];
+                let d2: i64 = (0..3).map(|a| (at[a] - site[a]).pow(2)).sum();
+                if d2 < best.0 {
+                    best = (d2, c);
+                }
+            }
+        }
+    }
+    let c = best.1;
+    // Cells that share a layer differ in their cube's x, y or z.
+    mix(hash_pos(seed, k as u32, TAG_SLAB, [c[0], c[1], layer]) ^ c[2] as u64)
 }
 
 /// The exemplar's period in voxels of level `k`.
@@ -156,13 +208,14 @@ pub fn initial_triple(
     c: &Candidates,
     seed: u64,
     slab_thickness: u32,
+    slab_tiling: SlabTiling,
     field: &JitterField,
     k: usize,
     p: [i64; 3],
 ) -> [u32; 3] {
     let d = field.displacement(p);
     let q = [0, 1, 2].map(|a| p[a] + d[a].round() as i64);
-    slab_triple(c, seed, slab_thickness, k, q)
+    slab_triple(c, seed, slab_thickness, slab_tiling, k, q)
 }
 
 /// Upsampling (Zhang et al. eq. 3–4): a child inherits its parent's triple
