@@ -578,6 +578,10 @@ mod tests {
             "invalid_params"
         );
         assert_eq!(
+            code(TextureParams::from_json(r#"{"slab_tiling": "squares"}"#).unwrap_err()),
+            "invalid_params"
+        );
+        assert_eq!(
             code(TextureParams::from_json(r#"{"neighbourhood": 4}"#).unwrap_err()),
             "invalid_request"
         );
@@ -592,10 +596,12 @@ mod tests {
             ("correct_init_level", "false"),
             ("contrast", "1.25"),
             ("slices", "full"),
+            ("slab_tiling", "blocks"),
         ];
         let flat = TextureParams::flat_from_pairs(pairs.into_iter());
         let p = TextureParams::from_flat(&flat).unwrap();
         assert_eq!(p.synth.slices, solidtex_core::Slices::Full);
+        assert_eq!(p.synth.slab_tiling, solidtex_core::SlabTiling::Blocks);
         assert_eq!(p.synth.seed, 7);
         assert_eq!(p.synth.jitter, 0.5);
         assert!(!p.synth.correct_init_level);
