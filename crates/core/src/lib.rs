@@ -18,6 +18,7 @@ mod candidates;
 mod error;
 pub mod eval;
 mod exemplar;
+mod field;
 pub mod hash;
 mod orientation;
 mod params;
@@ -30,6 +31,7 @@ mod texture;
 pub use candidates::{Candidates, PrecomputeReport, Stage};
 pub use error::{CorruptKind, Error, Result};
 pub use exemplar::{Exemplar, ExemplarSet};
+pub use field::{Along, Curve, Field, Sketch};
 pub use orientation::{Grain, Layout};
 pub use params::{
     AnalysisParams, Arrangement, Correction, Orientation, Scheme, SlabTiling, Slices, SynthParams,

@@ -3,6 +3,7 @@
 //! synthesis parameters shape the voxels produced from them.
 
 use crate::error::{Error, Result};
+use crate::field::Field;
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the exemplar analysis and 3D candidate precomputation.
@@ -403,6 +404,11 @@ pub struct SynthParams {
     pub slab_tiling: SlabTiling,
     /// What a correction matches.
     pub correction: Correction,
+    /// The field of local frames the texture follows (see [`Field`]);
+    /// none keeps every voxel's frame on the world axes. Needs the
+    /// appearance correction.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<Field>,
 }
 
 /// Default [`SynthParams::fine_levels`], measured on the shared exemplars
@@ -435,6 +441,7 @@ impl Default for SynthParams {
             slab_thickness: DEFAULT_SLAB_THICKNESS,
             slab_tiling: SlabTiling::default(),
             correction: Correction::default(),
+            field: None,
         }
     }
 }
@@ -467,6 +474,14 @@ impl SynthParams {
         range("contrast", self.contrast, 1.0, 4.0)?;
         range("consistency", self.consistency, 0.0, 1024.0)?;
         range("slab_thickness", self.slab_thickness, 1, 9)?;
+        if let Some(field) = &self.field {
+            field.validate()?;
+            if self.correction != Correction::Appearance {
+                return Err(Error::InvalidRequest(
+                    "field: a field needs the appearance correction".into(),
+                ));
+            }
+        }
         Ok(())
     }
 }
