@@ -6,8 +6,8 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use solidtex_core::{
-    AnalysisParams, Candidates, Correction, Exemplar, ExemplarSet, Scheme, SlabTiling, Slices,
-    Stage, SynthParams, SynthStats, Texture, TileCache,
+    AnalysisParams, Candidates, Correction, Exemplar, ExemplarSet, Field, Scheme, SlabTiling,
+    Slices, Stage, SynthParams, SynthStats, Texture, TileCache,
 };
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -82,6 +82,21 @@ pub struct SynthArgs {
     /// neighbourhoods).
     #[arg(long, default_value_t = SynthParams::default().correction)]
     correction: Correction,
+    /// A field of local frames the texture follows: a preset
+    /// (`slant:ANGLE`, `circular[:CX,CY]`, `emissive[:CX,CY]`,
+    /// `zigzag:ANGLE,PERIOD`, `slant3d:DX,DY,DZ`), a JSON object, or
+    /// `@FILE` holding one (docs/fields.md).
+    #[arg(long, value_parser = parse_field)]
+    field: Option<Field>,
+}
+
+/// A `--field` value, reading `@FILE` from the file.
+fn parse_field(s: &str) -> anyhow::Result<Field> {
+    let text = match s.strip_prefix('@') {
+        Some(path) => std::fs::read_to_string(path).with_context(|| format!("reading {path}"))?,
+        None => s.to_string(),
+    };
+    Ok(text.parse()?)
 }
 
 impl SynthArgs {
@@ -109,6 +124,7 @@ impl SynthArgs {
             slab_thickness: self.slab_thickness,
             slab_tiling: self.slab_tiling,
             correction: self.correction,
+            field: self.field.clone(),
             ..base
         }
     }

@@ -112,6 +112,44 @@ impl RgbView<'_> {
     }
 }
 
+/// The grain of one window of an image (see [`grain_map`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WindowGrain {
+    /// The window's centre, in pixels.
+    pub centre: [f64; 2],
+    /// Its grain: direction in degrees from u towards v, and coherence.
+    pub grain: crate::Grain,
+}
+
+/// The dominant orientation of each `window`×`window` square of `image`
+/// (whole squares only), from the structure tensor of its luminance: how a
+/// synthesized slice's grain can be checked against a field.
+pub fn grain_map(image: RgbView, window: u32) -> Vec<WindowGrain> {
+    image.check("image");
+    let n = window.max(2) as usize;
+    let mut out = Vec::new();
+    for wy in 0..image.height as usize / n {
+        for wx in 0..image.width as usize / n {
+            let (x0, y0) = (wx * n, wy * n);
+            let grain = crate::Grain::of(n, n, false, |x, y| {
+                let p = image.pixel(x0 + x, y0 + y);
+                crate::orientation::luminance([p[0], p[1], p[2]])
+            });
+            out.push(WindowGrain {
+                centre: [x0 as f64 + n as f64 / 2.0, y0 as f64 + n as f64 / 2.0],
+                grain,
+            });
+        }
+    }
+    out
+}
+
+/// The angle between two undirected lines given in degrees, 0 to 90.
+pub fn line_angle(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(180.0);
+    d.min(180.0 - d)
+}
+
 /// Scores of one slice against an exemplar; lower is better for all three.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SliceScores {

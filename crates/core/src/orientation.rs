@@ -63,17 +63,24 @@ impl Grain {
     /// exemplars' shading).
     pub fn measure(e: &Exemplar) -> Grain {
         let (w, h) = (e.width() as usize, e.height() as usize);
-        let lum: Vec<f64> = e
-            .pixels()
-            .iter()
-            .map(|p| 0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64)
-            .collect();
-        let at = |x: usize, y: usize| lum[(y % h) * w + x % w];
+        let lum: Vec<f64> = e.pixels().iter().map(|p| luminance(*p)).collect();
+        Grain::of(w, h, true, |x, y| lum[(y % h) * w + x % w])
+    }
+
+    /// Measures the `w`×`h` image whose luminance at (x, y) is `at`: over
+    /// every pixel with `wrap` (reading `at` one past the edges), else
+    /// between the pixels only.
+    pub(crate) fn of(w: usize, h: usize, wrap: bool, at: impl Fn(usize, usize) -> f64) -> Grain {
+        let (nx, ny) = if wrap {
+            (w, h)
+        } else {
+            (w.saturating_sub(1), h.saturating_sub(1))
+        };
         let (mut xx, mut yy, mut xy) = (0f64, 0f64, 0f64);
-        for y in 0..h {
-            for x in 0..w {
-                // The gradient at the corner between four pixels (wrapping):
-                // centred, and reaching one pixel rather than two.
+        for y in 0..ny {
+            for x in 0..nx {
+                // The gradient at the corner between four pixels: centred,
+                // and reaching one pixel rather than two.
                 let (a, b, c, d) = (at(x, y), at(x + 1, y), at(x, y + 1), at(x + 1, y + 1));
                 let gx = (b - a + d - c) / 2.0;
                 let gy = (c - a + d - b) / 2.0;
@@ -117,6 +124,11 @@ impl Grain {
             None
         }
     }
+}
+
+/// Rec. 601 luminance of an RGB8 pixel.
+pub(crate) fn luminance(p: [u8; 3]) -> f64 {
+    0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64
 }
 
 /// The arrangement a texture's candidates are computed with, and what was

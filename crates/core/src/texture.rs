@@ -31,7 +31,7 @@ impl Texture {
     ) -> Result<Texture> {
         params.validate()?;
         Ok(Texture {
-            engine: Arc::new(Engine::new(candidates, params, cache)),
+            engine: Arc::new(Engine::new(candidates, params, cache)?),
         })
     }
 
@@ -49,6 +49,15 @@ impl Texture {
     /// The synthesis parameters.
     pub fn params(&self) -> &SynthParams {
         self.engine.params()
+    }
+
+    /// The local frame of the texture's field at `p` (in voxels of the
+    /// finest level): the local x, y and z axes in world coordinates, the
+    /// world axes when the texture has no field.
+    pub fn frame(&self, p: [f64; 3]) -> [[f64; 3]; 3] {
+        self.engine
+            .field()
+            .map_or(crate::field::IDENTITY, |f| f.frame(p))
     }
 
     /// Highest level of detail served: lod k is pyramid level L−k, voxels

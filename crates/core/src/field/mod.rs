@@ -77,6 +77,94 @@ pub enum Field {
     Sketch(Sketch),
 }
 
+impl std::str::FromStr for Field {
+    type Err = Error;
+    /// A field as JSON (`{"kind":"slant","angle":30}`, the only form for a
+    /// sketch), or a preset in short: `slant:ANGLE`, `circular[:CX,CY]`,
+    /// `emissive[:CX,CY]`, `zigzag:ANGLE,PERIOD`, `slant3d:DX,DY,DZ` (the
+    /// centres on the z axis through (CX, CY)). The field is validated.
+    fn from_str(s: &str) -> Result<Field> {
+        let s = s.trim();
+        let field = if s.starts_with('{') {
+            serde_json::from_str(s).map_err(|e| Error::InvalidRequest(format!("field: {e}")))?
+        } else {
+            let (kind, args) = s.split_once(':').unwrap_or((s, ""));
+            let nums: Vec<f64> = if args.is_empty() {
+                Vec::new()
+            } else {
+                args.split(',')
+                    .map(|v| v.trim().parse::<f64>())
+                    .collect::<std::result::Result<_, _>>()
+                    .map_err(|_| {
+                        Error::InvalidRequest(format!("field: `{args}` is not a list of numbers"))
+                    })?
+            };
+            let want = |n: &[usize]| -> Result<()> {
+                if n.contains(&nums.len()) {
+                    Ok(())
+                } else {
+                    Err(Error::InvalidRequest(format!(
+                        "field: `{kind}` takes {} numbers, not {}",
+                        n.iter()
+                            .map(|v| v.to_string())
+                            .collect::<Vec<_>>()
+                            .join(" or "),
+                        nums.len()
+                    )))
+                }
+            };
+            let centre = || {
+                [
+                    nums.first().copied().unwrap_or(0.0),
+                    nums.get(1).copied().unwrap_or(0.0),
+                    0.0,
+                ]
+            };
+            match kind {
+                "slant" => {
+                    want(&[1])?;
+                    Field::Slant { angle: nums[0] }
+                }
+                "circular" => {
+                    want(&[0, 2])?;
+                    Field::Circular {
+                        centre: centre(),
+                        axis: Z,
+                    }
+                }
+                "emissive" => {
+                    want(&[0, 2])?;
+                    Field::Emissive {
+                        centre: centre(),
+                        axis: Z,
+                    }
+                }
+                "zigzag" => {
+                    want(&[2])?;
+                    Field::Zigzag {
+                        angle: nums[0],
+                        period: nums[1],
+                    }
+                }
+                "slant3d" => {
+                    want(&[3])?;
+                    Field::Slant3d {
+                        direction: [nums[0], nums[1], nums[2]],
+                    }
+                }
+                _ => {
+                    return Err(Error::InvalidRequest(format!(
+                        "field: unknown preset `{kind}` (expected slant, circular, emissive, \
+                         zigzag, slant3d, or a JSON object)"
+                    )));
+                }
+            }
+        };
+        field.validate()?;
+        Ok(field)
+    }
+}
+
 fn z_axis() -> [f64; 3] {
     [0.0, 0.0, 1.0]
 }
@@ -89,7 +177,9 @@ impl Field {
             if v.iter().all(|x| x.is_finite() && x.abs() <= MAX_COORD) {
                 Ok(())
             } else {
-                bad(format!("{name} must be finite numbers of at most {MAX_COORD:e}"))
+                bad(format!(
+                    "{name} must be finite numbers of at most {MAX_COORD:e}"
+                ))
             }
         };
         match self {
@@ -150,6 +240,13 @@ impl Field {
     }
 }
 
+/// Where the point `p` of level `k` (in its voxels) sits, in voxels of the
+/// finest level: a voxel stands for the 2^k-wide cube around its centre.
+pub(crate) fn world(k: usize, p: [f64; 3]) -> [f64; 3] {
+    let h = (1u64 << k) as f64;
+    p.map(|v| (v + 0.5) * h - 0.5)
+}
+
 /// A [`Field`] ready to read at any point.
 pub(crate) enum FrameField {
     /// The same frame everywhere.
@@ -167,6 +264,11 @@ pub(crate) enum FrameField {
 }
 
 impl FrameField {
+    /// The local frame of voxel `p` of level `k`.
+    pub(crate) fn frame_at(&self, k: usize, p: [i64; 3]) -> Frame {
+        self.frame(world(k, p.map(|v| v as f64)))
+    }
+
     /// The local frame at `p` (voxels of the finest level).
     pub(crate) fn frame(&self, p: [f64; 3]) -> Frame {
         match self {
@@ -309,17 +411,29 @@ mod tests {
         assert!((slant[0][1] - 0.5).abs() < 1e-12);
         // Circular: at +x of the centre, local x points along +y.
         let circ = fields[1].compile().unwrap().frame([20.0, -4.0, 3.0]);
-        assert!(sub(circ[0], [0.0, 1.0, 0.0]).iter().all(|v| v.abs() < 1e-12));
+        assert!(
+            sub(circ[0], [0.0, 1.0, 0.0])
+                .iter()
+                .all(|v| v.abs() < 1e-12)
+        );
         // Emissive: local x points away from the axis.
         let emis = fields[2].compile().unwrap().frame([10.0, -4.0, 7.0]);
-        assert!(sub(emis[0], [0.0, 0.0, 1.0]).iter().all(|v| v.abs() < 1e-12));
+        assert!(
+            sub(emis[0], [0.0, 0.0, 1.0])
+                .iter()
+                .all(|v| v.abs() < 1e-12)
+        );
         // Zigzag: the angle flips from one band to the next.
         let zig = fields[3].compile().unwrap();
         assert!(zig.frame([1.0, 0.0, 0.0])[0][1] > 0.7);
         assert!(zig.frame([17.0, 0.0, 0.0])[0][1] < -0.7);
         assert!(zig.frame([-1.0, 0.0, 0.0])[0][1] < -0.7);
         let s3 = fields[4].compile().unwrap().frame([0.0; 3]);
-        assert!(sub(s3[0], unit([1.0, 2.0, 3.0])).iter().all(|v| v.abs() < 1e-12));
+        assert!(
+            sub(s3[0], unit([1.0, 2.0, 3.0]))
+                .iter()
+                .all(|v| v.abs() < 1e-12)
+        );
     }
 
     #[test]
@@ -340,6 +454,44 @@ mod tests {
             r#"{"kind":"slant"}"#,
         ] {
             assert!(serde_json::from_str::<Field>(json).is_err(), "{json}");
+        }
+    }
+
+    #[test]
+    fn short_forms_name_the_presets() {
+        assert_eq!(
+            "slant:30".parse::<Field>().unwrap(),
+            Field::Slant { angle: 30.0 }
+        );
+        assert_eq!(
+            "circular:64,-8".parse::<Field>().unwrap(),
+            Field::Circular {
+                centre: [64.0, -8.0, 0.0],
+                axis: [0.0, 0.0, 1.0]
+            }
+        );
+        assert_eq!(
+            "zigzag:40, 32".parse::<Field>().unwrap(),
+            Field::Zigzag {
+                angle: 40.0,
+                period: 32.0
+            }
+        );
+        assert_eq!(
+            r#"{"kind":"slant3d","direction":[1,0,1]}"#.parse::<Field>().unwrap(),
+            Field::Slant3d {
+                direction: [1.0, 0.0, 1.0]
+            }
+        );
+        for bad in [
+            "spiral",
+            "slant",
+            "slant:x",
+            "zigzag:40",
+            "emissive:1",
+            "zigzag:40,0",
+        ] {
+            assert!(bad.parse::<Field>().is_err(), "{bad}");
         }
     }
 

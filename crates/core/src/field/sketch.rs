@@ -43,7 +43,9 @@ pub struct Sketch {
 impl Sketch {
     /// Checks the curves.
     pub fn validate(&self) -> Result<()> {
-        Err(Error::InvalidRequest("field: sketch fields are not supported yet".into()))
+        Err(Error::InvalidRequest(
+            "field: sketch fields are not supported yet".into(),
+        ))
     }
 
     /// Interpolates the curves' frames over a grid.

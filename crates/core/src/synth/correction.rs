@@ -43,6 +43,7 @@ use super::grid::{Box3, Grid};
 use crate::appearance::Projector;
 use crate::candidates::geometry::{AXES, Dims, offset_triple};
 use crate::candidates::{Candidates, Level, SIMILAR_DIMS, quantise, sum_of_squares};
+use crate::field::{Frame, FrameField};
 use crate::params::{Correction, Slices, SynthParams};
 use crate::stack::spacing;
 use appearance::AppearanceCorrector;
@@ -131,18 +132,30 @@ pub struct ColourCorrector<'a> {
 pub enum Corrector<'a> {
     /// Sparse appearance-space neighbourhoods.
     Appearance(Box<AppearanceCorrector<'a>>),
+    /// Sparse appearance-space neighbourhoods in each voxel's local frame.
+    Field(Box<AppearanceCorrector<'a>>, &'a FrameField),
     /// Colour neighbourhoods.
     Colour(Box<ColourCorrector<'a>>),
 }
 
 impl<'a> Corrector<'a> {
-    /// The corrector of level `k`.
-    pub fn new(cands: &'a Candidates, k: usize, params: &SynthParams) -> Self {
-        match params.correction {
-            Correction::Appearance => {
+    /// The corrector of level `k`, in the frames of `field` if there is one
+    /// (the parameters' validation keeps fields to the appearance
+    /// correction).
+    pub fn new(
+        cands: &'a Candidates,
+        k: usize,
+        params: &SynthParams,
+        field: Option<&'a FrameField>,
+    ) -> Self {
+        match (params.correction, field) {
+            (Correction::Appearance, None) => {
                 Corrector::Appearance(Box::new(AppearanceCorrector::new(cands, k, params)))
             }
-            Correction::Colour => {
+            (Correction::Appearance, Some(f)) => {
+                Corrector::Field(Box::new(AppearanceCorrector::new(cands, k, params)), f)
+            }
+            (Correction::Colour, _) => {
                 Corrector::Colour(Box::new(ColourCorrector::new(cands, k, params)))
             }
         }
@@ -172,7 +185,7 @@ impl<'a> Corrector<'a> {
         // Most voxels read no neighbour across the cell wall: their copy of
         // the correction has no version choices to make.
         let r = match self {
-            Corrector::Appearance(_) => 1,
+            Corrector::Appearance(_) | Corrector::Field(..) => 1,
             Corrector::Colour(c) => c.reach,
         };
         if inside.iter().all(|&(lo, hi)| lo <= -r && hi >= r) {
@@ -196,6 +209,10 @@ impl<'a> Corrector<'a> {
     ) -> [u32; 3] {
         match self {
             Corrector::Appearance(c) => c.correct_with::<BY_WALL>(work, start, inside, p),
+            Corrector::Field(c, field) => {
+                let local = Local::new(&field.frame_at(c.level_index(), p), c.spacing());
+                c.correct_local_with::<BY_WALL>(work, start, inside, p, &local)
+            }
             Corrector::Colour(c) => c.correct_with::<BY_WALL>(work, start, inside, p, s),
         }
     }
@@ -527,6 +544,91 @@ fn gather_near<const BY_WALL: bool>(
         let [r, g, b] = src.colours.data[idx];
         near.colours[k] = [r, g, b, 0.0];
         moved[k] = offset_triple(dims, near.triples[k], d.map(|v| -v), h);
+    }
+    (near, moved)
+}
+
+/// A voxel's neighbourhood in its local frame (Zhang et al. §4.3): which
+/// world neighbour stands at each in-plane offset of each local plane, and
+/// where each world neighbour lies in local coordinates. The neighbours
+/// are the nearest voxels to the rotated offsets; a rotated offset of at
+/// most √2 rounds into {−1, 0, 1}³, so the reads stay within radius 1,
+/// corners included.
+pub struct Local {
+    /// Per plane, per in-plane offset (i, j) at `3 (j + 1) + i + 1`, the
+    /// [`near_slot`] of the world neighbour there.
+    slot: [[u8; 9]; 3],
+    /// Per [`near_slot`], the world offset in local coordinates times the
+    /// level's spacing, rounded: exemplar pixels to move by.
+    offset: [[i64; 3]; 27],
+}
+
+impl Local {
+    /// The neighbourhood of a voxel whose local frame is `frame`, at a
+    /// level of spacing `h`.
+    pub fn new(frame: &Frame, h: i64) -> Local {
+        let mut offset = [[0i64; 3]; 27];
+        for (k, o) in offset.iter_mut().enumerate() {
+            let d = [
+                (k % 3) as f64 - 1.0,
+                ((k / 3) % 3) as f64 - 1.0,
+                (k / 9) as f64 - 1.0,
+            ];
+            *o = [0, 1, 2].map(|a| {
+                let e = frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2];
+                (e * h as f64).round() as i64
+            });
+        }
+        let mut slot = [[0u8; 9]; 3];
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            for j in -1..=1i64 {
+                for i in -1..=1i64 {
+                    let d = [0, 1, 2].map(|w| {
+                        let v = frame[a][w] * i as f64 + frame[b][w] * j as f64;
+                        (v.round() as i64).clamp(-1, 1)
+                    });
+                    slot[plane][(3 * (j + 1) + i + 1) as usize] = near_slot(d) as u8;
+                }
+            }
+        }
+        Local { slot, offset }
+    }
+
+    /// The near slot at in-plane offset (i, j) of `plane`.
+    #[inline(always)]
+    fn slot(&self, plane: usize, i: i64, j: i64) -> usize {
+        self.slot[plane][(3 * (j + 1) + i + 1) as usize] as usize
+    }
+}
+
+/// [`gather_near`] in a local frame: all 27 neighbours (rotated offsets
+/// reach the corners), each moved back by its offset in local coordinates.
+#[inline(always)]
+fn gather_local<const BY_WALL: bool>(
+    work: &Work,
+    start: &Work,
+    inside: [(i64, i64); 3],
+    p: [i64; 3],
+    dims: Dims,
+    local: &Local,
+) -> (Near, [[u32; 3]; 27]) {
+    let strides = work.triples.strides();
+    let centre = work.triples.index(p) as i64;
+    let mut near = Near::default();
+    let mut moved = [[u32::MAX; 3]; 27];
+    for (k, m) in moved.iter_mut().enumerate() {
+        let d = [
+            (k % 3) as i64 - 1,
+            ((k / 3) % 3) as i64 - 1,
+            (k / 9) as i64 - 1,
+        ];
+        let idx = (centre + d[0] * strides[0] + d[1] * strides[1] + d[2] * strides[2]) as usize;
+        let inside = !BY_WALL || (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
+        let src = if inside { work } else { start };
+        near.triples[k] = src.triples.data[idx];
+        let [r, g, b] = src.colours.data[idx];
+        near.colours[k] = [r, g, b, 0.0];
+        *m = offset_triple(dims, near.triples[k], local.offset[k].map(|v| -v), 1);
     }
     (near, moved)
 }

@@ -93,6 +93,7 @@ impl Engine {
             targets,
             self.steps_at(k),
             self.radius,
+            self.field.is_some(),
             self.params.subpass_side as i64,
             self.barrier_cell(),
             |pass, forward, voxels| {
@@ -185,7 +186,7 @@ impl Engine {
         // cached once it ends.
         let mut ended: HashMap<[i64; 3], u64> = HashMap::default();
         let mut work = Work::new(&self.cands, k, triples);
-        let corrector = Corrector::new(&self.cands, k, &self.params);
+        let corrector = Corrector::new(&self.cands, k, &self.params, self.field.as_deref());
         let mut step_start: Option<(usize, Work)> = None;
         let mut current_pass = 0;
         let classes = (side * side * side) as usize;
@@ -267,23 +268,22 @@ impl Engine {
             if acc.dry {
                 return g;
             }
-            let field =
+            let jitter =
                 init::JitterField::new(&self.cands, self.params.seed, self.params.jitter, k, &b);
+            let slab = init::Slab {
+                cands: &self.cands,
+                seed: self.params.seed,
+                thickness: self.params.slab_thickness,
+                tiling: self.params.slab_tiling,
+                field: self.field.as_deref(),
+            };
             g.data
                 .par_chunks_mut(layer)
                 .zip(zs.par_iter())
                 .for_each(|(dst, &z)| {
                     for p in need.layer(z) {
                         let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
-                        dst[i] = init::initial_triple(
-                            &self.cands,
-                            self.params.seed,
-                            self.params.slab_thickness,
-                            self.params.slab_tiling,
-                            &field,
-                            k,
-                            p,
-                        );
+                        dst[i] = slab.initial_triple(&jitter, k, p);
                     }
                 });
             return g;
@@ -301,7 +301,7 @@ impl Engine {
                     let q = p.map(|v| v.div_euclid(2));
                     let parent = parents[&Self::tile_of(q)].get(q);
                     let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
-                    dst[i] = init::upsample(&self.cands, parent, k, p);
+                    dst[i] = init::upsample(&self.cands, parent, k, p, self.field.as_deref());
                 }
             });
         g

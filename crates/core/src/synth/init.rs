@@ -4,6 +4,7 @@
 
 use crate::candidates::Candidates;
 use crate::candidates::geometry::offset_triple;
+use crate::field::{FrameField, world};
 use crate::hash::{hash_pos, mix, unit as unit_f};
 use crate::params::SlabTiling;
 use crate::stack::spacing;
@@ -24,11 +25,47 @@ const GAUSSIANS_PER_CELL: u64 = 3;
 /// the correction then repairs (Zhang et al.'s subpart initialisation,
 /// §4.1). The pieces are `tiling`'s: the correction mends a seam only
 /// locally, so whatever shape the pieces have stays visible.
-pub fn slab_triple(
+pub struct Slab<'a> {
+    /// The candidates whose slab is tiled.
+    pub cands: &'a Candidates,
+    /// The texture's seed.
+    pub seed: u64,
+    /// Layer thickness (see [`crate::SynthParams::slab_thickness`]).
+    pub thickness: u32,
+    /// How the slab is cut into pieces.
+    pub tiling: SlabTiling,
+    /// The texture's field, if any.
+    pub field: Option<&'a FrameField>,
+}
+
+impl Slab<'_> {
+    /// Version 0 of the initial level `k` at `p`: the slab, warped by the
+    /// jitter.
+    pub fn initial_triple(&self, jitter: &JitterField, k: usize, p: [i64; 3]) -> [u32; 3] {
+        let d = jitter.displacement(p);
+        let q = [0, 1, 2].map(|a| p[a] + d[a].round() as i64);
+        self.triple(k, q)
+    }
+
+    /// The tiled slab's triple at `p` of level `k`.
+    pub fn triple(&self, k: usize, p: [i64; 3]) -> [u32; 3] {
+        let (c, seed, thickness, tiling, field) = (
+            self.cands,
+            self.seed,
+            self.thickness,
+            self.tiling,
+            self.field,
+        );
+        slab_triple(c, seed, thickness, tiling, field, k, p)
+    }
+}
+
+fn slab_triple(
     c: &Candidates,
     seed: u64,
     thickness: u32,
     tiling: SlabTiling,
+    field: Option<&FrameField>,
     k: usize,
     p: [i64; 3],
 ) -> [u32; 3] {
@@ -37,13 +74,41 @@ pub fn slab_triple(
     let h = spacing(k) as i64;
     let dims = c.dims();
     let side = (period(c, k) as i64 / 2).max(4);
-    let layer = (p[2] + r).div_euclid(n);
-    let o = match tiling {
+    // The piece that holds `p`, and the point it turns about in a field.
+    let (piece, pivot) = match tiling {
         SlabTiling::Blocks => {
-            let block = [p[0].div_euclid(side), p[1].div_euclid(side), layer];
-            hash_pos(seed, k as u32, TAG_SLAB, block)
+            let block = [p[0].div_euclid(side), p[1].div_euclid(side)];
+            let centre = block.map(|b| (b * side) as f64 + (side as f64 - 1.0) / 2.0);
+            (Piece::Block(block), [centre[0], centre[1], p[2] as f64])
         }
-        SlabTiling::Cells => cell(seed, k, side, layer, p),
+        SlabTiling::Cells => {
+            let (cube, site) = nearest_site(seed, k, side, p);
+            let site = site.map(|v| v as f64 / SITE_STEPS as f64 - 0.5);
+            (Piece::Cell(cube), site)
+        }
+    };
+    // In a field, each piece is the slab turned into the local frame at
+    // its pivot (Zhang et al. §4.1's T([q⁻¹ v]), piece by piece as their
+    // subpart initialisation): one frame for a whole piece keeps the
+    // piece undistorted wherever the field bends.
+    let p = match field {
+        None => p,
+        Some(f) => {
+            let frame = f.frame(world(k, pivot));
+            let d = [0, 1, 2].map(|a| p[a] as f64 - pivot[a]);
+            [0, 1, 2].map(|a| {
+                let e = frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2];
+                (pivot[a] + e).round() as i64
+            })
+        }
+    };
+    let layer = (p[2] + r).div_euclid(n);
+    let o = match piece {
+        Piece::Block(block) => hash_pos(seed, k as u32, TAG_SLAB, [block[0], block[1], layer]),
+        // Cells that share a layer differ in their cube's x, y or z.
+        Piece::Cell(c) => {
+            mix(hash_pos(seed, k as u32, TAG_SLAB, [c[0], c[1], layer]) ^ c[2] as u64)
+        }
     };
     let dz = (p[2] + r).rem_euclid(n) - r;
     let ox = (o % dims.w as u64) as i64;
@@ -54,23 +119,32 @@ pub fn slab_triple(
     offset_triple(dims, first, [0, 0, dz], h)
 }
 
+/// A piece of the tiled slab.
+enum Piece {
+    /// An axis-aligned block, by its x and y index.
+    Block([i64; 2]),
+    /// A cell, by the cube of its site.
+    Cell([i64; 3]),
+}
+
 /// Sub-voxel steps of a cell's site: voxel centres lie half a voxel off the
 /// sites' grid, so a voxel is almost never equally far from two sites.
 const SITE_STEPS: i64 = 256;
 
-/// The cell that holds `p`, and the hash of its slab offset in `layer`.
-/// Cubes of side `side` each own one site at a hashed position inside
-/// them, and a voxel belongs to the nearest site among its own cube's and
-/// the 26 around it (a jittered-grid Voronoi partition, in integers so
-/// every machine draws the same borders). Borders run at every angle, and
-/// they are the same in neighbouring layers, as the blocks' were: a seam
-/// scattered anew in every layer would spoil far more x and y slice
-/// neighbourhoods than one that continues across the layers.
-fn cell(seed: u64, k: usize, side: i64, layer: i64, p: [i64; 3]) -> u64 {
+/// The cell that holds `p`: its site's cube, and the site in
+/// [`SITE_STEPS`] of a voxel. Cubes of side `side` each own one site at a
+/// hashed position inside them, and a voxel belongs to the nearest site
+/// among its own cube's and the 26 around it (a jittered-grid Voronoi
+/// partition, in integers so every machine draws the same borders).
+/// Borders run at every angle, and they are the same in neighbouring
+/// layers, as the blocks' were: a seam scattered anew in every layer would
+/// spoil far more x and y slice neighbourhoods than one that continues
+/// across the layers.
+fn nearest_site(seed: u64, k: usize, side: i64, p: [i64; 3]) -> ([i64; 3], [i64; 3]) {
     let span = side * SITE_STEPS;
     let at = p.map(|v| v * SITE_STEPS + SITE_STEPS / 2);
     let cube = at.map(|v| v.div_euclid(span));
-    let mut best = (i64::MAX, cube);
+    let mut best = (i64::MAX, cube, at);
     for dz in -1..=1 {
         for dy in -1..=1 {
             for dx in -1..=1 {
@@ -84,14 +158,12 @@ fn cell(seed: u64, k: usize, side: i64, layer: i64, p: [i64; 3]) -> u64 {
                 ];
                 let d2: i64 = (0..3).map(|a| (at[a] - site[a]).pow(2)).sum();
                 if d2 < best.0 {
-                    best = (d2, c);
+                    best = (d2, c, site);
                 }
             }
         }
     }
-    let c = best.1;
-    // Cells that share a layer differ in their cube's x, y or z.
-    mix(hash_pos(seed, k as u32, TAG_SLAB, [c[0], c[1], layer]) ^ c[2] as u64)
+    (best.1, best.2)
 }
 
 /// The exemplar's period in voxels of level `k`.
@@ -203,28 +275,34 @@ impl JitterField {
     }
 }
 
-/// Version 0 of the initial level at `p`: the slab, warped by the jitter.
-pub fn initial_triple(
-    c: &Candidates,
-    seed: u64,
-    slab_thickness: u32,
-    slab_tiling: SlabTiling,
-    field: &JitterField,
-    k: usize,
-    p: [i64; 3],
-) -> [u32; 3] {
-    let d = field.displacement(p);
-    let q = [0, 1, 2].map(|a| p[a] + d[a].round() as i64);
-    slab_triple(c, seed, slab_thickness, slab_tiling, k, q)
-}
-
 /// Upsampling (Zhang et al. eq. 3–4): a child inherits its parent's triple
 /// moved by its offset within the parent, scaled by the child level's
 /// spacing.
+/// In a field the offset is taken in the parent's local frame (their
+/// eq. 3), rounded to exemplar pixels.
 #[inline]
-pub fn upsample(c: &Candidates, parent: [u32; 3], k: usize, p: [i64; 3]) -> [u32; 3] {
+pub fn upsample(
+    c: &Candidates,
+    parent: [u32; 3],
+    k: usize,
+    p: [i64; 3],
+    field: Option<&FrameField>,
+) -> [u32; 3] {
     let o = p.map(|v| v.rem_euclid(2));
-    offset_triple(c.dims(), parent, o, spacing(k) as i64)
+    match field {
+        None => offset_triple(c.dims(), parent, o, spacing(k) as i64),
+        Some(f) => {
+            let frame = f.frame_at(k + 1, p.map(|v| v.div_euclid(2)));
+            let h = spacing(k) as f64;
+            let local = [0, 1, 2].map(|a| {
+                let e = frame[a][0] * o[0] as f64
+                    + frame[a][1] * o[1] as f64
+                    + frame[a][2] * o[2] as f64;
+                (e * h).round() as i64
+            });
+            offset_triple(c.dims(), parent, local, 1)
+        }
+    }
 }
 
 /// e^(−x) for x ≥ 0 from basic arithmetic only, so every machine computes

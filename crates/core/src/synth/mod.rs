@@ -37,6 +37,7 @@ mod stats;
 
 use crate::candidates::Candidates;
 use crate::error::Result;
+use crate::field::FrameField;
 use crate::params::{Correction, Scheme, SynthParams};
 use crate::request::{CutPlane, Filter, Region};
 use cache::{Claim, Tile, TileCache, TileKey};
@@ -119,6 +120,8 @@ impl Acc {
 pub(crate) struct Engine {
     cands: Arc<Candidates>,
     params: SynthParams,
+    /// The texture's field of local frames, ready to read.
+    field: Option<Arc<FrameField>>,
     cache: Arc<TileCache>,
     key: u64,
     init_level: usize,
@@ -154,7 +157,16 @@ fn steps_for(params: &SynthParams, passes: u32) -> Vec<Step> {
 }
 
 impl Engine {
-    pub(crate) fn new(cands: Arc<Candidates>, params: SynthParams, cache: Arc<TileCache>) -> Self {
+    pub(crate) fn new(
+        cands: Arc<Candidates>,
+        params: SynthParams,
+        cache: Arc<TileCache>,
+    ) -> Result<Self> {
+        let field = params
+            .field
+            .as_ref()
+            .map(|f| f.compile().map(Arc::new))
+            .transpose()?;
         let mut bytes = cands.digest().to_le_bytes().to_vec();
         bytes.extend_from_slice(&serde_json::to_vec(&params).expect("params serialise"));
         let key = crate::hash::fingerprint(&bytes);
@@ -173,6 +185,7 @@ impl Engine {
             cell: params.grid as i64,
             cands,
             params,
+            field,
             cache,
             key,
             steps,
@@ -189,7 +202,12 @@ impl Engine {
                 )
             })
             .collect();
-        engine
+        Ok(engine)
+    }
+
+    /// The texture's field, ready to read.
+    pub(crate) fn field(&self) -> Option<&FrameField> {
+        self.field.as_deref()
     }
 
     /// The dual grid's cell side, or `None` under the standard scheme.
@@ -415,6 +433,7 @@ impl Engine {
         Engine {
             cands: self.cands.clone(),
             params: self.params.clone(),
+            field: self.field.clone(),
             cache: Arc::new(TileCache::new(usize::MAX)),
             key: self.key,
             init_level: self.init_level,
@@ -480,6 +499,7 @@ impl Engine {
             levels.len(),
             &levels,
             radius,
+            self.field.is_some(),
             self.params.subpass_side as i64,
             cell,
         )

@@ -49,8 +49,20 @@ pub struct LevelPlan {
 
 /// The voxels a correction at `v` reads: its three axis-aligned N×N slice
 /// neighbourhoods (which contain the 3×3 in-plane neighbours whose triples
-/// gather candidates).
-fn shape(v: [i64; 3], r: i64, mut f: impl FnMut([i64; 3])) {
+/// gather candidates), or with `cube` the whole (2r + 1)³ cube around it
+/// (a correction in a local frame, whose rotated neighbourhoods reach the
+/// corners).
+fn shape(v: [i64; 3], r: i64, cube: bool, mut f: impl FnMut([i64; 3])) {
+    if cube {
+        for z in -r..=r {
+            for y in -r..=r {
+                for x in -r..=r {
+                    f([v[0] + x, v[1] + y, v[2] + z]);
+                }
+            }
+        }
+        return;
+    }
     for (a, b) in [(0usize, 1usize), (1, 2), (2, 0)] {
         for j in -r..=r {
             for i in -r..=r {
@@ -253,6 +265,7 @@ pub fn backward(
     targets: &[[i64; 3]],
     steps: &[Step],
     radius: i64,
+    cube: bool,
     side: i64,
     cell: Option<i64>,
     mut known_after: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
@@ -298,11 +311,11 @@ pub fn backward(
                 .par_iter()
                 .with_min_len(1024)
                 .for_each(|&v| match cell {
-                    None => shape(v, radius, |q| need.mark(q)),
+                    None => shape(v, radius, cube, |q| need.mark(q)),
                     Some(m) => {
                         let lo = v.map(|c| (c - step.offset).div_euclid(m) * m + step.offset);
                         let cell_box = Box3::new(lo, [m; 3]);
-                        shape(v, radius, |q| {
+                        shape(v, radius, cube, |q| {
                             if cell_box.contains(q) {
                                 need.mark(q);
                             } else {
@@ -342,6 +355,7 @@ pub fn exact_chain(
     levels: usize,
     steps_per_level: &[Vec<Step>],
     radius: i64,
+    cube: bool,
     side: i64,
     cell: Option<i64>,
 ) -> Vec<LevelPlan> {
@@ -351,7 +365,9 @@ pub fn exact_chain(
         if points.is_empty() {
             break;
         }
-        let chain = backward(&points, steps, radius, side, cell, |_, _, _| Vec::new());
+        let chain = backward(&points, steps, radius, cube, side, cell, |_, _, _| {
+            Vec::new()
+        });
         out.push(LevelPlan {
             voxels: chain.need.count(),
             corrections: chain.corrections(),
@@ -431,9 +447,12 @@ pub fn reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> Reach
                     layer.push(p);
                 }
             }
-            let need = backward(&layer, steps, radius, side, cell, |_, _, _| Vec::new())
-                .need
-                .bounds();
+            // The cube reads no further along an axis than the planes.
+            let need = backward(&layer, steps, radius, false, side, cell, |_, _, _| {
+                Vec::new()
+            })
+            .need
+            .bounds();
             out.lo[a] = out.lo[a].max(at - need.lo[a]);
             out.hi[a] = out.hi[a].max(need.hi[a] - 1 - at);
         }
@@ -496,7 +515,7 @@ mod tests {
     #[test]
     fn shape_has_sixty_one_voxels_for_n5() {
         let mut s = std::collections::HashSet::new();
-        shape([0, 0, 0], 2, |q| {
+        shape([0, 0, 0], 2, false, |q| {
             assert!(s.insert(q), "duplicate {q:?}");
         });
         assert_eq!(s.len(), 61);
@@ -524,8 +543,8 @@ mod tests {
             }];
             3
         ];
-        let dual = exact_chain(&[[5, 5, 5]], 3, &steps, 2, 2, Some(12));
-        let standard = exact_chain(&[[5, 5, 5]], 3, &standard_steps, 2, 2, None);
+        let dual = exact_chain(&[[5, 5, 5]], 3, &steps, 2, false, 2, Some(12));
+        let standard = exact_chain(&[[5, 5, 5]], 3, &standard_steps, 2, false, 2, None);
         let total = |v: &[LevelPlan]| v.iter().map(|l| l.voxels).sum::<u64>();
         assert!(total(&dual) < total(&standard), "{dual:?} vs {standard:?}");
     }
@@ -553,9 +572,11 @@ mod tests {
                 for y in 0..period {
                     for x in 0..period {
                         let p = [x, y, z];
-                        let b = backward(&[p], &steps, radius, side, cell, |_, _, _| Vec::new())
-                            .need
-                            .bounds();
+                        let b = backward(&[p], &steps, radius, false, side, cell, |_, _, _| {
+                            Vec::new()
+                        })
+                        .need
+                        .bounds();
                         for (a, c) in p.into_iter().enumerate() {
                             met.lo[a] = met.lo[a].max(c - b.lo[a]);
                             met.hi[a] = met.hi[a].max(b.hi[a] - 1 - c);

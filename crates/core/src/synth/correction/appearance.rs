@@ -35,7 +35,10 @@
 //! them, as the colour correction gives, left upsampled blocks standing.
 //! The best by distance of the quantised 12-location vectors wins.
 
-use super::{DIRECT, Work, disagreement, gather_near, in_plane_slot, near_slot, prefetch};
+use super::{
+    DIRECT, Local, Work, disagreement, gather_local, gather_near, in_plane_slot, near_slot,
+    prefetch,
+};
 use crate::candidates::geometry::{AXES, Dims};
 use crate::candidates::sparse::{
     DIAGONALS, SPARSE_DIMS, SparseTables, WIDE_RANGE, WideVector, appearance_stride,
@@ -44,6 +47,13 @@ use crate::candidates::sparse::{
 use crate::candidates::{Candidates, Level};
 use crate::params::SynthParams;
 use crate::stack::spacing;
+
+/// The neighbourhood of the world frame, for the unguided correction
+/// (which never reads it: its offsets are constants).
+static WORLD: Local = Local {
+    slot: [[0; 9]; 3],
+    offset: [[0; 3]; 27],
+};
 
 /// Largest appearance dimension count per location (`pca_dims` ≤ 16).
 const MAX_LOCATION_DIMS: usize = 16;
@@ -58,6 +68,8 @@ const MAX_PROPOSED: usize = 3 * 9 * MAX_SIMILAR;
 /// Everything the appearance-space correction of one level reads.
 pub struct AppearanceCorrector<'a> {
     level: &'a Level,
+    /// The level's index (0 = finest).
+    k: usize,
     tables: &'a SparseTables,
     dims: Dims,
     /// The level's spacing.
@@ -189,6 +201,7 @@ impl<'a> AppearanceCorrector<'a> {
         let scale = tables.scale();
         AppearanceCorrector {
             level,
+            k,
             tables,
             dims: cands.dims(),
             h: spacing(k) as i64,
@@ -209,6 +222,16 @@ impl<'a> AppearanceCorrector<'a> {
         self
     }
 
+    /// The level's index (0 = finest).
+    pub(super) fn level_index(&self) -> usize {
+        self.k
+    }
+
+    /// The level's spacing.
+    pub(super) fn spacing(&self) -> i64 {
+        self.h
+    }
+
     /// See [`super::Corrector::correct_with`].
     #[inline(always)]
     pub(super) fn correct_with<const BY_WALL: bool>(
@@ -218,28 +241,55 @@ impl<'a> AppearanceCorrector<'a> {
         inside: [(i64, i64); 3],
         p: [i64; 3],
     ) -> [u32; 3] {
-        #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is only set when the CPU has AVX2.
-            #[allow(unsafe_code)]
-            return unsafe { self.correct_avx2::<BY_WALL>(work, start, inside, p) };
-        }
-        self.correct_any::<BY_WALL, false>(work, start, inside, p)
+        self.dispatch::<BY_WALL, false>(work, start, inside, p, &WORLD)
     }
 
-    /// The correction for the texture's appearance width.
+    /// [`AppearanceCorrector::correct_with`] in the local frame `local`.
     #[inline(always)]
-    fn correct_any<const BY_WALL: bool, const AVX2: bool>(
+    pub(super) fn correct_local_with<const BY_WALL: bool>(
         &self,
         work: &Work,
         start: &Work,
         inside: [(i64, i64); 3],
         p: [i64; 3],
+        local: &Local,
+    ) -> [u32; 3] {
+        self.dispatch::<BY_WALL, true>(work, start, inside, p, local)
+    }
+
+    /// Runs the AVX2 build where the CPU has it.
+    #[inline(always)]
+    fn dispatch<const BY_WALL: bool, const FIELD: bool>(
+        &self,
+        work: &Work,
+        start: &Work,
+        inside: [(i64, i64); 3],
+        p: [i64; 3],
+        local: &Local,
+    ) -> [u32; 3] {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is only set when the CPU has AVX2.
+            #[allow(unsafe_code)]
+            return unsafe { self.correct_avx2::<BY_WALL, FIELD>(work, start, inside, p, local) };
+        }
+        self.correct_any::<BY_WALL, false, FIELD>(work, start, inside, p, local)
+    }
+
+    /// The correction for the texture's appearance width.
+    #[inline(always)]
+    fn correct_any<const BY_WALL: bool, const AVX2: bool, const FIELD: bool>(
+        &self,
+        work: &Work,
+        start: &Work,
+        inside: [(i64, i64); 3],
+        p: [i64; 3],
+        local: &Local,
     ) -> [u32; 3] {
         if self.stride == 8 {
-            self.correct_portable::<BY_WALL, 8, AVX2>(work, start, inside, p)
+            self.correct_portable::<BY_WALL, 8, AVX2, FIELD>(work, start, inside, p, local)
         } else {
-            self.correct_portable::<BY_WALL, 16, AVX2>(work, start, inside, p)
+            self.correct_portable::<BY_WALL, 16, AVX2, FIELD>(work, start, inside, p, local)
         }
     }
 
@@ -247,28 +297,48 @@ impl<'a> AppearanceCorrector<'a> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     #[allow(unsafe_code)]
-    fn correct_avx2<const BY_WALL: bool>(
+    fn correct_avx2<const BY_WALL: bool, const FIELD: bool>(
         &self,
         work: &Work,
         start: &Work,
         inside: [(i64, i64); 3],
         p: [i64; 3],
+        local: &Local,
     ) -> [u32; 3] {
-        self.correct_any::<BY_WALL, true>(work, start, inside, p)
+        self.correct_any::<BY_WALL, true, FIELD>(work, start, inside, p, local)
     }
 
     /// The correction, for appearance vectors of `W` values (see
-    /// [`appearance_stride`]); `AVX2` when compiled for it.
+    /// [`appearance_stride`]); `AVX2` when compiled for it; in the local
+    /// frame `local` when `FIELD`, else on the world axes.
     #[inline(always)]
-    fn correct_portable<const BY_WALL: bool, const W: usize, const AVX2: bool>(
+    fn correct_portable<
+        const BY_WALL: bool,
+        const W: usize,
+        const AVX2: bool,
+        const FIELD: bool,
+    >(
         &self,
         work: &Work,
         start: &Work,
         inside: [(i64, i64); 3],
         p: [i64; 3],
+        local: &Local,
     ) -> [u32; 3] {
         let h = self.h;
-        let (near, moved) = gather_near::<BY_WALL>(work, start, inside, p, self.dims, h);
+        let (near, moved) = if FIELD {
+            gather_local::<BY_WALL>(work, start, inside, p, self.dims, local)
+        } else {
+            gather_near::<BY_WALL>(work, start, inside, p, self.dims, h)
+        };
+        // The near slot at in-plane offset (i, j) of a plane.
+        let slot_of = |plane: usize, a: usize, i: i64, b: usize, j: i64| {
+            if FIELD {
+                local.slot(plane, i, j)
+            } else {
+                in_plane_slot(a, i, b, j)
+            }
+        };
         // The exemplar pixel each of the 3 predictions of each location
         // reads, by plane and location; their vectors are fetched while
         // the candidates are proposed.
@@ -276,8 +346,14 @@ impl<'a> AppearanceCorrector<'a> {
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
                 for (k, (du, dv)) in [(i, j), (i, 0), (0, j)].into_iter().enumerate() {
-                    let t = near.triples[in_plane_slot(a, du, b, dv)][plane];
-                    let c = self.dims.shift(t, (i - du) * h, (j - dv) * h);
+                    let slot = slot_of(plane, a, du, b, dv);
+                    let t = near.triples[slot][plane];
+                    let c = if FIELD {
+                        let o = local.offset[slot];
+                        self.dims.shift(t, i * h - o[a], j * h - o[b])
+                    } else {
+                        self.dims.shift(t, (i - du) * h, (j - dv) * h)
+                    };
                     prefetch(&self.app[plane][c as usize * W..]);
                     predicted[plane][l][k] = c;
                 }
@@ -294,7 +370,7 @@ impl<'a> AppearanceCorrector<'a> {
             let mut bases_n = 0;
             for j in -1..=1i64 {
                 for i in -1..=1i64 {
-                    let base = moved[in_plane_slot(a, i, b, j)][plane];
+                    let base = moved[slot_of(plane, a, i, b, j)][plane];
                     // Coherent neighbours usually point at the same pixel.
                     if bases[..bases_n].contains(&base) {
                         continue;
@@ -315,8 +391,10 @@ impl<'a> AppearanceCorrector<'a> {
         // The coherent triples: each direct neighbour's triple moved back.
         // One proposed twice is scored twice, which is cheaper than
         // finding out.
-        let coherent = DIRECT.map(|d| moved[near_slot(d)]);
-        for t in &coherent {
+        let direct = DIRECT.map(|d| moved[near_slot(d)]);
+        // In a local frame any of the 27 may be an in-plane neighbour.
+        let coherent: &[[u32; 3]] = if FIELD { &moved } else { &direct };
+        for t in coherent {
             for (q, &c) in t.iter().enumerate() {
                 prefetch(std::slice::from_ref(self.tables.share(q, c)));
             }
@@ -329,7 +407,7 @@ impl<'a> AppearanceCorrector<'a> {
                 // W appearance sums, then 3 colour offsets.
                 let mut sum = [0f32; MAX_LOCATION_DIMS + 3];
                 for (k, (du, dv)) in [(i, j), (i, 0), (0, j)].into_iter().enumerate() {
-                    let slot = in_plane_slot(a, du, b, dv);
+                    let slot = slot_of(plane, a, du, b, dv);
                     let t = near.triples[slot][plane];
                     let c = predicted[plane][l][k] as usize;
                     let row: &[i16; W] = app[c * W..(c + 1) * W].try_into().expect("W values");
@@ -370,7 +448,7 @@ impl<'a> AppearanceCorrector<'a> {
         }
         // Coherent triples last: with the proposals' best known, few are
         // close enough to need their penalty worked out.
-        for &t in &coherent {
+        for &t in coherent {
             let dist = wide_distance(&self.tables.triple_vector(t), &query);
             if dist <= best.0 {
                 // Saturating: a large `consistency` can push the penalty to u32::MAX.
