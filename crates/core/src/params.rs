@@ -407,7 +407,10 @@ pub struct SynthParams {
     /// The field of local frames the texture follows (see [`Field`]);
     /// none keeps every voxel's frame on the world axes. Needs the
     /// appearance correction.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "field_or_text"
+    )]
     pub field: Option<Field>,
 }
 
@@ -499,6 +502,21 @@ fn shortest_f32s<S: serde::Serializer>(v: &[f32; 3], s: S) -> std::result::Resul
         t.serialize_element(&x.to_string().parse::<f64>().unwrap_or(*x as f64))?;
     }
     t.end()
+}
+
+/// A field as its JSON object or as text (a preset's short form or the
+/// object's JSON), which is how query strings and the command line give it.
+fn field_or_text<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<Field>, D::Error> {
+    use serde::de::Error as _;
+    match serde_json::Value::deserialize(d)? {
+        serde_json::Value::Null => Ok(None),
+        serde_json::Value::String(s) => s.parse().map(Some).map_err(D::Error::custom),
+        v => serde_json::from_value(v)
+            .map(Some)
+            .map_err(D::Error::custom),
+    }
 }
 
 /// Checks `min ≤ v ≤ max` (NaN fails the test and is refused too).

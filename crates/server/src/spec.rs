@@ -53,7 +53,9 @@ impl TextureParams {
     /// id, are those the preset expands to.
     pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, SpecError> {
         let analysis_keys = keys_of::<AnalysisParams>();
-        let synth_keys = keys_of::<SynthParams>();
+        let mut synth_keys = keys_of::<SynthParams>();
+        // Left out of the defaults' JSON, which has no field.
+        synth_keys.push("field".to_string());
         let mut a = Map::new();
         let mut s = Map::new();
         if let Some(preset) = obj.get("preset") {
@@ -606,6 +608,43 @@ mod tests {
         assert_eq!(p.synth.jitter, 0.5);
         assert!(!p.synth.correct_init_level);
         assert_eq!(p.synth.contrast, 1.25);
+    }
+
+    #[test]
+    fn a_field_comes_as_text_or_object_and_is_part_of_the_id() {
+        let text = TextureParams::flat_from_pairs([("field", "slant:30")].into_iter());
+        let object = TextureParams::from_json(r#"{"field": {"kind": "slant", "angle": 30}}"#);
+        let json_text = TextureParams::flat_from_pairs(
+            [("field", r#"{"kind":"slant","angle":30}"#)].into_iter(),
+        );
+        let a = TextureParams::from_flat(&text).unwrap();
+        assert_eq!(a, object.unwrap());
+        assert_eq!(a, TextureParams::from_flat(&json_text).unwrap());
+        assert_eq!(
+            a.synth.field,
+            Some(solidtex_core::Field::Slant { angle: 30.0 })
+        );
+        // Stored as the object, it reads back the same.
+        assert_eq!(TextureParams::from_flat(&a.to_flat()).unwrap(), a);
+        let id = |params: TextureParams| {
+            TextureSpec {
+                planes: Planes::Single(img(3)),
+                params,
+            }
+            .content_hash()
+        };
+        assert_ne!(id(a.clone()), id(TextureParams::default()));
+        // No field hashes as before fields existed: no `field` key at all.
+        assert!(!TextureParams::default().to_flat().contains_key("field"));
+        for bad in [
+            r#"{"field": "spiral"}"#,
+            r#"{"field": {"kind": "zigzag", "angle": 10, "period": 0}}"#,
+            r#"{"field": {"kind": "slant", "angle": "x"}}"#,
+            r#"{"field": 3}"#,
+            r#"{"field": "slant:30", "correction": "colour"}"#,
+        ] {
+            assert!(TextureParams::from_json(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]
