@@ -89,7 +89,9 @@ impl Field {
             if v.iter().all(|x| x.is_finite() && x.abs() <= MAX_COORD) {
                 Ok(())
             } else {
-                bad(format!("{name} must be finite numbers of at most {MAX_COORD:e}"))
+                bad(format!(
+                    "{name} must be finite numbers of at most {MAX_COORD:e}"
+                ))
             }
         };
         match self {
@@ -309,17 +311,29 @@ mod tests {
         assert!((slant[0][1] - 0.5).abs() < 1e-12);
         // Circular: at +x of the centre, local x points along +y.
         let circ = fields[1].compile().unwrap().frame([20.0, -4.0, 3.0]);
-        assert!(sub(circ[0], [0.0, 1.0, 0.0]).iter().all(|v| v.abs() < 1e-12));
+        assert!(
+            sub(circ[0], [0.0, 1.0, 0.0])
+                .iter()
+                .all(|v| v.abs() < 1e-12)
+        );
         // Emissive: local x points away from the axis.
         let emis = fields[2].compile().unwrap().frame([10.0, -4.0, 7.0]);
-        assert!(sub(emis[0], [0.0, 0.0, 1.0]).iter().all(|v| v.abs() < 1e-12));
+        assert!(
+            sub(emis[0], [0.0, 0.0, 1.0])
+                .iter()
+                .all(|v| v.abs() < 1e-12)
+        );
         // Zigzag: the angle flips from one band to the next.
         let zig = fields[3].compile().unwrap();
         assert!(zig.frame([1.0, 0.0, 0.0])[0][1] > 0.7);
         assert!(zig.frame([17.0, 0.0, 0.0])[0][1] < -0.7);
         assert!(zig.frame([-1.0, 0.0, 0.0])[0][1] < -0.7);
         let s3 = fields[4].compile().unwrap().frame([0.0; 3]);
-        assert!(sub(s3[0], unit([1.0, 2.0, 3.0])).iter().all(|v| v.abs() < 1e-12));
+        assert!(
+            sub(s3[0], unit([1.0, 2.0, 3.0]))
+                .iter()
+                .all(|v| v.abs() < 1e-12)
+        );
     }
 
     #[test]
