@@ -64,8 +64,20 @@ fn alignment_error(measured: &Texture, guide: &Texture) -> f64 {
     errors[errors.len() / 2]
 }
 
+/// Two steep curves across the slice on the xy plane, leaning opposite
+/// ways, one of them bent.
+fn two_curves() -> Field {
+    serde_json::from_str(
+        r#"{"kind": "sketch", "curves": [
+            {"points": [[20, 0, 0], [40, 80, 0], [50, 160, 0]], "normal": [0, 0, 1]},
+            {"points": [[110, 160, 0], [140, 0, 0]], "normal": [0, 0, 1]}
+        ]}"#,
+    )
+    .unwrap()
+}
+
 #[test]
-fn slices_follow_the_slant_and_circular_presets() {
+fn slices_follow_the_slant_and_circular_presets_and_a_sketch() {
     let unguided = grain_texture(None);
     for field in [
         Field::Slant { angle: 60.0 },
@@ -73,6 +85,7 @@ fn slices_follow_the_slant_and_circular_presets() {
             centre: [SIDE as f64 / 2.0, SIDE as f64 / 2.0, 0.0],
             axis: [0.0, 0.0, 1.0],
         },
+        two_curves(),
     ] {
         let guided = grain_texture(Some(field.clone()));
         let follows = alignment_error(&guided, &guided);

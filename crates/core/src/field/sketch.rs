@@ -4,18 +4,26 @@
 //! local axis named by [`Curve::along`], the curve's normal (made
 //! perpendicular to the tangent) the axis two after it, and the third axis
 //! completes a right-handed frame. Frames become unit quaternions, and the
-//! quaternions of all grid nodes `Q` minimise Zhang's eq. (2),
+//! quaternions of all grid nodes `Q` are harmonic (Zhang's eq. 1) with the
+//! curves as soft constraints (their eq. 2, w = 100), in the least-squares
+//! sense of the Dirichlet energy:
 //!
 //! ```text
-//! ||L Q||² + Σ_samples w² ||q(sample) − q̄(sample)||²,   w = 100,
+//! Σ_edges ||q_i − q_j||² + Σ_samples w² ||q(sample) − q̄(sample)||²,
 //! ```
 //!
-//! with `L` the grid's graph Laplacian (6-neighbourhood, weights
-//! 1/degree) and `q(sample)` the trilinear interpolation of the eight nodes
-//! around the sample, the same interpolation that reading the field uses.
-//! The normal equations `(LᵀL + w² CᵀC) Q = w² Cᵀ q̄` share one sparse
-//! symmetric positive definite matrix across the four quaternion
-//! components, factored once by a sparse Cholesky decomposition.
+//! over the grid's 6-neighbourhood edges, with `q(sample)` the trilinear
+//! interpolation of the eight nodes around the sample, the same
+//! interpolation that reading the field uses. Its normal equations
+//! `(L + w² CᵀC) Q = w² Cᵀ q̄`, with `L` the grid's graph Laplacian, say
+//! `Δq = 0` wherever no curve pulls, which is eq. (1); minimising
+//! `||L Q||²` instead, the other reading of "least squares", solves the
+//! biharmonic equation, which overshoots between curves that turn
+//! differently (frames swung past 90° where the curves differ by 50°).
+//! A harmonic field stays within its constraints' range, component by
+//! component. The system shares one sparse symmetric positive definite
+//! matrix across the four quaternion components, factored once by a
+//! sparse Cholesky decomposition.
 //!
 //! Choices made where the paper leaves them open:
 //!
@@ -64,14 +72,13 @@ pub(crate) const MAX_POINTS: usize = 2048;
 pub(crate) const MAX_COORD: f64 = 1e6;
 /// Most grid nodes along one axis.
 pub(crate) const MAX_AXIS_NODES: usize = 32;
-/// Most grid nodes in all. The work of the sparse Cholesky factorisation
-/// grows about as the sixth power of a cube's side (the stencil of `LᵀL`
-/// couples nodes two apart, so the dense separators are slabs two nodes
-/// thick), which would make a cube of 32 nodes a side some sixty times
-/// dearer than one of 16, the worst grid this budget allows. The field is
-/// smooth and read by trilinear interpolation, so a coarse grid loses
-/// little.
-pub(crate) const MAX_NODES: usize = 4096;
+/// Most grid nodes in all. The sparse Cholesky factorisation's work grows
+/// about as the square of the node count on a 3D grid (its last separators
+/// are dense planes), so the texture's creation would wait seconds for a
+/// grid of 32³ nodes against a fraction of one at this budget (BENCHMARKS.md
+/// has the solve time). The field is smooth and read by trilinear
+/// interpolation, so a coarse grid loses little.
+pub(crate) const MAX_NODES: usize = 8192;
 /// Weight of the curve constraints against smoothness (Zhang's `w`).
 const WEIGHT: f64 = 100.0;
 /// Default margin as a fraction of the curves' largest extent.
@@ -143,7 +150,7 @@ pub struct Sketch {
     pub margin: Option<f64>,
     /// Smallest distance between grid nodes, in voxels (positive, at most
     /// 1e6). The grid is made coarser than this where its limits, 32 nodes
-    /// along an axis and 4096 in all, need it; by default it is as fine as
+    /// along an axis and 8192 in all, need it; by default it is as fine as
     /// they allow.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub spacing: Option<f64>,
@@ -615,34 +622,23 @@ fn solve_grid(grid: &Grid, targets: &[([f64; 3], Quat)]) -> Result<Vec<Quat>> {
     let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
     let mut push = |i: usize, j: usize, v: f64| cols[rank[j]].push((rank[i], v));
 
-    // LᵀL, one row of L at a time: (LᵀL)_ij = Σ_r L_ri L_rj.
+    // The Dirichlet energy Σ over grid edges of (q_i − q_j)²: its matrix is
+    // the graph Laplacian, degree on the diagonal and −1 per edge.
     let [dx, dy, dz] = grid.dims;
-    let mut row: Vec<(usize, f64)> = Vec::with_capacity(7);
     for z in 0..dz {
         for y in 0..dy {
             for x in 0..dx {
                 let c = [x, y, z];
-                row.clear();
-                row.push((grid.index(c), 1.0));
+                let i = grid.index(c);
                 for a in 0..3 {
-                    if c[a] > 0 {
-                        let mut d = c;
-                        d[a] -= 1;
-                        row.push((grid.index(d), 0.0));
-                    }
                     if c[a] + 1 < grid.dims[a] {
                         let mut d = c;
                         d[a] += 1;
-                        row.push((grid.index(d), 0.0));
-                    }
-                }
-                let w = -1.0 / (row.len() - 1) as f64;
-                for e in &mut row[1..] {
-                    e.1 = w;
-                }
-                for &(i, a) in &row {
-                    for &(j, b) in &row {
-                        push(i, j, a * b);
+                        let j = grid.index(d);
+                        push(i, i, 1.0);
+                        push(j, j, 1.0);
+                        push(i, j, -1.0);
+                        push(j, i, -1.0);
                     }
                 }
             }
