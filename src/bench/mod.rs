@@ -19,8 +19,8 @@ pub mod service;
 use anyhow::Context;
 use serde::Serialize;
 use solidtex_core::{
-    AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Region, Scheme,
-    SynthParams, SynthStats, Texture, TileCache,
+    AnalysisParams, Axis, Candidates, Curve, CutPlane, Exemplar, ExemplarSet, Field, Filter,
+    Region, Scheme, Sketch, SynthParams, SynthStats, Texture, TileCache,
 };
 use solidtex_server::peak_alloc;
 use std::collections::HashMap;
@@ -291,6 +291,7 @@ pub fn run(opts: &Options) -> anyhow::Result<Results> {
     };
     synthesis_rows(&c, sizes, &mut predictor, &mut rows)?;
     preview_rows(&c, sizes, &mut predictor, &mut rows)?;
+    field_rows(&c, sizes, &mut predictor, &mut rows)?;
     let load = match &opts.load {
         Some(l) => service::measure(&opts.exemplars.join(sizes.synthesis), sizes.levels, l)?,
         None => Vec::new(),
@@ -659,6 +660,95 @@ fn preview_rows(
             target,
             None,
             || Ok(tex.region(&region, 0)?),
+        )?);
+    }
+    Ok(())
+}
+
+/// Ten curves winding through a 240-voxel box: the sketch whose solve is
+/// timed.
+fn ten_curves() -> Field {
+    let curves: Vec<Curve> = (0..10)
+        .map(|c| {
+            let c = c as f64;
+            Curve {
+                points: (0..40)
+                    .map(|i| {
+                        let t = i as f64 / 39.0;
+                        [
+                            5.0 + 240.0 * t,
+                            20.0 * c + 30.0 * (6.0 * t + c).sin(),
+                            20.0 * c + 15.0 * t,
+                        ]
+                    })
+                    .collect(),
+                normal: [0.1 * c, 0.3, 1.0],
+                along: Default::default(),
+            }
+        })
+        .collect();
+    Field::Sketch(Sketch {
+        curves,
+        margin: None,
+        spacing: None,
+    })
+}
+
+/// Fields of local frames: what reading the field costs a cold slice
+/// (its neighbourhoods reach the corners, and each voxel's frame is
+/// worked out), and the sketch solve that creating such a texture does.
+fn field_rows(
+    c: &Arc<Candidates>,
+    sizes: &Sizes,
+    predictor: &mut Predictor,
+    rows: &mut Vec<Row>,
+) -> anyhow::Result<()> {
+    let side = sizes.sides[0];
+    let sketch = ten_curves();
+    let m = measure(3, || {
+        texture_with(
+            c,
+            SynthParams {
+                field: Some(sketch.clone()),
+                ..SynthParams::default()
+            },
+        )
+    });
+    rows.push(Row {
+        name: "sketch field solve, 10 curves of 40 points".into(),
+        seconds: Some(m.seconds),
+        runs: 3,
+        peak_bytes: Some(m.peak_bytes),
+        target: None,
+        paper: None,
+        detail: "creating the texture: curve frames interpolated over the grid".into(),
+    });
+    let slice = Region::slice(Axis::Z, 5, 0, 0, side, side);
+    for (name, field) in [
+        ("slant 30°", Field::Slant { angle: 30.0 }),
+        (
+            "circular",
+            Field::Circular {
+                centre: [side as f64 / 2.0, side as f64 / 2.0, 0.0],
+                axis: [0.0, 0.0, 1.0],
+            },
+        ),
+        ("sketch of 10 curves", sketch),
+    ] {
+        let tex = texture_with(
+            c,
+            SynthParams {
+                field: Some(field),
+                ..SynthParams::default()
+            },
+        );
+        rows.push(cold_row(
+            format!("field {name}: axis slice {side}² cold"),
+            Some(&tex.plan(&slice, 0)?),
+            predictor,
+            (side == 256).then_some("≤ 2× unguided"),
+            None,
+            || Ok(tex.region(&slice, 0)?),
         )?);
     }
     Ok(())
