@@ -168,3 +168,27 @@ fn a_field_needs_the_appearance_correction() {
     .unwrap();
     assert!(e.to_string().contains("appearance"), "{e}");
 }
+
+/// The planner marks the whole 3×3×3 neighbourhood a turned correction
+/// reads: a plan still counts exactly what cold synthesis computes, and
+/// the dual grid bounds the set (a small box is mostly halo, where the
+/// cube's corners add the most; a 256² slice's set grows by a few per
+/// cent).
+#[test]
+fn plans_count_what_a_field_texture_computes() {
+    let region = Region {
+        origin: [-7, 3, 11],
+        size: [20, 9, 5],
+    };
+    let guided = grain_texture(Some(Field::Slant3d {
+        direction: [1.0, 2.0, 2.0],
+    }));
+    let planned = guided.plan(&region, 0).unwrap();
+    let (_, done) = guided.region(&region, 0).unwrap();
+    assert_eq!(planned.voxels_per_level, done.voxels_per_level);
+    assert_eq!(planned.corrections_per_level, done.corrections_per_level);
+    let unguided = grain_texture(None).plan(&region, 0).unwrap();
+    let total = |v: &[u64]| v.iter().sum::<u64>() as f64;
+    let ratio = total(&planned.corrections_per_level) / total(&unguided.corrections_per_level);
+    assert!((1.0..1.6).contains(&ratio), "{ratio}");
+}
