@@ -361,21 +361,23 @@ pub(crate) fn unit(a: [f64; 3]) -> [f64; 3] {
     scale(a, 1.0 / norm(a))
 }
 
+/// Asserts that `f` is a rotation: orthonormal axes, right-handed.
+#[cfg(test)]
+fn assert_rotation(f: &Frame) {
+    for i in 0..3 {
+        for j in 0..3 {
+            let want = if i == j { 1.0 } else { 0.0 };
+            assert!((dot(f[i], f[j]) - want).abs() < 1e-9, "{f:?}");
+        }
+    }
+    // Right-handed: x × y = z.
+    let z = cross(f[0], f[1]);
+    assert!(sub(z, f[2]).iter().all(|v| v.abs() < 1e-9), "{f:?}");
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn orthonormal(f: &Frame) {
-        for i in 0..3 {
-            for j in 0..3 {
-                let want = if i == j { 1.0 } else { 0.0 };
-                assert!((dot(f[i], f[j]) - want).abs() < 1e-9, "{f:?}");
-            }
-        }
-        // Right-handed: x × y = z.
-        let z = cross(f[0], f[1]);
-        assert!(sub(z, f[2]).iter().all(|v| v.abs() < 1e-9), "{f:?}");
-    }
 
     #[test]
     fn presets_give_right_handed_frames_that_point_where_documented() {
@@ -403,7 +405,7 @@ mod tests {
         for field in &fields {
             let f = field.compile().unwrap();
             for p in [[0.0, 0.0, 0.0], [10.0, -4.0, 5.0], [37.5, 12.0, -90.0]] {
-                orthonormal(&f.frame(p));
+                assert_rotation(&f.frame(p));
             }
         }
         let slant = fields[0].compile().unwrap().frame([5.0, 6.0, 7.0]);

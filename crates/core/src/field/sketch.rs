@@ -748,6 +748,7 @@ impl SolvedSketch {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::field::assert_rotation;
 
     fn curve(points: &[[f64; 3]], normal: [f64; 3], along: Along) -> Curve {
         Curve {
@@ -777,16 +778,6 @@ mod tests {
         (0..n).map(|_| [next(), next(), next()]).collect()
     }
 
-    fn assert_rotation(f: &Frame) {
-        for i in 0..3 {
-            for j in 0..3 {
-                let want = if i == j { 1.0 } else { 0.0 };
-                assert!((dot(f[i], f[j]) - want).abs() < 1e-9, "{f:?}");
-            }
-        }
-        let z = cross(f[0], f[1]);
-        assert!(sub(z, f[2]).iter().all(|v| v.abs() < 1e-9), "{f:?}");
-    }
 
     /// Angle in degrees of the rotation taking frame `a` to frame `b`.
     fn angle(a: &Frame, b: &Frame) -> f64 {
