@@ -175,6 +175,6 @@ mod tests {
         assert_eq!(finest(-1, 2), -2.5);
         assert_eq!(short(-1e-9), 0.0);
         assert!(short(-1e-9).is_sign_positive());
-        assert_eq!(short(0.70710678), 0.707107);
+        assert_eq!(short(0.123_456_789), 0.123_457);
     }
 }

@@ -1,7 +1,7 @@
 //! Typed path parameters.
 //!
-//! Some routes name a file in their last segment (`{at}.png`,
-//! `{at}.json`, `{bx}_{by}_{bz}.raw`). The router matches whole segments only, so the
+//! Some routes name a file in their last segment (`{at}.png`, `{at}.json`,
+//! `{bx}_{by}_{bz}.raw`). The router matches whole segments only, so the
 //! segment is captured whole and deserialized into a [`Stem`], which
 //! checks the extension and keeps the rest; [`TypedPath`] answers a
 //! segment without it as an unknown route, as the router would.
