@@ -312,3 +312,31 @@ async fn a_variant_survives_a_restart() {
     assert_eq!((status, v["id"].as_str()), (201, Some(slanted.as_str())));
     s.stop().await;
 }
+
+/// A variant of a texture whose candidates left memory reads them back
+/// from disk instead of searching again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_variant_of_an_evicted_texture_shares_its_stored_candidates() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    // Only the texture last used stays in memory.
+    args.max_resident_bytes = 1;
+    let s = TestServer::start(args).await;
+    let c = client();
+    let a = ready_texture(&c, &s, 26).await;
+    // `a` leaves memory when `b` becomes ready.
+    let _b = ready_texture(&c, &s, 27).await;
+    let seeded = ready_variant(&c, &s, &a, r#"{"seed": 9, "field": "slant:15"}"#).await;
+    let text = metrics(&c, &s).await;
+    assert_eq!(
+        metric(&text, r#"solidtex_precomputes_total{outcome="ok"}"#),
+        2.0,
+        "{text}"
+    );
+    assert_eq!(
+        metric(&text, r#"solidtex_precomputes_total{outcome="reused"}"#),
+        1.0
+    );
+    assert_ne!(slice(&c, &s, &seeded).await, slice(&c, &s, &a).await);
+    s.stop().await;
+}
