@@ -43,13 +43,19 @@ for _ in $(seq 1 600); do
 done
 curl -fsS "$BASE/readyz" >/dev/null || { echo "server not ready" >&2; exit 1; }
 
-# Voxel and metadata reads go to the bundled texture (random ids would only
-# ever meet 404); DELETE gets an id that is never stored, so it cannot
-# remove the bundled texture half-way through.
+# Voxel and metadata reads and variants go to the bundled texture (random
+# ids would only ever meet 404; variants of it share its candidates, so
+# each is ready at once); DELETE gets an id that is never stored, so it
+# cannot remove the bundled texture half-way through.
 cat >"$DATA/schemathesis.toml" <<'TOML'
 [[operations]]
 include-method = "GET"
 include-path-regex = "^/v1/textures/\\{id\\}"
+parameters = { "path.id" = "default" }
+
+[[operations]]
+include-method = "POST"
+include-path-regex = "^/v1/textures/\\{id\\}/variants$"
 parameters = { "path.id" = "default" }
 
 [[operations]]

@@ -3,13 +3,15 @@
 // becomes ready; the list shows its name and thumbnail, and the exemplar is
 // shown beside the view; its slice fills the canvas and is not blank; the
 // position slider and a typed far position change it; the oblique cut and
-// the 3D preview draw; the texture is deleted; and the console stays free
-// of errors. Screenshots go to ARTEFACTS.
+// the 3D preview draw; the texture is deleted; a field preset applied from
+// the field panel switches to a texture that follows it, with its arrows
+// over the slice, and curves clicked on the slice make another; and the
+// console stays free of errors. Screenshots go to ARTEFACTS.
 
 import assert from "node:assert/strict";
 import { mkdirSync, readFileSync } from "node:fs";
 import { join } from "node:path";
-import { ARTEFACTS, HERE, launch, pngStats, startServer } from "./browser.mjs";
+import { ARTEFACTS, HERE, launch, pngStats, readyTexture, startServer } from "./browser.mjs";
 
 mkdirSync(ARTEFACTS, { recursive: true });
 const server = await startServer();
@@ -158,6 +160,85 @@ try {
   await page.waitForFunction(() => document.querySelectorAll("#textures li").length === 0, null, { timeout: 10_000 });
   await page.waitForFunction(() => /deleted/.test(document.getElementById("status").textContent));
   assert.equal((await (await fetch(`${server.base}/v1/textures`)).json()).textures.length, 0);
+
+  // The field panel: a texture selected again, a slant preset applied
+  // makes the viewer switch to a variant that follows it, keeping the
+  // view, and draws its local x arrows at the slant's angle.
+  const base = await readyTexture(server.base, join(HERE, "exemplar32.png"), "name=field.png");
+  await page.waitForFunction((id) => window.solidtex.state.selected && window.solidtex.state.selected.id === id, base.id, { timeout: 10_000 });
+  await page.keyboard.press("s");
+  await page.keyboard.press("z");
+  await page.locator("#at").fill("0");
+  await page.locator("#at").press("Enter");
+  await waitComplete("z = 0");
+  const unguided = await pixels();
+  await page.locator("#field-panel summary").click();
+  assert.match(await page.locator("#f-current").textContent(), /no field/);
+  await page.locator("#f-kind").selectOption("slant");
+  assert.ok(await page.locator("#f-angle").isVisible(), "the slant's angle is offered");
+  assert.ok(!(await page.locator("#f-period").isVisible()), "the zigzag's period is not");
+  await page.locator("#f-angle").fill("40");
+  await page.locator("#f-arrows").check();
+  // Without a field the arrows follow the world's x axis.
+  await page.waitForFunction(() => Number(document.getElementById("overlay").dataset.arrows) > 0, null, { timeout: 30_000 });
+  await page.locator("#f-apply").click();
+  await page.waitForFunction((id) => {
+    const t = window.solidtex.state.selected;
+    return t && t.id !== id && t.params.field && t.status === "ready";
+  }, base.id, { timeout: 60_000 });
+  const slanted = await page.evaluate(() => window.solidtex.state.selected);
+  assert.deepEqual(slanted.params.field, { kind: "slant", angle: 40 });
+  const variant = await (await fetch(`${server.base}/v1/textures/${base.id}/variants`, {
+    method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ field: "slant:40" }),
+  })).json();
+  assert.equal(variant.id, slanted.id, "the viewer's variant is the API's");
+  assert.match(await page.locator("#f-current").textContent(), /slant 40°/);
+  await page.waitForFunction((id) => location.hash.includes(`t=${id}`), slanted.id, { timeout: 10_000 });
+  await waitComplete("z = 0");
+  const guided = await pixels();
+  assert.ok(differs(unguided, guided) > guided.length / 4 / 4, "the slice did not change with the field");
+  // Arrows of the new texture, drawn at 40° on the screen (v down).
+  await page.waitForFunction(() => Number(document.getElementById("overlay").dataset.arrows) > 4, null, { timeout: 30_000 });
+  const overlay = await page.evaluate(() => {
+    const c = document.getElementById("overlay");
+    const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+    let drawn = 0, accent = 0;
+    for (let i = 0; i < d.length; i += 4) {
+      if (d[i + 3] > 0) drawn++;
+      if (d[i + 3] > 200 && d[i] > 180 && d[i + 1] > 120 && d[i + 2] < 110) accent++;
+    }
+    return { drawn, accent, pixels: d.length / 4 };
+  });
+  assert.ok(overlay.accent > 200, `no arrows on the overlay: ${JSON.stringify(overlay)}`);
+  assert.ok(overlay.drawn < overlay.pixels / 3, `the overlay hides the slice: ${JSON.stringify(overlay)}`);
+  const angle = await page.evaluate(async (id) => {
+    const f = await (await fetch(`/v1/textures/${id}/frames/z/0.json?w=1&h=1`)).json();
+    return (Math.atan2(f.samples[0].x[1], f.samples[0].x[0]) * 180) / Math.PI;
+  }, slanted.id);
+  assert.ok(Math.abs(angle - 40) < 1e-3, `arrows at ${angle}°`);
+  await page.screenshot({ path: join(ARTEFACTS, "viewer-field-slant.png") });
+
+  // Curves: two clicks draw a curve on the slice, Apply makes a texture
+  // that follows it.
+  await page.locator("#f-kind").selectOption("sketch");
+  assert.equal(await page.locator("#f-draw").getAttribute("aria-pressed"), "true");
+  const stageBox = await page.locator("#plane").boundingBox();
+  await page.mouse.click(stageBox.x + stageBox.width * 0.3, stageBox.y + stageBox.height * 0.6);
+  await page.mouse.click(stageBox.x + stageBox.width * 0.7, stageBox.y + stageBox.height * 0.4);
+  await page.waitForFunction(() => document.getElementById("overlay").dataset.points === "2");
+  const curve = await page.evaluate(() => window.solidtex.state.field.curves[0]);
+  assert.equal(curve.points.length, 2);
+  assert.deepEqual(curve.normal, [0, 0, 1]);
+  assert.ok(curve.points.every((p) => p[2] === 0), "the points lie on the slice z = 0");
+  assert.ok(curve.points[1][0] > curve.points[0][0] && curve.points[1][1] < curve.points[0][1], JSON.stringify(curve));
+  await page.locator("#f-apply").click();
+  await page.waitForFunction((id) => {
+    const t = window.solidtex.state.selected;
+    return t && t.id !== id && t.params.field && t.params.field.kind === "sketch" && t.status === "ready";
+  }, slanted.id, { timeout: 60_000 });
+  await waitComplete("z = 0");
+  await page.waitForFunction(() => Number(document.getElementById("overlay").dataset.arrows) > 4, null, { timeout: 30_000 });
+  await page.screenshot({ path: join(ARTEFACTS, "viewer-field-sketch.png") });
 
   assert.deepEqual(errors, [], "console errors");
   console.log("viewer: ok");

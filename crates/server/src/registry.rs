@@ -184,6 +184,14 @@ impl Entry {
         self.planes.named()[0].1
     }
 
+    /// What the texture is made of: its exemplars and parameters.
+    pub fn spec(&self) -> TextureSpec {
+        TextureSpec {
+            planes: self.planes.clone(),
+            params: self.params.clone(),
+        }
+    }
+
     /// Current status.
     pub fn status(&self) -> Status {
         self.status.read().clone()
@@ -815,6 +823,29 @@ impl Registry {
             .find_map(|e| e.candidates())
     }
 
+    /// Candidates of another texture of the same pixels and analysis
+    /// parameters read back from disk, when none is in memory (they were
+    /// evicted): a variant of a texture then costs a read, not a search.
+    fn stored_shared_candidates(&self, entry: &Entry) -> Option<Arc<Candidates>> {
+        let siblings: Vec<Arc<Entry>> = self
+            .map
+            .read()
+            .values()
+            .filter(|e| {
+                e.analysis_hash == entry.analysis_hash
+                    && e.id != entry.id
+                    && e.on_disk.load(Ordering::Relaxed)
+            })
+            .cloned()
+            .collect();
+        let set = entry.planes.to_set().ok()?;
+        siblings.iter().find_map(|e| {
+            let bytes = self.store.read_candidates(&e.id).ok()?;
+            let c = Candidates::load(&bytes).ok()?;
+            (c.params() == &entry.params.analysis && c.exemplars() == &set).then(|| Arc::new(c))
+        })
+    }
+
     /// Runs one precompute to its end (blocking).
     fn precompute(&self, entry: &Arc<Entry>) {
         if entry.deleted.load(Ordering::SeqCst) {
@@ -829,7 +860,9 @@ impl Registry {
             "precompute started"
         );
         let t0 = Instant::now();
-        let shared = self.shared_candidates(entry);
+        let shared = self
+            .shared_candidates(entry)
+            .or_else(|| self.stored_shared_candidates(entry));
         let reused = shared.is_some();
         let mut computed = false;
         let baseline = self.meter.map(Meter::reset);

@@ -104,6 +104,38 @@ impl TextureParams {
         Ok(TextureParams { analysis, synth })
     }
 
+    /// These parameters with some synthesis parameters replaced: the
+    /// parameters of a variant of a texture. `overrides` is a flat object
+    /// of synthesis keys (`null` for `field` drops the field); `preset`
+    /// starts from that preset instead of these synthesis parameters.
+    /// Analysis keys are refused: they shape the candidates, which a
+    /// variant shares.
+    pub fn with_overrides(
+        &self,
+        overrides: &Map<String, Value>,
+    ) -> Result<TextureParams, SpecError> {
+        let analysis_keys = keys_of::<AnalysisParams>();
+        if let Some(k) = overrides.keys().find(|k| analysis_keys.contains(k)) {
+            return Err(invalid_params(format!(
+                "parameter `{k}` shapes the precomputed candidates: a variant shares them and \
+                 changes synthesis parameters only; upload the exemplars again with it \
+                 (a new precompute)"
+            )));
+        }
+        let mut flat = if overrides.contains_key("preset") {
+            match serde_json::to_value(&self.analysis) {
+                Ok(Value::Object(m)) => m,
+                _ => Map::new(),
+            }
+        } else {
+            self.to_flat()
+        };
+        for (k, v) in overrides {
+            flat.insert(k.clone(), v.clone());
+        }
+        Self::from_flat(&flat)
+    }
+
     /// Parameters as a data directory stored them. Stored parameters are
     /// complete, so a key added since they were written takes the value that
     /// reproduces the texture's voxels as they were then, not today's
@@ -347,6 +379,12 @@ fn hash_json_keys<T: Serialize>(h: &mut Sha256, v: &T, keep: &Map<String, Value>
     let Ok(Members(members)) = serde_json::from_str::<Members>(&full) else {
         return hash_json(h, v);
     };
+    // Nothing to leave out: the text as written. Rewriting it would sort
+    // the members of nested objects (a field's `kind` first no more) and
+    // change the hash.
+    if members.iter().all(|(k, _)| keep.contains_key(k)) {
+        return hash_json(h, v);
+    }
     let kept: Vec<String> = members
         .iter()
         .filter(|(k, _)| keep.contains_key(k))
@@ -710,6 +748,17 @@ mod tests {
         assert_eq!(
             now.content_hash_as_stored(&now.params.to_flat()),
             now.content_hash()
+        );
+        // Nested objects keep their members' order: a field whose `kind`
+        // comes first hashes as written.
+        let mut guided = now.clone();
+        guided.params.synth.field = Some(solidtex_core::Field::Circular {
+            centre: [4.0, 4.0, 0.0],
+            axis: [0.0, 0.0, 1.0],
+        });
+        assert_eq!(
+            guided.content_hash_as_stored(&guided.params.to_flat()),
+            guided.content_hash()
         );
         // A texture stored by the first layout: its parameters lack the
         // keys added since, and its id hashed the structs of then.

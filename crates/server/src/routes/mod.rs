@@ -6,6 +6,7 @@
 //! → JSON error shape → handler. Handlers only parse, call the registry or the job
 //! queue, and shape responses; no synthesis logic lives here.
 
+mod frames;
 mod ops;
 mod paths;
 mod textures;
@@ -25,7 +26,7 @@ use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
 use axum::http::{HeaderName, Method, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::Response;
-use axum::routing::get;
+use axum::routing::{get, post};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tower_http::catch_panic::CatchPanicLayer;
@@ -45,6 +46,8 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/textures/{id}"),
     ("DELETE", "/v1/textures/{id}"),
     ("GET", "/v1/textures/{id}/exemplar.png"),
+    ("POST", "/v1/textures/{id}/variants"),
+    ("GET", "/v1/textures/{id}/frames/{axis}/{at}.json"),
     ("GET", "/v1/textures/{id}/slices/{axis}/{at}.png"),
     ("GET", "/v1/textures/{id}/cut.png"),
     ("GET", "/v1/textures/{id}/region.raw"),
@@ -139,6 +142,11 @@ pub fn router(state: AppState) -> Router {
             get(textures::show).delete(textures::remove),
         )
         .route("/v1/textures/{id}/exemplar.png", get(textures::exemplar))
+        .route(
+            "/v1/textures/{id}/variants",
+            post(textures::variant).layer(DefaultBodyLimit::max(textures::MAX_VARIANT_BYTES)),
+        )
+        .route("/v1/textures/{id}/frames/{axis}/{at}", get(frames::frames))
         .route("/v1/textures/{id}/slices/{axis}/{at}", get(voxels::slice))
         .route("/v1/textures/{id}/cut.png", get(voxels::cut))
         .route("/v1/textures/{id}/region.raw", get(voxels::region))

@@ -1,6 +1,6 @@
 //! Typed path parameters.
 //!
-//! Some routes name a file in their last segment (`{at}.png`,
+//! Some routes name a file in their last segment (`{at}.png`, `{at}.json`,
 //! `{bx}_{by}_{bz}.raw`). The router matches whole segments only, so the
 //! segment is captured whole and deserialized into a [`Stem`], which
 //! checks the extension and keeps the rest; [`TypedPath`] answers a
@@ -41,9 +41,17 @@ impl Extension for Raw {
     const EXPECTED: &'static str = "bricks are served as `{bx}_{by}_{bz}.raw`";
 }
 
+/// Frames of a field: `{at}.json`.
+pub(super) struct Json;
+
+impl Extension for Json {
+    const SUFFIX: &'static str = ".json";
+    const EXPECTED: &'static str = "frames are served as `{at}.json`";
+}
+
 /// Every [`Extension::EXPECTED`]: the deserialization errors that mean
 /// "no such route" rather than a malformed path.
-const MISSING_EXTENSION: [&str; 2] = [Png::EXPECTED, Raw::EXPECTED];
+const MISSING_EXTENSION: [&str; 3] = [Png::EXPECTED, Raw::EXPECTED, Json::EXPECTED];
 
 /// A path segment `<stem><E::SUFFIX>`, holding the stem.
 pub(super) struct Stem<E> {
@@ -117,6 +125,11 @@ mod tests {
         assert_eq!(stem::<Png>("12.png.png").unwrap(), "12.png");
         assert_eq!(stem::<Png>(".png").unwrap(), "");
         assert_eq!(stem::<Raw>("0_1_2.raw").unwrap(), "0_1_2");
+        assert_eq!(stem::<Json>("-7.json").unwrap(), "-7");
+        assert_eq!(
+            stem::<Json>("7.png").unwrap_err().to_string(),
+            Json::EXPECTED
+        );
         assert_eq!(
             stem::<Png>("12.jpg").unwrap_err().to_string(),
             Png::EXPECTED

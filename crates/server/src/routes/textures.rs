@@ -4,7 +4,7 @@ use super::AppState;
 use super::voxels::{body_response, etag, not_modified, not_modified_response};
 use crate::error::ApiError;
 use crate::query::Query;
-use crate::registry::{Entry, Status, Submitted};
+use crate::registry::{Entry, RegistryError, Status, Submitted};
 use crate::spec::{Planes, TextureParams, TextureSpec, params_object, valid_id};
 use axum::Json;
 use axum::body::Bytes;
@@ -221,7 +221,7 @@ fn too_large(limit: usize) -> ApiError {
     ApiError::new(
         StatusCode::PAYLOAD_TOO_LARGE,
         "payload_too_large",
-        format!("upload larger than {limit} bytes"),
+        format!("request body larger than {limit} bytes"),
     )
 }
 
@@ -378,6 +378,61 @@ fn decode(raw: RawPlanes, params: TextureParams) -> Result<(TextureSpec, Vec<Str
     let spec = TextureSpec { planes, params };
     spec.layout()?;
     Ok((spec, notes))
+}
+
+/// Largest body of a variant request: room for a sketch field of the
+/// most curves and points a field may have, written out in full.
+pub const MAX_VARIANT_BYTES: usize = 512 << 10;
+
+/// `POST /v1/textures/{id}/variants`: the texture made of the same
+/// exemplars and analysis parameters with the synthesis parameters of the
+/// JSON body changed. Its id is a content hash like an upload's, so asking
+/// twice finds the same texture, and it shares the source's candidates.
+pub async fn variant(
+    State(s): State<AppState>,
+    Path(id): Path<String>,
+    req: Request,
+) -> Result<Response, ApiError> {
+    let source = known(&s, &id)?;
+    let essence = req
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+        .map(|v| v.trim().to_ascii_lowercase());
+    if essence.as_deref() != Some("application/json") {
+        return Err(unsupported(
+            "a variant is asked for with a JSON object of synthesis parameters \
+             (Content-Type: application/json)",
+        ));
+    }
+    let body = read_body(req, MAX_VARIANT_BYTES).await?;
+    let text = std::str::from_utf8(&body).map_err(|_| {
+        ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "invalid_params",
+            "the body is not UTF-8",
+        )
+    })?;
+    let overrides = params_object(text)?;
+    let mut spec = source.spec();
+    spec.params = spec.params.with_overrides(&overrides)?;
+    // Sharing the candidates needs them computed: a variant of a texture
+    // still being precomputed would search for them a second time.
+    if let Status::Pending = source.status() {
+        return Err(RegistryError::Pending {
+            id: source.id.clone(),
+            progress: source.progress(),
+        }
+        .into());
+    }
+    let submitted = s.registry.submit(None, spec, source.name.clone()).await?;
+    let (entry, status) = match submitted {
+        Submitted::Known(e) => (e, StatusCode::CREATED),
+        Submitted::Pending(e) => (e, StatusCode::ACCEPTED),
+    };
+    tracing::Span::current().record("texture", entry.id.as_str());
+    Ok(created_response(&entry, status, s.brick_size, &[]))
 }
 
 /// `GET /v1/textures/{id}/exemplar.png`: the texture's xy exemplar, for a

@@ -46,12 +46,12 @@ pub(super) async fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Textu
     Ok(s.registry.loaded(id).await?)
 }
 
-fn lod(q: &Query, t: &Texture) -> Result<u32, ApiError> {
+pub(super) fn lod(q: &Query, t: &Texture) -> Result<u32, ApiError> {
     q.int("lod", 0u32, 0, t.max_lod())
 }
 
 /// A coordinate parameter: any integer within ±2^31.
-fn coord(q: &Query, name: &str) -> Result<i64, ApiError> {
+pub(super) fn coord(q: &Query, name: &str) -> Result<i64, ApiError> {
     q.int(name, 0i64, -COORD_LIMIT, COORD_LIMIT)
 }
 
@@ -87,7 +87,7 @@ pub(super) fn check_budget(s: &AppState, what: &str, voxels: u64) -> Result<(), 
 }
 
 /// Checks that `start + len - 1` stays within the coordinate limit.
-fn check_extent(name: &str, start: i64, len: u32) -> Result<(), ApiError> {
+pub(super) fn check_extent(name: &str, start: i64, len: u32) -> Result<(), ApiError> {
     let last = start + len as i64 - 1;
     if last > COORD_LIMIT {
         return Err(ApiError::out_of_range(
@@ -186,7 +186,7 @@ pub(super) async fn raw_job(
     Ok(rgb)
 }
 
-fn parse_axis(s: &str) -> Result<Axis, ApiError> {
+pub(super) fn parse_axis(s: &str) -> Result<Axis, ApiError> {
     Axis::from_name(s).ok_or_else(|| {
         ApiError::new(
             StatusCode::BAD_REQUEST,

@@ -16,6 +16,11 @@
 // - The 3D preview fetches one brick as raw RGB8 into a WebGL2 3D texture
 //   and ray-casts a carved shape (cube or sphere, cut by a plane) through
 //   it, so every face shows the solid texture.
+// - The field panel gives the selected texture a field of local frames (a
+//   preset, or curves clicked on the slice) by asking for a variant of it,
+//   which shares its candidates, and switches to that texture; arrows of
+//   the local x axis, sampled by the frames route, can be drawn over the
+//   slice, with the curves being drawn.
 "use strict";
 
 const API = "/v1/textures";
@@ -46,6 +51,12 @@ const state = {
   orbit: { yaw: -35, pitch: 25, distance: 3.6 },
   uploading: null, // id of a texture being precomputed after an upload
   progressive: true, // coarse tiles first while the target level arrives
+  field: {
+    curves: [], // sketched curves: { points: [[x, y, z], …], normal, axis, at }
+    current: -1, // index of the curve clicks extend (-1: start a new one)
+    drawing: false, // clicks on the slice add points
+    arrows: false, // local x arrows over the slice
+  },
 };
 
 const clampCoord = (v) => Math.max(COORD_MIN, Math.min(COORD_MAX, v));
@@ -199,8 +210,9 @@ function renderList() {
     const [name, meta, bar] = text.children;
     name.textContent = label(t);
     const size = `${t.exemplar.width}×${t.exemplar.height}`;
+    const field = t.params && t.params.field ? ` · ${t.params.field.kind || "field"}` : "";
     meta.textContent =
-      t.status === "ready" ? `${size} · seed ${t.params && t.params.seed != null ? t.params.seed : "?"} · ${t.id.slice(0, 8)}`
+      t.status === "ready" ? `${size} · seed ${t.params && t.params.seed != null ? t.params.seed : "?"}${field} · ${t.id.slice(0, 8)}`
         : t.status === "failed" ? `${size} · failed`
           : `${size} · ${t.stage} ${(t.progress * 100).toFixed(0)}%`;
     bar.hidden = t.status !== "pending";
@@ -245,7 +257,8 @@ function renderInfo() {
     const tr = document.createElement("tr");
     const a = document.createElement("td"), b = document.createElement("td");
     a.textContent = k;
-    b.textContent = String(t.params[k]);
+    const value = t.params[k];
+    b.textContent = value && typeof value === "object" ? JSON.stringify(value) : String(value);
     tr.append(a, b);
     table.append(tr);
   }
@@ -289,6 +302,7 @@ function select(t) {
   renderList();
   renderInfo();
   renderInset();
+  fieldUi.selected();
   if (!t || t.status !== "ready") {
     plane.clear(t ? `${label(t)}: ${t.status}` : "no texture: drop an exemplar on the left");
     solid.clear();
@@ -780,6 +794,7 @@ const plane = (() => {
       Object.assign(snapshot, { plane: v.plane, cx: v.cx, cy: v.cy, ps: v.ps, W, H });
     }
     hud(v, done, want.length);
+    fieldUi.draw(v);
   }
 
   function hud(v, done, total) {
@@ -920,6 +935,7 @@ const plane = (() => {
     $("progress").firstChild.style.width = "0";
     hudText = text || "";
     $("hud").textContent = hudText;
+    fieldUi.draw(null);
   }
 
   /// Sets scale (clamped) keeping the plane point under (mx, my) CSS
@@ -942,8 +958,21 @@ const plane = (() => {
     state.center = [drag.c[0] - (e.clientX - drag.x) / state.scale, drag.c[1] - (e.clientY - drag.y) / state.scale].map(clampCoord);
     invalidate(false);
   });
-  const endDrag = () => {
-    if (drag) invalidate(true);
+  const endDrag = (e) => {
+    if (drag) {
+      // A click that did not move is a point for the field panel, at the
+      // plane coordinates (finest voxels) under the pointer.
+      const moved = Math.hypot(e.clientX - drag.x, e.clientY - drag.y);
+      if (e.type === "pointerup" && moved < 4 && state.field.drawing) {
+        const r = canvas.getBoundingClientRect();
+        state.center = drag.c;
+        fieldUi.click(
+          state.center[0] + (e.clientX - r.left - r.width / 2) / state.scale,
+          state.center[1] + (e.clientY - r.top - r.height / 2) / state.scale,
+        );
+      }
+      invalidate(true);
+    }
     drag = null;
   };
   canvas.addEventListener("pointerup", endDrag);
@@ -962,7 +991,7 @@ const plane = (() => {
   }).observe(canvas);
 
   return {
-    invalidate, clear, draw, targetLod,
+    invalidate, clear, draw, targetLod, view: currentView,
     pan(dx, dy) {
       state.center = [state.center[0] + dx / state.scale, state.center[1] + dy / state.scale].map(clampCoord);
       invalidate(false);
@@ -1208,6 +1237,7 @@ function setMode(mode) {
     l.hidden = !l.dataset.for.split(" ").includes(mode);
   }
   $("plane").hidden = mode === "solid";
+  $("overlay").hidden = mode !== "slice";
   $("solid").hidden = mode !== "solid";
   $("progress").hidden = mode === "solid";
   if (mode === "solid") solid.invalidate();
@@ -1323,8 +1353,359 @@ function setupControls() {
   });
 }
 
+// ---------------------------------------------------------------------
+// Field panel: a field of local frames for the selected texture (a preset
+// or curves clicked on the slice), applied as a variant of it; arrows of
+// the field's local x axis and the curves drawn over the slice.
+
+const fieldUi = (() => {
+  const overlay = $("overlay");
+  const ctx = overlay.getContext("2d");
+  // World axes (indices) of a slice's u and v and of its normal, as
+  // slices are laid out.
+  const PLANE = { z: [0, 1, 2], x: [1, 2, 0], y: [2, 0, 1] };
+  const MAX_SAMPLES = 4096; // the frames route's limit
+  const MAX_SIDE = 4096;
+  const SPACING = 56; // CSS pixels between arrows
+  let frames = null; // the last frames answer, with the texture's id
+  let framesUrl = null; // the frames asked for last
+  let ctrl = null;
+  let timer = null;
+  overlay.dataset.arrows = "0";
+  overlay.dataset.points = "0";
+
+  const kind = () => $("f-kind").value;
+
+  /// How a field reads in a sentence.
+  function describe(f) {
+    if (!f) return "no field";
+    if (f.kind === "slant") return `slant ${f.angle}°`;
+    if (f.kind === "zigzag") return `zigzag ±${f.angle}° every ${f.period}`;
+    if (f.kind === "sketch") return `${f.curves.length} drawn curve${f.curves.length > 1 ? "s" : ""}`;
+    if (f.kind === "slant3d") return `3D slant towards ${f.direction.join(", ")}`;
+    if (f.centre) return `${f.kind} about ${f.centre.join(", ")}`;
+    return f.kind;
+  }
+
+  function setDrawing(on) {
+    state.field.drawing = on;
+    $("f-draw").setAttribute("aria-pressed", String(on));
+    if (on) say("click on the slice to add points to the curve (drag to pan); Apply when done");
+  }
+
+  function showKind() {
+    const k = kind();
+    for (const el of $("field-panel").querySelectorAll("[data-kinds]")) {
+      el.hidden = !el.dataset.kinds.split(" ").includes(k);
+    }
+    if (k !== "sketch" && state.field.drawing) setDrawing(false);
+    renderCurves();
+  }
+
+  function number(id, what) {
+    const text = $(id).value.trim();
+    const v = Number(text);
+    if (text === "" || !Number.isFinite(v)) throw new Error(`${what} must be a number`);
+    return v;
+  }
+
+  /// Three numbers from "x,y,z".
+  function vec3(id, what) {
+    const v = $(id).value.split(",").map((x) => Number(x.trim()));
+    if (v.length !== 3 || !v.every(Number.isFinite)) throw new Error(`${what} must be three numbers x,y,z`);
+    return v;
+  }
+
+  /// The field the panel describes, as the API takes it (null for none).
+  function field() {
+    const k = kind();
+    if (k === "slant") return { kind: k, angle: number("f-angle", "the angle") };
+    if (k === "zigzag") return { kind: k, angle: number("f-angle", "the angle"), period: number("f-period", "the period") };
+    if (k === "circular" || k === "emissive") {
+      const axis = [0, 0, 0];
+      axis["xyz".indexOf($("f-axis").value)] = 1;
+      return { kind: k, centre: vec3("f-centre", "the centre"), axis };
+    }
+    if (k === "slant3d") return { kind: k, direction: vec3("f-direction", "the direction") };
+    if (k === "sketch") {
+      const along = $("f-along").value;
+      const curves = state.field.curves
+        .filter((c) => c.points.length >= 2)
+        .map((c) => ({ points: c.points, normal: c.normal, along }));
+      if (!curves.length) throw new Error("draw a curve of two points or more on the slice first (Draw, then click)");
+      return { kind: k, curves };
+    }
+    return null;
+  }
+
+  function renderCurves() {
+    const cs = state.field.curves;
+    const points = cs.reduce((n, c) => n + c.points.length, 0);
+    $("f-curves").textContent = cs.length
+      ? `${cs.length} curve${cs.length > 1 ? "s" : ""}, ${points} points; normal to the slice they were drawn on`
+      : "no curves yet: press Draw and click on the slice";
+  }
+
+  /// A click on the slice at plane coordinates (u, v), finest voxels:
+  /// the next point of the curve being drawn.
+  function click(u, v) {
+    if (!state.field.drawing || state.mode !== "slice") return;
+    const [iu, iv, n] = PLANE[state.axis];
+    const p = [0, 0, 0];
+    p[iu] = Math.round(u * 100) / 100;
+    p[iv] = Math.round(v * 100) / 100;
+    p[n] = state.position;
+    const f = state.field;
+    let c = f.curves[f.current];
+    // A curve lies on one slice: a point on another starts a new curve.
+    if (!c || c.axis !== state.axis || c.at !== state.position) {
+      if (f.curves.length >= 32) {
+        say("a field takes at most 32 curves", true);
+        return;
+      }
+      const normal = [0, 0, 0];
+      normal[n] = 1;
+      c = { points: [], normal, axis: state.axis, at: state.position };
+      f.curves.push(c);
+      f.current = f.curves.length - 1;
+    }
+    if (c.points.length >= 256) {
+      say("a curve takes at most 256 points: start a new curve", true);
+      return;
+    }
+    const last = c.points[c.points.length - 1];
+    if (last && last.every((x, i) => x === p[i])) return;
+    c.points.push(p);
+    renderCurves();
+  }
+
+  /// Asks for the frames that the view `v` shows, unless asked already.
+  function want(v) {
+    const lod = v.target, k = 2 ** lod;
+    let step = Math.max(1, Math.round((SPACING * dpr()) / (k * v.ps)));
+    const x0 = (v.cx - v.W / 2 / v.ps) / k, x1 = (v.cx + v.W / 2 / v.ps) / k;
+    const y0 = (v.cy - v.H / 2 / v.ps) / k, y1 = (v.cy + v.H / 2 / v.ps) / k;
+    // On the step's grid, so that panning keeps the arrows in place.
+    const grid = () => {
+      const u0 = Math.floor(x0 / step) * step, v0 = Math.floor(y0 / step) * step;
+      const w = Math.min(MAX_SIDE, Math.ceil((x1 - u0) / step + 1) * step);
+      const h = Math.min(MAX_SIDE, Math.ceil((y1 - v0) / step + 1) * step);
+      return { u0, v0, w, h };
+    };
+    let g = grid();
+    while (Math.ceil(g.w / step) * Math.ceil(g.h / step) > MAX_SAMPLES) {
+      step *= 2;
+      g = grid();
+    }
+    // Within the coordinate range: the last sample at most 2^31.
+    const fit = (o, n) => Math.max(COORD_MIN, Math.min(COORD_MAX + 2 - n, o));
+    const at = Math.floor(state.position / k);
+    const url = `${API}/${encodeURIComponent(v.t.id)}/frames/${state.axis}/${at}.json?u0=${fit(g.u0, g.w)}` +
+      `&v0=${fit(g.v0, g.h)}&w=${g.w}&h=${g.h}&step=${step}&lod=${lod}`;
+    if (url === framesUrl) return;
+    framesUrl = url;
+    clearTimeout(timer);
+    timer = setTimeout(() => load(url, v.t.id), 120);
+  }
+
+  async function load(url, id) {
+    if (ctrl) ctrl.abort();
+    const mine = (ctrl = new AbortController());
+    try {
+      const res = await fetch(url, { signal: mine.signal });
+      if (!res.ok) {
+        // Busy or not ready yet: asked again at the next draw.
+        if (res.status === 409 || res.status === 503) framesUrl = null;
+        else say(`could not read the field: ${await errorText(res)}`, true);
+        return;
+      }
+      frames = { ...(await res.json()), id };
+      draw(plane.view());
+    } catch (e) {
+      if (e.name !== "AbortError") {
+        framesUrl = null;
+        say(`could not read the field: ${e.message}`, true);
+      }
+    }
+  }
+
+  /// Local x arrows, each as long as the axis's part in the slice; a ring
+  /// where it leaves the slice. Returns how many were drawn.
+  function arrows(v, f) {
+    const k = 2 ** f.lod;
+    const L = Math.min(0.8 * f.step * k * v.ps, 48 * dpr());
+    const path = new Path2D();
+    let n = 0;
+    for (const s of f.samples) {
+      const x = ((s.u + 0.5) * k - v.cx) * v.ps + v.W / 2;
+      const y = ((s.v + 0.5) * k - v.cy) * v.ps + v.H / 2;
+      if (x < -L || y < -L || x > v.W + L || y > v.H + L) continue;
+      const [du, dv] = s.x;
+      if (Math.hypot(du, dv) < 0.2) {
+        path.moveTo(x + L * 0.12, y);
+        path.arc(x, y, L * 0.12, 0, 2 * Math.PI);
+      } else {
+        const hx = (du * L) / 2, hy = (dv * L) / 2;
+        const tx = x + hx, ty = y + hy;
+        const m = Math.hypot(hx, hy), ux = hx / m, uy = hy / m, head = Math.min(m, L * 0.22);
+        path.moveTo(x - hx, y - hy);
+        path.lineTo(tx, ty);
+        path.moveTo(tx - head * (ux - uy * 0.6), ty - head * (uy + ux * 0.6));
+        path.lineTo(tx, ty);
+        path.lineTo(tx - head * (ux + uy * 0.6), ty - head * (uy - ux * 0.6));
+      }
+      n++;
+    }
+    ctx.lineCap = "round";
+    ctx.lineJoin = "round";
+    ctx.strokeStyle = "rgba(12, 13, 15, .8)";
+    ctx.lineWidth = 4 * dpr();
+    ctx.stroke(path);
+    ctx.strokeStyle = "#d9a441";
+    ctx.lineWidth = 1.6 * dpr();
+    ctx.stroke(path);
+    return n;
+  }
+
+  /// The curves drawn on slices of the current axis (dashed when on
+  /// another slice than this one). Returns how many points were drawn.
+  function curves(v) {
+    const [iu, iv] = PLANE[state.axis];
+    let n = 0;
+    state.field.curves.forEach((c, i) => {
+      if (c.axis !== state.axis || !c.points.length) return;
+      const pts = c.points.map((p) => [(p[iu] - v.cx) * v.ps + v.W / 2, (p[iv] - v.cy) * v.ps + v.H / 2]);
+      ctx.setLineDash(c.at === state.position ? [] : [6 * dpr(), 5 * dpr()]);
+      ctx.strokeStyle = i === state.field.current ? "#ffd27a" : "#f2f2f2";
+      ctx.lineWidth = 2 * dpr();
+      ctx.beginPath();
+      pts.forEach(([x, y], j) => (j ? ctx.lineTo(x, y) : ctx.moveTo(x, y)));
+      ctx.stroke();
+      ctx.setLineDash([]);
+      ctx.fillStyle = ctx.strokeStyle;
+      for (const [x, y] of pts) {
+        ctx.beginPath();
+        ctx.arc(x, y, 3 * dpr(), 0, 2 * Math.PI);
+        ctx.fill();
+      }
+      n += pts.length;
+    });
+    return n;
+  }
+
+  /// Redraws the overlay over the view `v` (none: cleared).
+  function draw(v) {
+    const plane = $("plane");
+    if (overlay.width !== plane.width || overlay.height !== plane.height) {
+      overlay.width = plane.width;
+      overlay.height = plane.height;
+    }
+    ctx.clearRect(0, 0, overlay.width, overlay.height);
+    let drawn = 0, points = 0;
+    if (v && v.mode === "slice") {
+      if (state.field.arrows) {
+        want(v);
+        if (frames && frames.id === v.t.id && frames.axis === state.axis) drawn = arrows(v, frames);
+      }
+      points = curves(v);
+    }
+    overlay.dataset.arrows = String(drawn);
+    overlay.dataset.points = String(points);
+  }
+
+  /// Makes the selected texture follow the panel's field: asks for the
+  /// variant and shows it once ready.
+  async function apply() {
+    const t = state.selected;
+    if (!t || t.status !== "ready") {
+      say("select a ready texture first", true);
+      return;
+    }
+    let f;
+    try {
+      f = field();
+    } catch (e) {
+      say(e.message, true);
+      return;
+    }
+    const button = $("f-apply");
+    button.setAttribute("aria-disabled", "true");
+    let res;
+    try {
+      res = await fetch(`${API}/${encodeURIComponent(t.id)}/variants`, {
+        method: "POST",
+        headers: { "Content-Type": "application/json" },
+        body: JSON.stringify({ field: f }),
+      });
+    } catch (e) {
+      say(`could not apply the field: ${e.message}`, true);
+      return;
+    } finally {
+      button.removeAttribute("aria-disabled");
+    }
+    if (!res.ok) {
+      say(`field refused: ${await errorText(res)}`, true);
+      return;
+    }
+    const made = await res.json();
+    setDrawing(false);
+    if (made.id === t.id) {
+      say(`${label(t)} has ${describe(f)} already`);
+      return;
+    }
+    // The view stays where it is: only the texture changes.
+    await refreshList();
+    const now = state.textures.find((x) => x.id === made.id);
+    if (made.status === "ready" && now) {
+      say(`${label(now)} with ${describe(f)}`);
+      select(now);
+    } else {
+      state.uploading = made.id;
+      say(`making ${label(made)} with ${describe(f)}…`);
+    }
+  }
+
+  /// Shows the selected texture's field.
+  function selected() {
+    const t = state.selected;
+    $("f-current").textContent = t ? `this texture: ${describe(t.params && t.params.field)}` : "";
+  }
+
+  $("f-kind").addEventListener("change", () => {
+    const k = kind();
+    if (k === "circular" || k === "emissive") {
+      // About the view's centre, around the slice's axis: rings in view.
+      const c = centreVoxel();
+      $("f-centre").value = [c.x, c.y, c.z].join(",");
+      $("f-axis").value = state.axis;
+    }
+    showKind();
+    if (k === "sketch" && state.mode === "slice") setDrawing(true);
+  });
+  $("f-draw").addEventListener("click", () => setDrawing(!state.field.drawing));
+  $("f-new").addEventListener("click", () => {
+    state.field.current = -1;
+    renderCurves();
+    draw(plane.view());
+  });
+  $("f-clear").addEventListener("click", () => {
+    state.field.curves = [];
+    state.field.current = -1;
+    renderCurves();
+    draw(plane.view());
+  });
+  $("f-apply").addEventListener("click", apply);
+  $("f-arrows").addEventListener("change", () => {
+    state.field.arrows = $("f-arrows").checked;
+    draw(plane.view());
+  });
+  showKind();
+
+  return { draw, click, selected, field, apply };
+})();
+
 // Exposed for tests and for poking at from the console.
-window.solidtex = { state, select, setMode, upload, setView: plane.setView, stats: plane.stats };
+window.solidtex = { state, select, setMode, upload, setView: plane.setView, stats: plane.stats, field: fieldUi };
 
 setupUpload();
 setupDownloads();

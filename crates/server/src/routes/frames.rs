@@ -1,0 +1,180 @@
+//! `GET /v1/textures/{id}/frames/{axis}/{at}.json`: the texture's field of
+//! local frames sampled on a grid of an axis slice, for drawing the field
+//! over the slice (the viewer's arrows).
+//!
+//! Reading a frame is cheap (a closed form, or a trilinear lookup for a
+//! sketch) and nothing is synthesized, so the answer comes from a blocking
+//! thread without a place in the synthesis queue. Like the voxel routes,
+//! it depends only on the texture and the request: strong `ETag`,
+//! immutable.
+
+use super::AppState;
+use super::paths::{Json, Stem, TypedPath};
+use super::voxels::{
+    body_response, check_extent, coord, etag, lod, not_modified, not_modified_response, parse_axis,
+    texture,
+};
+use crate::error::ApiError;
+use crate::query::{Query, parse_int};
+use axum::extract::{RawQuery, State};
+use axum::http::HeaderMap;
+use axum::response::Response;
+use serde::Deserialize;
+use serde_json::{Value, json};
+use solidtex_core::{Axis, COORD_LIMIT, MAX_SLICE_SIDE};
+
+/// Most samples one request may ask for.
+pub const MAX_FRAME_SAMPLES: u64 = 4096;
+/// Side of the sampled rectangle when not given, like a slice's.
+const DEFAULT_SIDE: u32 = 256;
+/// Distance between samples when not given, in voxels of the lod.
+const DEFAULT_STEP: u32 = 16;
+
+/// The path of a frames request: `/v1/textures/{id}/frames/{axis}/{at}.json`.
+#[derive(Deserialize)]
+pub(super) struct FramesPath {
+    id: String,
+    axis: String,
+    at: Stem<Json>,
+}
+
+/// World axis indices of a slice's (u, v) axes and of its normal: (x, y)
+/// for z, (y, z) for x, (z, x) for y, as slices are laid out.
+fn plane_axes(axis: Axis) -> [usize; 3] {
+    match axis {
+        Axis::Z => [0, 1, 2],
+        Axis::X => [1, 2, 0],
+        Axis::Y => [2, 0, 1],
+    }
+}
+
+fn axis_name(i: usize) -> &'static str {
+    ["x", "y", "z"][i]
+}
+
+/// Where voxel `p` of level of detail `lod` sits, in finest voxels: a
+/// voxel stands for the 2^lod-wide cube around its centre (as the engine
+/// reads fields at coarse levels).
+fn finest(p: i64, lod: u32) -> f64 {
+    let k = (1u64 << lod) as f64;
+    (p as f64 + 0.5) * k - 0.5
+}
+
+/// A component rounded to 1e-6 (plenty for drawing; keeps the answer
+/// short), without negative zeros.
+fn short(x: f64) -> f64 {
+    (x * 1e6).round() / 1e6 + 0.0
+}
+
+/// `GET /v1/textures/{id}/frames/{axis}/{at}.json`
+pub(super) async fn frames(
+    State(s): State<AppState>,
+    TypedPath(FramesPath { id, axis, at }): TypedPath<FramesPath>,
+    RawQuery(raw): RawQuery,
+    headers: HeaderMap,
+) -> Result<Response, ApiError> {
+    let (entry, tex) = texture(&s, &id).await?;
+    let axis = parse_axis(&axis)?;
+    let at = parse_int("at", at.as_str(), -COORD_LIMIT, COORD_LIMIT)?;
+    let q = Query::parse(raw.as_deref())?;
+    let u0 = coord(&q, "u0")?;
+    let v0 = coord(&q, "v0")?;
+    let w = q.int("w", DEFAULT_SIDE, 1, MAX_SLICE_SIDE)?;
+    let h = q.int("h", DEFAULT_SIDE, 1, MAX_SLICE_SIDE)?;
+    let step = q.int("step", DEFAULT_STEP, 1, MAX_SLICE_SIDE)?;
+    let lod = lod(&q, &tex)?;
+    check_extent("u0", u0, w)?;
+    check_extent("v0", v0, h)?;
+    let columns = w.div_ceil(step);
+    let rows = h.div_ceil(step);
+    let count = u64::from(columns) * u64::from(rows);
+    if count > MAX_FRAME_SAMPLES {
+        return Err(ApiError::too_large(format!(
+            "{columns}x{rows} samples (w / step by h / step, rounded up); at most \
+             {MAX_FRAME_SAMPLES}: ask for a smaller area or a larger step"
+        )));
+    }
+    let name = axis_name(plane_axes(axis)[2]);
+    let tag = etag(
+        &entry,
+        &format!("frames/{name}/{at}/{u0}/{v0}/{w}/{h}/{step}/{lod}"),
+    );
+    if not_modified(&headers, &tag) {
+        return Ok(not_modified_response(&tag));
+    }
+    let kind = entry
+        .params
+        .synth
+        .field
+        .as_ref()
+        .map(|f| match serde_json::to_value(f) {
+            Ok(Value::Object(m)) => m.get("kind").cloned().unwrap_or(Value::Null),
+            _ => Value::Null,
+        });
+    let body = tokio::task::spawn_blocking(move || {
+        let [ia, ib, n] = plane_axes(axis);
+        let mut samples = Vec::with_capacity(count as usize);
+        // Every sample lies within the rectangle that check_extent bounded.
+        for j in 0..rows {
+            let v = v0 + i64::from(j) * i64::from(step);
+            for i in 0..columns {
+                let u = u0 + i64::from(i) * i64::from(step);
+                let mut p = [0.0; 3];
+                p[ia] = finest(u, lod);
+                p[ib] = finest(v, lod);
+                p[n] = finest(at, lod);
+                let f = tex.frame(p);
+                let project = |a: [f64; 3]| [short(a[ia]), short(a[ib]), short(a[n])];
+                samples.push(json!({
+                    "u": u,
+                    "v": v,
+                    "x": project(f[0]),
+                    "y": project(f[1]),
+                    "z": project(f[2]),
+                }));
+            }
+        }
+        json!({
+            "axis": name,
+            "at": at,
+            "lod": lod,
+            "u_axis": axis_name(ia),
+            "v_axis": axis_name(ib),
+            "u0": u0,
+            "v0": v0,
+            "w": w,
+            "h": h,
+            "step": step,
+            "columns": columns,
+            "rows": rows,
+            "field_kind": kind.unwrap_or(Value::Null),
+            "samples": samples,
+        })
+        .to_string()
+    })
+    .await
+    .map_err(|e| ApiError::internal(e.to_string()))?;
+    Ok(body_response(body.into_bytes(), "application/json", &tag))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slice_axes_follow_the_slices() {
+        assert_eq!(plane_axes(Axis::Z), [0, 1, 2]);
+        assert_eq!(plane_axes(Axis::X), [1, 2, 0]);
+        assert_eq!(plane_axes(Axis::Y), [2, 0, 1]);
+    }
+
+    #[test]
+    fn coarse_voxels_sit_at_their_centres() {
+        assert_eq!(finest(3, 0), 3.0);
+        assert_eq!(finest(0, 1), 0.5);
+        assert_eq!(finest(-1, 2), -2.5);
+        assert_eq!(short(-1e-9), 0.0);
+        assert!(short(-1e-9).is_sign_positive());
+        assert_eq!(short(0.123_456_789), 0.123_457);
+    }
+}
