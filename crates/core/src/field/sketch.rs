@@ -778,7 +778,6 @@ mod tests {
         (0..n).map(|_| [next(), next(), next()]).collect()
     }
 
-
     /// Angle in degrees of the rotation taking frame `a` to frame `b`.
     fn angle(a: &Frame, b: &Frame) -> f64 {
         let trace = dot(a[0], b[0]) + dot(a[1], b[1]) + dot(a[2], b[2]);

@@ -43,7 +43,7 @@ use super::grid::{Box3, Grid};
 use crate::appearance::Projector;
 use crate::candidates::geometry::{AXES, Dims, offset_triple};
 use crate::candidates::{Candidates, Level, SIMILAR_DIMS, quantise, sum_of_squares};
-use crate::field::{Frame, FrameField};
+use crate::field::{Frame, FrameField, round};
 use crate::params::{Correction, Slices, SynthParams};
 use crate::stack::spacing;
 use appearance::AppearanceCorrector;
@@ -132,8 +132,14 @@ pub struct ColourCorrector<'a> {
 pub enum Corrector<'a> {
     /// Sparse appearance-space neighbourhoods.
     Appearance(Box<AppearanceCorrector<'a>>),
-    /// Sparse appearance-space neighbourhoods in each voxel's local frame.
-    Field(Box<AppearanceCorrector<'a>>, &'a FrameField),
+    /// Sparse appearance-space neighbourhoods in each voxel's local frame:
+    /// the field, and the neighbourhood once for all voxels when the field
+    /// is the same everywhere.
+    Field(
+        Box<AppearanceCorrector<'a>>,
+        &'a FrameField,
+        Option<Box<Local>>,
+    ),
     /// Colour neighbourhoods.
     Colour(Box<ColourCorrector<'a>>),
 }
@@ -153,7 +159,11 @@ impl<'a> Corrector<'a> {
                 Corrector::Appearance(Box::new(AppearanceCorrector::new(cands, k, params)))
             }
             (Correction::Appearance, Some(f)) => {
-                Corrector::Field(Box::new(AppearanceCorrector::new(cands, k, params)), f)
+                let c = AppearanceCorrector::new(cands, k, params);
+                let constant = f
+                    .constant()
+                    .map(|frame| Box::new(Local::new(frame, c.spacing())));
+                Corrector::Field(Box::new(c), f, constant)
             }
             (Correction::Colour, _) => {
                 Corrector::Colour(Box::new(ColourCorrector::new(cands, k, params)))
@@ -209,7 +219,10 @@ impl<'a> Corrector<'a> {
     ) -> [u32; 3] {
         match self {
             Corrector::Appearance(c) => c.correct_with::<BY_WALL>(work, start, inside, p),
-            Corrector::Field(c, field) => {
+            Corrector::Field(c, _, Some(local)) => {
+                c.correct_local_with::<BY_WALL>(work, start, inside, p, local)
+            }
+            Corrector::Field(c, field, None) => {
                 let local = Local::new(&field.frame_at(c.level_index(), p), c.spacing());
                 c.correct_local_with::<BY_WALL>(work, start, inside, p, &local)
             }
@@ -561,37 +574,66 @@ pub struct Local {
     /// Per [`near_slot`], the world offset in local coordinates times the
     /// level's spacing, rounded: exemplar pixels to move by.
     offset: [[i64; 3]; 27],
+    /// The distinct slots of `slot`, ascending: the neighbours a
+    /// correction reads, first `used_n` of them.
+    used: [u8; 27],
+    used_n: usize,
 }
 
 impl Local {
+    /// The neighbours a correction in this frame reads, by [`near_slot`].
+    #[inline(always)]
+    fn used(&self) -> &[u8] {
+        &self.used[..self.used_n]
+    }
+
     /// The neighbourhood of a voxel whose local frame is `frame`, at a
     /// level of spacing `h`.
     pub fn new(frame: &Frame, h: i64) -> Local {
+        let hf = h as f64;
+        let along = |a: usize, d: [f64; 3]| {
+            round((frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2]) * hf)
+        };
         let mut offset = [[0i64; 3]; 27];
-        for (k, o) in offset.iter_mut().enumerate() {
-            let d = [
-                (k % 3) as f64 - 1.0,
-                ((k / 3) % 3) as f64 - 1.0,
-                (k / 9) as f64 - 1.0,
-            ];
-            *o = [0, 1, 2].map(|a| {
-                let e = frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2];
-                (e * h as f64).round() as i64
-            });
-        }
-        let mut slot = [[0u8; 9]; 3];
-        for (plane, &(a, b)) in AXES.iter().enumerate() {
-            for j in -1..=1i64 {
-                for i in -1..=1i64 {
-                    let d = [0, 1, 2].map(|w| {
-                        let v = frame[a][w] * i as f64 + frame[b][w] * j as f64;
-                        (v.round() as i64).clamp(-1, 1)
-                    });
-                    slot[plane][(3 * (j + 1) + i + 1) as usize] = near_slot(d) as u8;
+        // z outermost, as [`near_slot`] counts.
+        let mut k = 0;
+        for dz in [-1.0, 0.0, 1.0] {
+            for dy in [-1.0, 0.0, 1.0] {
+                for dx in [-1.0, 0.0, 1.0] {
+                    let d = [dx, dy, dz];
+                    offset[k] = [along(0, d), along(1, d), along(2, d)];
+                    k += 1;
                 }
             }
         }
-        Local { slot, offset }
+        let mut slot = [[0u8; 9]; 3];
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            let (fa, fb) = (frame[a], frame[b]);
+            let mut n = 0;
+            for j in [-1.0, 0.0, 1.0] {
+                for i in [-1.0, 0.0, 1.0] {
+                    let d = |w: usize| round(fa[w] * i + fb[w] * j).clamp(-1, 1);
+                    slot[plane][n] = (13 + d(0) + 3 * d(1) + 9 * d(2)) as u8;
+                    n += 1;
+                }
+            }
+        }
+        let mut seen = [false; 27];
+        for &k in slot.iter().flatten() {
+            seen[k as usize] = true;
+        }
+        let mut used = [0u8; 27];
+        let mut used_n = 0;
+        for (k, _) in seen.iter().enumerate().filter(|(_, s)| **s) {
+            used[used_n] = k as u8;
+            used_n += 1;
+        }
+        Local {
+            slot,
+            offset,
+            used,
+            used_n,
+        }
     }
 
     /// The near slot at in-plane offset (i, j) of `plane`.
@@ -601,8 +643,9 @@ impl Local {
     }
 }
 
-/// [`gather_near`] in a local frame: all 27 neighbours (rotated offsets
-/// reach the corners), each moved back by its offset in local coordinates.
+/// [`gather_near`] in a local frame: the neighbours the frame's planes
+/// hold (turned offsets may reach the corners), each moved back by its
+/// offset in local coordinates.
 #[inline(always)]
 fn gather_local<const BY_WALL: bool>(
     work: &Work,
@@ -616,7 +659,8 @@ fn gather_local<const BY_WALL: bool>(
     let centre = work.triples.index(p) as i64;
     let mut near = Near::default();
     let mut moved = [[u32::MAX; 3]; 27];
-    for (k, m) in moved.iter_mut().enumerate() {
+    for &k in local.used() {
+        let k = k as usize;
         let d = [
             (k % 3) as i64 - 1,
             ((k / 3) % 3) as i64 - 1,
@@ -628,7 +672,7 @@ fn gather_local<const BY_WALL: bool>(
         near.triples[k] = src.triples.data[idx];
         let [r, g, b] = src.colours.data[idx];
         near.colours[k] = [r, g, b, 0.0];
-        *m = offset_triple(dims, near.triples[k], local.offset[k].map(|v| -v), 1);
+        moved[k] = offset_triple(dims, near.triples[k], local.offset[k].map(|v| -v), 1);
     }
     (near, moved)
 }

@@ -4,7 +4,7 @@
 
 use crate::candidates::Candidates;
 use crate::candidates::geometry::offset_triple;
-use crate::field::{FrameField, world};
+use crate::field::{FrameField, round, world};
 use crate::hash::{hash_pos, mix, unit as unit_f};
 use crate::params::SlabTiling;
 use crate::stack::spacing;
@@ -98,7 +98,7 @@ fn slab_triple(
             let d = [0, 1, 2].map(|a| p[a] as f64 - pivot[a]);
             [0, 1, 2].map(|a| {
                 let e = frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2];
-                (pivot[a] + e).round() as i64
+                round(pivot[a] + e)
             })
         }
     };
@@ -298,7 +298,7 @@ pub fn upsample(
                 let e = frame[a][0] * o[0] as f64
                     + frame[a][1] * o[1] as f64
                     + frame[a][2] * o[2] as f64;
-                (e * h).round() as i64
+                round(e * h)
             });
             offset_triple(c.dims(), parent, local, 1)
         }

@@ -53,6 +53,8 @@ use crate::stack::spacing;
 static WORLD: Local = Local {
     slot: [[0; 9]; 3],
     offset: [[0; 3]; 27],
+    used: [0; 27],
+    used_n: 0,
 };
 
 /// Largest appearance dimension count per location (`pca_dims` ≤ 16).
@@ -392,8 +394,17 @@ impl<'a> AppearanceCorrector<'a> {
         // One proposed twice is scored twice, which is cheaper than
         // finding out.
         let direct = DIRECT.map(|d| moved[near_slot(d)]);
-        // In a local frame any of the 27 may be an in-plane neighbour.
-        let coherent: &[[u32; 3]] = if FIELD { &moved } else { &direct };
+        // In a local frame, the in-plane neighbours the frame's planes hold
+        // (Zhang et al.'s reduced candidate set).
+        let mut turned = [[u32::MAX; 3]; 27];
+        let coherent: &[[u32; 3]] = if FIELD {
+            for (t, &k) in turned.iter_mut().zip(local.used()) {
+                *t = moved[k as usize];
+            }
+            &turned[..local.used().len()]
+        } else {
+            &direct
+        };
         for t in coherent {
             for (q, &c) in t.iter().enumerate() {
                 prefetch(std::slice::from_ref(self.tables.share(q, c)));
