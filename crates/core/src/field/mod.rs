@@ -519,7 +519,7 @@ mod tests {
         for x in [
             -2.5, -1.5, -1.49, -0.5, -0.2, 0.0, 0.2, 0.5, 1.49, 1.5, 2.5, 7.75,
         ] {
-            assert_eq!(round(x), (x as f64).round() as i64, "{x}");
+            assert_eq!(round(x), x.round() as i64, "{x}");
         }
     }
 
