@@ -55,7 +55,7 @@ fn alignment_error(measured: &Texture, guide: &Texture) -> f64 {
     let mut errors: Vec<f64> = grain_map(image, WINDOW)
         .iter()
         .map(|w| {
-            let x = guide.frame([w.centre[0], w.centre[1], 0.0])[0];
+            let x = guide.frame(0, [w.centre[0], w.centre[1], 0.0])[0];
             let want = x[1].atan2(x[0]).to_degrees();
             line_angle(w.grain.degrees as f64, want)
         })

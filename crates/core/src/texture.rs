@@ -51,13 +51,14 @@ impl Texture {
         self.engine.params()
     }
 
-    /// The local frame of the texture's field at `p` (in voxels of the
-    /// finest level): the local x, y and z axes in world coordinates, the
-    /// world axes when the texture has no field.
-    pub fn frame(&self, p: [f64; 3]) -> [[f64; 3]; 3] {
-        self.engine
-            .field()
-            .map_or(crate::field::IDENTITY, |f| f.frame(p))
+    /// The local frame of the texture's field at `p`, in voxels of level
+    /// of detail `lod` (a voxel stands for the 2^lod-wide cube around its
+    /// centre): the local x, y and z axes in world coordinates, the world
+    /// axes when the texture has no field.
+    pub fn frame(&self, lod: u32, p: [f64; 3]) -> [[f64; 3]; 3] {
+        self.engine.field().map_or(crate::field::IDENTITY, |f| {
+            f.frame(crate::field::world(lod as usize, p))
+        })
     }
 
     /// Highest level of detail served: lod k is pyramid level L−k, voxels

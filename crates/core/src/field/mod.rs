@@ -515,6 +515,13 @@ mod tests {
     }
 
     #[test]
+    fn coarse_voxels_sit_at_their_centres() {
+        assert_eq!(world(0, [3.0, 0.0, 0.0]), [3.0, 0.0, 0.0]);
+        assert_eq!(world(1, [0.0, 0.0, 0.0]), [0.5; 3]);
+        assert_eq!(world(2, [-1.0, -1.0, -1.0]), [-2.5; 3]);
+    }
+
+    #[test]
     fn rounding_takes_halves_away_from_zero() {
         for x in [
             -2.5, -1.5, -1.49, -0.5, -0.2, 0.0, 0.2, 0.5, 1.49, 1.5, 2.5, 7.75,

@@ -52,14 +52,6 @@ fn axis_name(i: usize) -> &'static str {
     ["x", "y", "z"][i]
 }
 
-/// Where voxel `p` of level of detail `lod` sits, in finest voxels: a
-/// voxel stands for the 2^lod-wide cube around its centre (as the engine
-/// reads fields at coarse levels).
-fn finest(p: i64, lod: u32) -> f64 {
-    let k = (1u64 << lod) as f64;
-    (p as f64 + 0.5) * k - 0.5
-}
-
 /// A component rounded to 1e-6 (plenty for drawing; keeps the answer
 /// short), without negative zeros.
 fn short(x: f64) -> f64 {
@@ -120,10 +112,10 @@ pub(super) async fn frames(
             for i in 0..columns {
                 let u = u0 + i64::from(i) * i64::from(step);
                 let mut p = [0.0; 3];
-                p[ia] = finest(u, lod);
-                p[ib] = finest(v, lod);
-                p[n] = finest(at, lod);
-                let f = tex.frame(p);
+                p[ia] = u as f64;
+                p[ib] = v as f64;
+                p[n] = at as f64;
+                let f = tex.frame(lod, p);
                 let project = |a: [f64; 3]| [short(a[ia]), short(a[ib]), short(a[n])];
                 samples.push(json!({
                     "u": u,
@@ -169,10 +161,7 @@ mod tests {
     }
 
     #[test]
-    fn coarse_voxels_sit_at_their_centres() {
-        assert_eq!(finest(3, 0), 3.0);
-        assert_eq!(finest(0, 1), 0.5);
-        assert_eq!(finest(-1, 2), -2.5);
+    fn components_are_short_and_never_negative_zero() {
         assert_eq!(short(-1e-9), 0.0);
         assert!(short(-1e-9).is_sign_positive());
         assert_eq!(short(0.123_456_789), 0.123_457);
