@@ -467,6 +467,21 @@ mod tests {
             let e = f.validate().unwrap_err().to_string();
             assert!(e.contains(says), "{json}: {e}");
         }
+        // At and past the bounds.
+        Field::Slant { angle: MAX_COORD }.validate().unwrap();
+        assert!(
+            Field::Slant {
+                angle: -1.1 * MAX_COORD
+            }
+            .validate()
+            .is_err()
+        );
+        let zigzag = |period| Field::Zigzag {
+            angle: 10.0,
+            period,
+        };
+        zigzag(1.0).validate().unwrap();
+        assert!(zigzag(0.99).validate().is_err());
         for json in [
             r#"{"kind":"spiral"}"#,
             r#"{"kind":"slant","angle":1,"extra":2}"#,

@@ -953,6 +953,30 @@ mod tests {
     }
 
     #[test]
+    fn sketches_at_the_limits_are_taken() {
+        let z = [0.0, 0.0, 1.0];
+        let line = |n: usize, y: f64| {
+            let pts: Vec<[f64; 3]> = (0..n).map(|i| [i as f64, y, 0.0]).collect();
+            curve(&pts, z, Along::X)
+        };
+        // 32 curves, 2048 points in all.
+        let full = sketch((0..MAX_CURVES).map(|c| line(64, 4.0 * c as f64)).collect());
+        assert_eq!(full.curves.len(), MAX_CURVES);
+        full.validate().unwrap();
+        // One curve of 256 points.
+        sketch(vec![line(MAX_CURVE_POINTS, 0.0)])
+            .validate()
+            .unwrap();
+        // Coordinates at ±1e6.
+        let far = curve(
+            &[[-MAX_COORD, 0.0, 0.0], [MAX_COORD, 0.0, 0.0]],
+            z,
+            Along::X,
+        );
+        sketch(vec![far]).validate().unwrap();
+    }
+
+    #[test]
     fn bad_sketches_are_refused_with_a_reason() {
         let line = |normal| curve(&[[0.0, 0.0, 0.0], [10.0, 0.0, 0.0]], normal, Along::X);
         let z = [0.0, 0.0, 1.0];

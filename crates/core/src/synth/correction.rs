@@ -590,41 +590,36 @@ impl Local {
     /// The neighbourhood of a voxel whose local frame is `frame`, at a
     /// level of spacing `h`.
     pub fn new(frame: &Frame, h: i64) -> Local {
-        let hf = h as f64;
-        let along = |a: usize, d: [f64; 3]| {
-            round((frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2]) * hf)
-        };
-        let mut offset = [[0i64; 3]; 27];
-        // z outermost, as [`near_slot`] counts.
-        let mut k = 0;
-        for dz in [-1.0, 0.0, 1.0] {
-            for dy in [-1.0, 0.0, 1.0] {
-                for dx in [-1.0, 0.0, 1.0] {
-                    let d = [dx, dy, dz];
-                    offset[k] = [along(0, d), along(1, d), along(2, d)];
-                    k += 1;
-                }
-            }
-        }
         let mut slot = [[0u8; 9]; 3];
+        let mut seen = [false; 27];
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             let (fa, fb) = (frame[a], frame[b]);
             let mut n = 0;
             for j in [-1.0, 0.0, 1.0] {
                 for i in [-1.0, 0.0, 1.0] {
                     let d = |w: usize| round(fa[w] * i + fb[w] * j).clamp(-1, 1);
-                    slot[plane][n] = (13 + d(0) + 3 * d(1) + 9 * d(2)) as u8;
+                    let k = (13 + d(0) + 3 * d(1) + 9 * d(2)) as usize;
+                    slot[plane][n] = k as u8;
+                    seen[k] = true;
                     n += 1;
                 }
             }
         }
-        let mut seen = [false; 27];
-        for &k in slot.iter().flatten() {
-            seen[k as usize] = true;
-        }
+        // Offsets of the neighbours read only: the others are never moved.
+        let hf = h as f64;
+        let mut offset = [[0i64; 3]; 27];
         let mut used = [0u8; 27];
         let mut used_n = 0;
-        for (k, _) in seen.iter().enumerate().filter(|(_, s)| **s) {
+        for k in (0..27).filter(|&k| seen[k]) {
+            // z outermost, as [`near_slot`] counts.
+            let d = [
+                (k % 3) as f64 - 1.0,
+                ((k / 3) % 3) as f64 - 1.0,
+                (k / 9) as f64 - 1.0,
+            ];
+            offset[k] = [0, 1, 2].map(|a| {
+                round((frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2]) * hf)
+            });
             used[used_n] = k as u8;
             used_n += 1;
         }

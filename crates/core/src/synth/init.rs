@@ -49,74 +49,56 @@ impl Slab<'_> {
 
     /// The tiled slab's triple at `p` of level `k`.
     pub fn triple(&self, k: usize, p: [i64; 3]) -> [u32; 3] {
-        let (c, seed, thickness, tiling, field) = (
-            self.cands,
-            self.seed,
-            self.thickness,
-            self.tiling,
-            self.field,
-        );
-        slab_triple(c, seed, thickness, tiling, field, k, p)
+        let (c, seed, tiling) = (self.cands, self.seed, self.tiling);
+        let n = self.thickness as i64;
+        let r = n / 2;
+        let h = spacing(k) as i64;
+        let dims = c.dims();
+        let side = (period(c, k) as i64 / 2).max(4);
+        // The piece that holds `p`, and the point it turns about in a field.
+        let (piece, pivot) = match tiling {
+            SlabTiling::Blocks => {
+                let block = [p[0].div_euclid(side), p[1].div_euclid(side)];
+                let centre = block.map(|b| (b * side) as f64 + (side as f64 - 1.0) / 2.0);
+                (Piece::Block(block), [centre[0], centre[1], p[2] as f64])
+            }
+            SlabTiling::Cells => {
+                let (cube, site) = nearest_site(seed, k, side, p);
+                let site = site.map(|v| v as f64 / SITE_STEPS as f64 - 0.5);
+                (Piece::Cell(cube), site)
+            }
+        };
+        // In a field, each piece is the slab turned into the local frame at
+        // its pivot (Zhang et al. §4.1's T([q⁻¹ v]), piece by piece as their
+        // subpart initialisation): one frame for a whole piece keeps the
+        // piece undistorted wherever the field bends.
+        let p = match self.field {
+            None => p,
+            Some(f) => {
+                let frame = f.frame(world(k, pivot));
+                let d = [0, 1, 2].map(|a| p[a] as f64 - pivot[a]);
+                [0, 1, 2].map(|a| {
+                    let e = frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2];
+                    round(pivot[a] + e)
+                })
+            }
+        };
+        let layer = (p[2] + r).div_euclid(n);
+        let o = match piece {
+            Piece::Block(block) => hash_pos(seed, k as u32, TAG_SLAB, [block[0], block[1], layer]),
+            // Cells that share a layer differ in their cube's x, y or z.
+            Piece::Cell(cube) => {
+                mix(hash_pos(seed, k as u32, TAG_SLAB, [cube[0], cube[1], layer]) ^ cube[2] as u64)
+            }
+        };
+        let dz = (p[2] + r).rem_euclid(n) - r;
+        let ox = (o % dims.w as u64) as i64;
+        let oy = ((o >> 32) % dims.h as u64) as i64;
+        let pixel = dims.index(p[0] * h + ox, p[1] * h + oy);
+        let cands = c.level(k).candidates(0);
+        let first = cands.triples[cands.range(pixel).start];
+        offset_triple(dims, first, [0, 0, dz], h)
     }
-}
-
-fn slab_triple(
-    c: &Candidates,
-    seed: u64,
-    thickness: u32,
-    tiling: SlabTiling,
-    field: Option<&FrameField>,
-    k: usize,
-    p: [i64; 3],
-) -> [u32; 3] {
-    let n = thickness as i64;
-    let r = n / 2;
-    let h = spacing(k) as i64;
-    let dims = c.dims();
-    let side = (period(c, k) as i64 / 2).max(4);
-    // The piece that holds `p`, and the point it turns about in a field.
-    let (piece, pivot) = match tiling {
-        SlabTiling::Blocks => {
-            let block = [p[0].div_euclid(side), p[1].div_euclid(side)];
-            let centre = block.map(|b| (b * side) as f64 + (side as f64 - 1.0) / 2.0);
-            (Piece::Block(block), [centre[0], centre[1], p[2] as f64])
-        }
-        SlabTiling::Cells => {
-            let (cube, site) = nearest_site(seed, k, side, p);
-            let site = site.map(|v| v as f64 / SITE_STEPS as f64 - 0.5);
-            (Piece::Cell(cube), site)
-        }
-    };
-    // In a field, each piece is the slab turned into the local frame at
-    // its pivot (Zhang et al. §4.1's T([q⁻¹ v]), piece by piece as their
-    // subpart initialisation): one frame for a whole piece keeps the
-    // piece undistorted wherever the field bends.
-    let p = match field {
-        None => p,
-        Some(f) => {
-            let frame = f.frame(world(k, pivot));
-            let d = [0, 1, 2].map(|a| p[a] as f64 - pivot[a]);
-            [0, 1, 2].map(|a| {
-                let e = frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2];
-                round(pivot[a] + e)
-            })
-        }
-    };
-    let layer = (p[2] + r).div_euclid(n);
-    let o = match piece {
-        Piece::Block(block) => hash_pos(seed, k as u32, TAG_SLAB, [block[0], block[1], layer]),
-        // Cells that share a layer differ in their cube's x, y or z.
-        Piece::Cell(c) => {
-            mix(hash_pos(seed, k as u32, TAG_SLAB, [c[0], c[1], layer]) ^ c[2] as u64)
-        }
-    };
-    let dz = (p[2] + r).rem_euclid(n) - r;
-    let ox = (o % dims.w as u64) as i64;
-    let oy = ((o >> 32) % dims.h as u64) as i64;
-    let pixel = dims.index(p[0] * h + ox, p[1] * h + oy);
-    let cands = c.level(k).candidates(0);
-    let first = cands.triples[cands.range(pixel).start];
-    offset_triple(dims, first, [0, 0, dz], h)
 }
 
 /// A piece of the tiled slab.

@@ -11,8 +11,8 @@
 use super::AppState;
 use super::paths::{Json, Stem, TypedPath};
 use super::voxels::{
-    body_response, check_extent, coord, etag, lod, not_modified, not_modified_response, parse_axis,
-    texture,
+    SliceWindow, body_response, etag, not_modified, not_modified_response, parse_axis,
+    slice_window, texture,
 };
 use crate::error::ApiError;
 use crate::query::{Query, parse_int};
@@ -21,12 +21,10 @@ use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
 use serde_json::{Value, json};
-use solidtex_core::{Axis, COORD_LIMIT, MAX_SLICE_SIDE};
+use solidtex_core::{COORD_LIMIT, MAX_SLICE_SIDE};
 
 /// Most samples one request may ask for.
 pub const MAX_FRAME_SAMPLES: u64 = 4096;
-/// Side of the sampled rectangle when not given, like a slice's.
-const DEFAULT_SIDE: u32 = 256;
 /// Distance between samples when not given, in voxels of the lod.
 const DEFAULT_STEP: u32 = 16;
 
@@ -36,16 +34,6 @@ pub(super) struct FramesPath {
     id: String,
     axis: String,
     at: Stem<Json>,
-}
-
-/// World axis indices of a slice's (u, v) axes and of its normal: (x, y)
-/// for z, (y, z) for x, (z, x) for y, as slices are laid out.
-fn plane_axes(axis: Axis) -> [usize; 3] {
-    match axis {
-        Axis::Z => [0, 1, 2],
-        Axis::X => [1, 2, 0],
-        Axis::Y => [2, 0, 1],
-    }
 }
 
 fn axis_name(i: usize) -> &'static str {
@@ -69,14 +57,8 @@ pub(super) async fn frames(
     let axis = parse_axis(&axis)?;
     let at = parse_int("at", at.as_str(), -COORD_LIMIT, COORD_LIMIT)?;
     let q = Query::parse(raw.as_deref())?;
-    let u0 = coord(&q, "u0")?;
-    let v0 = coord(&q, "v0")?;
-    let w = q.int("w", DEFAULT_SIDE, 1, MAX_SLICE_SIDE)?;
-    let h = q.int("h", DEFAULT_SIDE, 1, MAX_SLICE_SIDE)?;
+    let SliceWindow { u0, v0, w, h, lod } = slice_window(&q, &tex)?;
     let step = q.int("step", DEFAULT_STEP, 1, MAX_SLICE_SIDE)?;
-    let lod = lod(&q, &tex)?;
-    check_extent("u0", u0, w)?;
-    check_extent("v0", v0, h)?;
     let columns = w.div_ceil(step);
     let rows = h.div_ceil(step);
     let count = u64::from(columns) * u64::from(rows);
@@ -86,7 +68,8 @@ pub(super) async fn frames(
              {MAX_FRAME_SAMPLES}: ask for a smaller area or a larger step"
         )));
     }
-    let name = axis_name(plane_axes(axis)[2]);
+    let (n, ia, ib) = axis.frame();
+    let name = axis_name(n);
     let tag = etag(
         &entry,
         &format!("frames/{name}/{at}/{u0}/{v0}/{w}/{h}/{step}/{lod}"),
@@ -104,7 +87,6 @@ pub(super) async fn frames(
             _ => Value::Null,
         });
     let body = tokio::task::spawn_blocking(move || {
-        let [ia, ib, n] = plane_axes(axis);
         let mut samples = Vec::with_capacity(count as usize);
         // Every sample lies within the rectangle that check_extent bounded.
         for j in 0..rows {
@@ -152,13 +134,6 @@ pub(super) async fn frames(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn slice_axes_follow_the_slices() {
-        assert_eq!(plane_axes(Axis::Z), [0, 1, 2]);
-        assert_eq!(plane_axes(Axis::X), [1, 2, 0]);
-        assert_eq!(plane_axes(Axis::Y), [2, 0, 1]);
-    }
 
     #[test]
     fn components_are_short_and_never_negative_zero() {

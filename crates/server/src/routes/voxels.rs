@@ -86,6 +86,28 @@ pub(super) fn check_budget(s: &AppState, what: &str, voxels: u64) -> Result<(), 
     Ok(())
 }
 
+/// Where on its plane an axis slice (or its frames) is asked for.
+pub(super) struct SliceWindow {
+    pub u0: i64,
+    pub v0: i64,
+    pub w: u32,
+    pub h: u32,
+    pub lod: u32,
+}
+
+/// The `u0`, `v0`, `w`, `h` and `lod` of a slice request, each in range
+/// and the rectangle within the coordinate limit.
+pub(super) fn slice_window(q: &Query, t: &Texture) -> Result<SliceWindow, ApiError> {
+    let u0 = coord(q, "u0")?;
+    let v0 = coord(q, "v0")?;
+    let w = q.int("w", DEFAULT_SIDE, 1, MAX_SLICE_SIDE)?;
+    let h = q.int("h", DEFAULT_SIDE, 1, MAX_SLICE_SIDE)?;
+    let lod = lod(q, t)?;
+    check_extent("u0", u0, w)?;
+    check_extent("v0", v0, h)?;
+    Ok(SliceWindow { u0, v0, w, h, lod })
+}
+
 /// Checks that `start + len - 1` stays within the coordinate limit.
 pub(super) fn check_extent(name: &str, start: i64, len: u32) -> Result<(), ApiError> {
     let last = start + len as i64 - 1;
@@ -215,13 +237,7 @@ pub(super) async fn slice(
     let axis = parse_axis(&axis)?;
     let at = parse_int("at", at.as_str(), -COORD_LIMIT, COORD_LIMIT)?;
     let q = Query::parse(raw.as_deref())?;
-    let u0 = coord(&q, "u0")?;
-    let v0 = coord(&q, "v0")?;
-    let w = q.int("w", DEFAULT_SIDE, 1, MAX_SLICE_SIDE)?;
-    let h = q.int("h", DEFAULT_SIDE, 1, MAX_SLICE_SIDE)?;
-    let lod = lod(&q, &tex)?;
-    check_extent("u0", u0, w)?;
-    check_extent("v0", v0, h)?;
+    let SliceWindow { u0, v0, w, h, lod } = slice_window(&q, &tex)?;
     check_budget(&s, "slice", w as u64 * h as u64)?;
     let region = Region::slice(axis, at, u0, v0, w, h);
     check_work(&s, tex.estimate(&region, lod, s.max_request_work))?;

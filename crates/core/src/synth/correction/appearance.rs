@@ -393,18 +393,21 @@ impl<'a> AppearanceCorrector<'a> {
         // The coherent triples: each direct neighbour's triple moved back.
         // One proposed twice is scored twice, which is cheaper than
         // finding out.
-        let direct = DIRECT.map(|d| moved[near_slot(d)]);
         // In a local frame, the in-plane neighbours the frame's planes hold
         // (Zhang et al.'s reduced candidate set).
-        let mut turned = [[u32::MAX; 3]; 27];
-        let coherent: &[[u32; 3]] = if FIELD {
-            for (t, &k) in turned.iter_mut().zip(local.used()) {
+        let mut coherent = [[u32::MAX; 3]; 27];
+        let coherent_n = if FIELD {
+            for (t, &k) in coherent.iter_mut().zip(local.used()) {
                 *t = moved[k as usize];
             }
-            &turned[..local.used().len()]
+            local.used().len()
         } else {
-            &direct
+            for (t, &d) in coherent.iter_mut().zip(&DIRECT) {
+                *t = moved[near_slot(d)];
+            }
+            DIRECT.len()
         };
+        let coherent = &coherent[..coherent_n];
         for t in coherent {
             for (q, &c) in t.iter().enumerate() {
                 prefetch(std::slice::from_ref(self.tables.share(q, c)));
