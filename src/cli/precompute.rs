@@ -29,6 +29,10 @@ pub struct PrecomputeArgs {
     /// '{"rotate": [0, 270, 0], "weights": [1, 1, 0.25]}'.
     #[arg(long, default_value = "auto")]
     orientation: Orientation,
+    /// Weight of the feature-distance channel in the appearance vectors,
+    /// relative to the luminance; 0 matches colour alone.
+    #[arg(long, default_value_t = AnalysisParams::default().feature_weight)]
+    feature_weight: f32,
     /// Also print each stage's time and each level's candidate statistics.
     #[arg(long)]
     verbose: bool,
@@ -45,6 +49,7 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
     let params = AnalysisParams {
         levels: a.levels,
         orientation: a.orientation,
+        feature_weight: a.feature_weight,
         ..AnalysisParams::default()
     };
     let (w, h) = (set.width(), set.height());

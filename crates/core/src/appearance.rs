@@ -303,17 +303,24 @@ pub fn sq_dist(a: &[f32], b: &[f32]) -> f32 {
     sum8(a, b, |x, y| (x - y) * (x - y))
 }
 
-/// Gathers the N×N neighbourhood of (x, y) at level `k` (spacing 2^k) as
-/// RGB triplets, row by row (v outer, u inner).
+/// Gathers the N×N neighbourhood of (x, y) at level `k` (spacing 2^k),
+/// row by row (v outer, u inner): per pixel its RGB colour, then its
+/// feature distance when the stack has one ([`GaussianStack::channels`]).
 pub fn neighbourhood(stack: &GaussianStack, k: usize, n: u32, x: i64, y: i64, out: &mut [f32]) {
     let r = (n / 2) as i64;
     let h = spacing(k) as i64;
+    let (w, hh) = (stack.width() as i64, stack.height() as i64);
+    let feature = stack.feature_level(k);
     let mut o = 0;
     for j in -r..=r {
         for i in -r..=r {
-            let c = stack.at(k, x + i * h, y + j * h);
-            out[o..o + 3].copy_from_slice(&c);
+            let (px, py) = (x + i * h, y + j * h);
+            out[o..o + 3].copy_from_slice(&stack.at(k, px, py));
             o += 3;
+            if let Some(f) = feature {
+                out[o] = f[(py.rem_euclid(hh) * w + px.rem_euclid(w)) as usize];
+                o += 1;
+            }
         }
     }
 }
@@ -323,6 +330,9 @@ pub fn neighbourhood(stack: &GaussianStack, k: usize, n: u32, x: i64, y: i64, ou
 pub struct AppearanceLevel {
     /// The neighbourhood PCA.
     pub pca: Pca,
+    /// Values per neighbourhood pixel: 3 colours, and a feature distance
+    /// when the stack has one.
+    pub channels: usize,
     /// `dims` floats per pixel, row-major pixels.
     pub vectors: Vec<f32>,
 }
@@ -338,7 +348,7 @@ impl AppearanceLevel {
 /// All N×N neighbourhoods of a level, flattened.
 pub fn all_neighbourhoods(stack: &GaussianStack, k: usize, n: u32) -> Vec<f32> {
     let (w, h) = (stack.width() as i64, stack.height() as i64);
-    let len = (n * n * 3) as usize;
+    let len = (n * n) as usize * stack.channels();
     let mut all = vec![0f32; (w * h) as usize * len];
     for (i, chunk) in all.chunks_exact_mut(len).enumerate() {
         let (x, y) = (i as i64 % w, i as i64 / w);
@@ -354,6 +364,7 @@ pub fn project_all(stack: &GaussianStack, k: usize, n: u32, pca: &Pca) -> Appear
     pca.project_many(&all, &mut vectors);
     AppearanceLevel {
         pca: pca.clone(),
+        channels: stack.channels(),
         vectors,
     }
 }

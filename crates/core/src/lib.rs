@@ -18,6 +18,7 @@ mod candidates;
 mod error;
 pub mod eval;
 mod exemplar;
+mod feature;
 mod field;
 pub mod hash;
 mod orientation;

@@ -32,6 +32,12 @@ pub struct AnalysisParams {
     /// How the exemplar is laid on the three planes, and how much each
     /// plane counts in the matching (see [`Orientation`]).
     pub orientation: Orientation,
+    /// Weight of the feature-distance channel in the appearance vectors,
+    /// relative to the luminance (see [`crate::feature`]); 0 leaves the
+    /// vectors to colour alone. Not written when 0, so textures without
+    /// the channel keep their ids. Needs the appearance correction.
+    #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
+    pub feature_weight: f32,
 }
 
 impl Default for AnalysisParams {
@@ -46,8 +52,18 @@ impl Default for AnalysisParams {
             similar_coarse: 4,
             similar_fine: 2,
             orientation: Orientation::Auto,
+            feature_weight: DEFAULT_FEATURE_WEIGHT,
         }
     }
+}
+
+/// Default [`AnalysisParams::feature_weight`]: off, since the channel found
+/// automatically made the shared exemplars' statistics worse
+/// (docs/quality.md).
+pub const DEFAULT_FEATURE_WEIGHT: f32 = 0.0;
+
+fn is_zero(v: &f32) -> bool {
+    *v == 0.0
 }
 
 impl AnalysisParams {
@@ -67,6 +83,7 @@ impl AnalysisParams {
         if let Orientation::Given(a) = &self.orientation {
             a.validate()?;
         }
+        range("feature_weight", self.feature_weight, 0.0, 4.0)?;
         Ok(())
     }
 }
@@ -466,6 +483,18 @@ impl SynthParams {
         }
     }
 
+    /// Checks that these synthesis parameters can run on candidates
+    /// analysed with `analysis`.
+    pub fn validate_with(&self, analysis: &AnalysisParams) -> Result<()> {
+        if analysis.feature_weight > 0.0 && self.correction != Correction::Appearance {
+            return Err(Error::InvalidRequest(
+                "feature_weight: a feature-distance channel needs the appearance correction"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
         range("passes", self.passes, 0, 6)?;
@@ -548,6 +577,29 @@ mod tests {
         assert!(json.contains(r#""contrast":1.6,"#), "{json}");
         assert!(json.contains(r#""jitter":0.3,"#), "{json}");
         assert_eq!(serde_json::from_str::<SynthParams>(&json).unwrap(), p);
+    }
+
+    #[test]
+    fn a_feature_channel_needs_the_appearance_correction() {
+        let analysis = AnalysisParams {
+            feature_weight: 0.5,
+            ..AnalysisParams::default()
+        };
+        assert!(analysis.validate().is_ok());
+        assert!(SynthParams::default().validate_with(&analysis).is_ok());
+        let colour = SynthParams {
+            correction: Correction::Colour,
+            ..SynthParams::default()
+        };
+        assert!(colour.validate_with(&analysis).is_err());
+        assert!(colour.validate_with(&AnalysisParams::default()).is_ok());
+        for bad in [-0.5, 4.5, f32::NAN] {
+            let a = AnalysisParams {
+                feature_weight: bad,
+                ..AnalysisParams::default()
+            };
+            assert!(a.validate().is_err(), "{bad}");
+        }
     }
 
     #[test]

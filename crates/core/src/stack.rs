@@ -23,6 +23,9 @@ pub struct GaussianStack {
     /// The same colours padded to four floats (the fourth is 0), so that
     /// the correction loads a colour as one 16-byte vector.
     padded: Arc<Vec<Vec<[f32; 4]>>>,
+    /// The feature-distance channel, blurred like the colours, when the
+    /// analysis adds one (see [`crate::feature`]).
+    feature: Option<Arc<Vec<Vec<f32>>>>,
 }
 
 impl GaussianStack {
@@ -36,13 +39,7 @@ impl GaussianStack {
             .iter()
             .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
             .collect();
-        let mut levels = vec![base];
-        for k in 1..count {
-            let prev = &levels[k - 1];
-            let step = spacing(k - 1) as i64;
-            let horizontal = blur(prev, w, h, step, 0);
-            levels.push(blur(&horizontal, w, h, 0, step));
-        }
+        let levels = blurred_levels(base, w, h, count);
         let padded = levels
             .iter()
             .map(|l| l.iter().map(|&[r, g, b]| [r, g, b, 0.0]).collect())
@@ -52,7 +49,34 @@ impl GaussianStack {
             height: h,
             levels: Arc::new(levels),
             padded: Arc::new(padded),
+            feature: None,
         }
+    }
+
+    /// The same stack with a feature-distance channel (one value per
+    /// pixel of the finest level), blurred level by level like the colours.
+    pub fn with_feature(mut self, base: Vec<f32>) -> Self {
+        debug_assert_eq!(base.len(), (self.width * self.height) as usize);
+        let base = base.into_iter().map(|v| [v]).collect();
+        let levels = blurred_levels(base, self.width, self.height, self.len());
+        self.feature = Some(Arc::new(
+            levels
+                .into_iter()
+                .map(|l| l.into_iter().map(|[v]| v).collect())
+                .collect(),
+        ));
+        self
+    }
+
+    /// Values per pixel in an appearance neighbourhood: the three colours,
+    /// and the feature distance when there is one.
+    pub fn channels(&self) -> usize {
+        if self.feature.is_some() { 4 } else { 3 }
+    }
+
+    /// The feature-distance channel of level `k`, if any.
+    pub fn feature_level(&self, k: usize) -> Option<&[f32]> {
+        self.feature.as_ref().map(|f| f[k].as_slice())
     }
 
     /// Number of levels.
@@ -96,18 +120,35 @@ impl GaussianStack {
 
 const BINOMIAL: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
 
-fn blur(src: &[[f32; 3]], w: u32, h: u32, dx: i64, dy: i64) -> Vec<[f32; 3]> {
+/// `count` levels from `base`, each the previous one blurred.
+fn blurred_levels<const C: usize>(
+    base: Vec<[f32; C]>,
+    w: u32,
+    h: u32,
+    count: usize,
+) -> Vec<Vec<[f32; C]>> {
+    let mut levels = vec![base];
+    for k in 1..count {
+        let prev = &levels[k - 1];
+        let step = spacing(k - 1) as i64;
+        let horizontal = blur(prev, w, h, step, 0);
+        levels.push(blur(&horizontal, w, h, 0, step));
+    }
+    levels
+}
+
+fn blur<const C: usize>(src: &[[f32; C]], w: u32, h: u32, dx: i64, dy: i64) -> Vec<[f32; C]> {
     let (wi, hi) = (w as i64, h as i64);
-    let mut out = vec![[0f32; 3]; src.len()];
+    let mut out = vec![[0f32; C]; src.len()];
     for y in 0..hi {
         for x in 0..wi {
-            let mut acc = [0f32; 3];
+            let mut acc = [0f32; C];
             for (t, &wt) in BINOMIAL.iter().enumerate() {
                 let o = t as i64 - 2;
                 let sx = (x + o * dx).rem_euclid(wi);
                 let sy = (y + o * dy).rem_euclid(hi);
                 let c = src[(sy * wi + sx) as usize];
-                for ch in 0..3 {
+                for ch in 0..C {
                     acc[ch] += wt * c[ch];
                 }
             }

@@ -30,6 +30,7 @@ impl Texture {
         cache: Arc<TileCache>,
     ) -> Result<Texture> {
         params.validate()?;
+        params.validate_with(candidates.params())?;
         Ok(Texture {
             engine: Arc::new(Engine::new(candidates, params, cache)?),
         })

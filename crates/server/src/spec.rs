@@ -42,6 +42,14 @@ fn keys_of<T: Serialize + Default>() -> Vec<String> {
     }
 }
 
+/// The analysis parameters' keys, those left out of the defaults' JSON
+/// included (no feature-distance channel writes no `feature_weight`).
+fn analysis_keys() -> Vec<String> {
+    let mut keys = keys_of::<AnalysisParams>();
+    keys.push("feature_weight".to_string());
+    keys
+}
+
 impl TextureParams {
     /// Splits a flat object of parameters into analysis and synthesis
     /// parameters, rejecting unknown keys, wrong types and out-of-range
@@ -52,7 +60,7 @@ impl TextureParams {
     /// beside it win. It is not kept: the texture's parameters, and so its
     /// id, are those the preset expands to.
     pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, SpecError> {
-        let analysis_keys = keys_of::<AnalysisParams>();
+        let analysis_keys = analysis_keys();
         let mut synth_keys = keys_of::<SynthParams>();
         // Left out of the defaults' JSON, which has no field.
         synth_keys.push("field".to_string());
@@ -101,6 +109,7 @@ impl TextureParams {
             serde_json::from_value(Value::Object(s)).map_err(|e| invalid_params(e.to_string()))?;
         analysis.validate()?;
         synth.validate()?;
+        synth.validate_with(&analysis)?;
         Ok(TextureParams { analysis, synth })
     }
 
@@ -114,7 +123,7 @@ impl TextureParams {
         &self,
         overrides: &Map<String, Value>,
     ) -> Result<TextureParams, SpecError> {
-        let analysis_keys = keys_of::<AnalysisParams>();
+        let analysis_keys = analysis_keys();
         if let Some(k) = overrides.keys().find(|k| analysis_keys.contains(k)) {
             return Err(invalid_params(format!(
                 "parameter `{k}` shapes the precomputed candidates: a variant shares them and \
@@ -213,6 +222,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("correction", r#""colour""#),
     ("orientation", r#""none""#),
     ("slab_tiling", r#""blocks""#),
+    ("feature_weight", "0"),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
@@ -624,6 +634,31 @@ mod tests {
         assert_eq!(
             code(TextureParams::from_json(r#"{"neighbourhood": 4}"#).unwrap_err()),
             "invalid_request"
+        );
+    }
+
+    #[test]
+    fn a_feature_channel_is_an_analysis_parameter_of_the_appearance_correction() {
+        let p = TextureParams::from_json(r#"{"feature_weight": 0.5}"#).unwrap();
+        assert_eq!(p.analysis.feature_weight, 0.5);
+        assert_eq!(p.to_flat()["feature_weight"], 0.5);
+        assert!(!TextureParams::default().to_flat().contains_key("feature_weight"));
+        assert_eq!(
+            code(
+                TextureParams::from_json(r#"{"feature_weight": 0.5, "correction": "colour"}"#)
+                    .unwrap_err()
+            ),
+            "invalid_request"
+        );
+        assert_eq!(
+            code(TextureParams::from_json(r#"{"feature_weight": 9}"#).unwrap_err()),
+            "out_of_range"
+        );
+        // A variant shares the candidates, so it cannot add the channel.
+        let overrides = TextureParams::flat_from_pairs([("feature_weight", "1")].into_iter());
+        assert_eq!(
+            code(p.with_overrides(&overrides).unwrap_err()),
+            "invalid_params"
         );
     }
 

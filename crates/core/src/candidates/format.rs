@@ -215,6 +215,10 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     params
         .entry("orientation")
         .or_insert_with(|| serde_json::json!("none"));
+    // Written before the feature-distance channel: colour alone.
+    params
+        .entry("feature_weight")
+        .or_insert_with(|| serde_json::json!(0));
     let params: AnalysisParams =
         serde_json::from_value(params.into()).map_err(|e| invalid(&format!("params: {e}")))?;
     params.validate().map_err(|e| invalid(&e.to_string()))?;
@@ -256,7 +260,8 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     let planes = if single { 1 } else { 3 };
     let npx = width * height;
     let wide = npx > u16::MAX as u32 + 1;
-    let app_input = (params.neighbourhood * params.neighbourhood * 3) as usize;
+    let channels = if params.feature_weight > 0.0 { 4 } else { 3 };
+    let app_input = (params.neighbourhood * params.neighbourhood) as usize * channels;
     let mut levels = Vec::new();
     for _ in 0..params.levels {
         let mut pcas = Vec::new();
@@ -446,6 +451,36 @@ mod tests {
         assert!(loaded.layout().detected);
         assert_eq!(loaded.layout().arrangement, Arrangement::default());
         assert_eq!(encode(&loaded), v2);
+    }
+
+    #[test]
+    fn a_feature_channel_widens_the_appearance_vectors_and_round_trips() {
+        let params = AnalysisParams {
+            levels: 2,
+            feature_weight: 1.0,
+            ..AnalysisParams::default()
+        };
+        let c = Candidates::compute(&ExemplarSet::single(grain(32)), &params, &|_, _| {}).unwrap();
+        let n = params.neighbourhood as usize;
+        for k in 0..2 {
+            assert_eq!(c.level(k).appearance[0].pca.input, n * n * 4);
+            assert_eq!(c.level(k).appearance[0].channels, 4);
+        }
+        let bytes = encode(&c);
+        let back = decode(&bytes).unwrap();
+        assert_eq!(back.params().feature_weight, 1.0);
+        assert_eq!(back.level(1).appearance, c.level(1).appearance);
+        assert_eq!(encode(&back), bytes);
+        // Without the channel the parameter is not written: files and ids
+        // of textures without it stay as they were.
+        let plain = compute(grain(32), Orientation::None);
+        assert_eq!(plain.level(0).appearance[0].pca.input, n * n * 3);
+        let json = serde_json::to_string(plain.params()).unwrap();
+        assert!(!json.contains("feature_weight"), "{json}");
+        assert_ne!(
+            plain.level(0).appearance[0].vectors,
+            c.level(0).appearance[0].vectors
+        );
     }
 
     #[test]

@@ -14,6 +14,7 @@ pub mod sparse;
 use crate::appearance::{self, AppearanceLevel, Pca, Projector};
 use crate::error::{Error, Result};
 use crate::exemplar::ExemplarSet;
+use crate::feature;
 use crate::orientation::Layout;
 use crate::params::AnalysisParams;
 use crate::stack::{GaussianStack, spacing};
@@ -358,7 +359,7 @@ impl Candidates {
         };
 
         progress(Stage::Analysis, 0.0);
-        let stacks = build_stacks(exemplars, levels_n);
+        let stacks = build_stacks(exemplars, levels_n, params.feature_weight);
         let stages = Stages {
             stacks: &stacks,
             dims,
@@ -404,7 +405,7 @@ impl Candidates {
                 "level count".into(),
             )));
         }
-        let stacks = build_stacks(&analysed, stored.len());
+        let stacks = build_stacks(&analysed, stored.len(), params.feature_weight);
         let levels = derive_levels(
             &stacks,
             stored,
@@ -562,7 +563,7 @@ impl Stages<'_> {
             let fit = |p: usize| {
                 let all = appearance::all_neighbourhoods(&self.stacks[p], k, n);
                 let stride = (self.dims.len() / 8192).max(1);
-                let len = (n * n * 3) as usize;
+                let len = (n * n) as usize * self.stacks[p].channels();
                 let sample: Vec<f32> = all
                     .chunks_exact(len)
                     .step_by(stride)
@@ -711,12 +712,22 @@ impl PopSingle for Vec<PlaneCandidates> {
     }
 }
 
-fn build_stacks(exemplars: &ExemplarSet, levels: usize) -> [GaussianStack; 3] {
+/// Each plane's stack, with its feature-distance channel when
+/// `feature_weight` is above 0.
+fn build_stacks(exemplars: &ExemplarSet, levels: usize, feature_weight: f32) -> [GaussianStack; 3] {
+    let stack = |p: usize| {
+        let s = GaussianStack::new(exemplars.plane(p), levels);
+        if feature_weight > 0.0 {
+            s.with_feature(feature::feature_distance(exemplars.plane(p), feature_weight))
+        } else {
+            s
+        }
+    };
     if exemplars.is_single() {
-        let s = GaussianStack::new(exemplars.plane(0), levels);
+        let s = stack(0);
         [s.clone(), s.clone(), s]
     } else {
-        [0, 1, 2].map(|p| GaussianStack::new(exemplars.plane(p), levels))
+        [0, 1, 2].map(stack)
     }
 }
 

@@ -140,20 +140,25 @@ impl QueryMap {
         }
         for plane in 0..3 {
             let local = &level.appearance[plane].pca;
-            let pixels = (local.input / 3) as f64;
+            // Each pixel's values: its colour, then its feature distance
+            // if any, which a colour offset leaves as it is.
+            let channels = level.appearance[plane].channels;
+            let pixels = (local.input / channels) as f64;
             // U: d rows of 3 (the sum of each basis row's channel weights).
             let mut u = vec![[0f64; 3]; d];
             for (row, out) in u.iter_mut().enumerate() {
-                for rgb in local.basis[row * local.input..(row + 1) * local.input].chunks_exact(3) {
+                for px in
+                    local.basis[row * local.input..(row + 1) * local.input].chunks_exact(channels)
+                {
                     for ch in 0..3 {
-                        out[ch] += rgb[ch] as f64;
+                        out[ch] += px[ch] as f64;
                     }
                 }
             }
             let mut m0 = [0f64; 3];
-            for rgb in local.mean.chunks_exact(3) {
+            for px in local.mean.chunks_exact(channels) {
                 for ch in 0..3 {
-                    m0[ch] += rgb[ch] as f64 / pixels;
+                    m0[ch] += px[ch] as f64 / pixels;
                 }
             }
             let offsets = local.mean_offsets();
