@@ -76,7 +76,7 @@ fn save_load_round_trip_is_exact() {
     assert_eq!(back.to_bytes(), bytes);
     for k in 0..c.level_count() {
         for p in 0..3 {
-            assert_eq!(back.level(k).vectors[p], c.level(k).vectors[p]);
+            assert_eq!(back.level(k).appearance[p], c.level(k).appearance[p]);
         }
     }
 }

@@ -152,23 +152,6 @@ fn a_field_keeps_voxels_a_function_of_position() {
     assert_ne!(region(&grain_texture(None), o, s), alone);
 }
 
-#[test]
-fn a_field_needs_the_appearance_correction() {
-    let params = SynthParams {
-        field: Some(Field::Slant { angle: 10.0 }),
-        correction: solidtex_core::Correction::Colour,
-        ..SynthParams::default()
-    };
-    let e = Texture::new(
-        grain_candidates(),
-        params,
-        Arc::new(TileCache::new(1 << 20)),
-    )
-    .err()
-    .unwrap();
-    assert!(e.to_string().contains("appearance"), "{e}");
-}
-
 /// The planner marks the whole 3×3×3 neighbourhood a turned correction
 /// reads: a plan still counts exactly what cold synthesis computes, and
 /// the dual grid bounds the set (a small box is mostly halo, where the

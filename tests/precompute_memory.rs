@@ -70,6 +70,7 @@ fn the_estimate_bounds_the_measured_peak() {
         let baseline = meter.reset();
         pool.install(|| Candidates::compute(&set, &params, &|_, _| {}).unwrap());
         let peak = meter.peak_above(baseline);
+        println!("{params:?}: estimated {estimate}, measured {peak}");
         assert!(peak > 0);
         assert!(
             estimate >= peak && estimate <= 3 * peak,

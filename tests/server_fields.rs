@@ -154,7 +154,7 @@ async fn variants_refuse_what_they_cannot_do() {
         ),
         (
             r#"{"field": "slant:30", "correction": "colour"}"#,
-            "invalid_request",
+            "invalid_params",
         ),
         (r#"{"sed": 1}"#, "invalid_params"),
         (r#"{"seed": 1, "seed": 2}"#, "invalid_params"),
@@ -180,13 +180,27 @@ async fn variants_refuse_what_they_cannot_do() {
     let r = c.post(&url).body("{}").send().await.unwrap();
     assert_eq!(r.status().as_u16(), 415);
     let big = format!(r#"{{"seed": 1, "x": "{}"}}"#, "a".repeat(600 << 10));
-    let r = c
-        .post(&url)
-        .header("content-type", "application/json")
-        .body(big)
-        .send()
-        .await
-        .unwrap();
+    // The server answers from the headers and closes without reading the
+    // body, so a client still writing it may see the pipe break before it
+    // reads the answer: then it asks again.
+    let mut answer = None;
+    for _ in 0..5 {
+        match c
+            .post(&url)
+            .header("content-type", "application/json")
+            .body(big.clone())
+            .send()
+            .await
+        {
+            Ok(r) => {
+                answer = Some(r);
+                break;
+            }
+            Err(e) if e.is_request() => continue,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    let r = answer.expect("an answer to one of five tries");
     assert_eq!(r.status().as_u16(), 413);
     let v: Value = r.json().await.unwrap();
     assert_eq!(v["error"]["code"], "payload_too_large");

@@ -4,9 +4,7 @@ mod common;
 
 use common::*;
 use solidtex_core::eval::{RgbView, anisotropy};
-use solidtex_core::{
-    Axis, Correction, CutPlane, Filter, Region, Scheme, SlabTiling, Slices, SynthParams, Texture,
-};
+use solidtex_core::{Axis, CutPlane, Filter, Region, Scheme, SlabTiling, SynthParams, Texture};
 
 fn region(t: &Texture, origin: [i64; 3], size: [u32; 3]) -> Vec<u8> {
     t.region(&Region { origin, size }, 0).unwrap().0
@@ -143,25 +141,15 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
 /// pass (which ends chains at step boundaries and inside passes, and
 /// serves some planes outright).
 /// The same bytes as cold planes, with far fewer corrections, also when the
-/// cache is too small to keep everything. Sparse slices have chains about a
-/// quarter as long, so a plane shares less with its neighbours.
+/// cache is too small to keep everything.
 #[test]
 fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
-    // Measured when written, over all levels: 7 % of the cold planes'
-    // corrections with full colour slices, 12 % with sparse ones, 20 % in
-    // appearance space. (With one finest
-    // pass, a plane's finest chain is itself and at most its two
-    // neighbours, so most of what a sweep saves is at coarser levels.)
-    for (correction, slices, max_percent) in [
-        (Correction::Colour, Slices::Full, 15),
-        (Correction::Colour, Slices::Sparse, 25),
-        (Correction::Appearance, Slices::Sparse, 25),
-    ] {
-        let params = SynthParams {
-            correction,
-            slices,
-            ..SynthParams::default()
-        };
+    // Measured when written, over all levels: 20 % of the cold planes'
+    // corrections. (With one finest pass, a plane's finest chain is itself
+    // and at most its two neighbours, so most of what a sweep saves is at
+    // coarser levels.)
+    {
+        let (params, max_percent) = (SynthParams::default(), 25);
         let slice = |t: &Texture, z: i64| t.slice(Axis::Z, z, -4, 3, 20, 20, 0).unwrap();
         let sweep = texture_with(params.clone(), 256 << 20);
         let small = texture_with(params.clone(), 512 << 10);
@@ -169,12 +157,8 @@ fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
         for z in 8..16 {
             let (cold, cold_stats) = slice(&texture_with(params.clone(), 256 << 20), z);
             let (swept, swept_stats) = slice(&sweep, z);
-            assert_eq!(cold, swept, "{slices:?}: plane {z} after its neighbours");
-            assert_eq!(
-                cold,
-                slice(&small, z).0,
-                "{slices:?}: plane {z} with evictions"
-            );
+            assert_eq!(cold, swept, "plane {z} after its neighbours");
+            assert_eq!(cold, slice(&small, z).0, "plane {z} with evictions");
             if z > 8 {
                 cold_corrections += cold_stats.corrections_per_level.iter().sum::<u64>();
                 swept_corrections += swept_stats.corrections_per_level.iter().sum::<u64>();
@@ -183,16 +167,14 @@ fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
                 }
             }
         }
-        println!(
-            "{correction:?} {slices:?}: swept {swept_corrections} of {cold_corrections}, {free_planes} free"
-        );
+        println!("swept {swept_corrections} of {cold_corrections}, {free_planes} free");
         assert!(
             swept_corrections * 100 < cold_corrections * max_percent,
-            "{slices:?}: a sweep made {swept_corrections} corrections, cold planes {cold_corrections}"
+            "a sweep made {swept_corrections} corrections, cold planes {cold_corrections}"
         );
         assert!(
             free_planes >= 2,
-            "{slices:?}: {free_planes} planes came whole from the cache"
+            "{free_planes} planes came whole from the cache"
         );
         assert!(tiny_cache_evicted(&small));
     }
@@ -237,19 +219,17 @@ fn overlapping_requests_of_any_shape_share_work_and_keep_their_bytes() {
     };
     // Three passes put two in the dual grid's first step, so versions after
     // a pass inside a step are shared too.
-    // Measured when written: 31 % (dual grid), 30 % (standard; 50 % while
-    // only the last pass was shared), 29 % (three passes), all with full
-    // slices; 39 % with sparse slices, whose shorter chains overlap less.
-    for (scheme, passes, slices, max_percent) in [
-        (Scheme::DualGrid, 2, Slices::Full, 40),
-        (Scheme::Standard, 2, Slices::Full, 40),
-        (Scheme::DualGrid, 3, Slices::Full, 40),
-        (Scheme::DualGrid, 2, Slices::Sparse, 50),
+    // Measured when written (with the colour correction's wider reads):
+    // 31 % (dual grid), 30 % (standard; 50 % while only the last pass was
+    // shared), 29 % (three passes); shorter chains overlap less.
+    for (scheme, passes, max_percent) in [
+        (Scheme::DualGrid, 2, 50),
+        (Scheme::Standard, 2, 50),
+        (Scheme::DualGrid, 3, 50),
     ] {
         let params = SynthParams {
             scheme,
             passes,
-            slices,
             ..SynthParams::default()
         };
         let shared = texture_with(params.clone(), 256 << 20);
@@ -267,10 +247,10 @@ fn overlapping_requests_of_any_shape_share_work_and_keep_their_bytes() {
             cold_total += cold_n;
             shared_total += shared_n;
         }
-        println!("{scheme:?} ×{passes} {slices:?}: shared {shared_total} of {cold_total}");
+        println!("{scheme:?} ×{passes}: shared {shared_total} of {cold_total}");
         assert!(
             shared_total * 100 < cold_total * max_percent,
-            "{scheme:?} ×{passes} {slices:?}: {shared_total} corrections shared, {cold_total} cold"
+            "{scheme:?} ×{passes}: {shared_total} corrections shared, {cold_total} cold"
         );
     }
 }
@@ -451,34 +431,20 @@ fn dual_grid_needs_fewer_voxels_than_standard() {
     .unwrap();
     let total = |v: &[u64]| v.iter().sum::<u64>();
     assert!(total(&dual.voxels_per_level) < total(&standard.voxels_per_level));
-    // A correction reads its 61 slice neighbours with full slices, its 19
-    // direct ones (and predicts the rest) with sparse slices. With one
-    // finest pass, voxel 0 (first subpass) reads them at version 0, so its
-    // finest chain is exactly those voxels.
-    for (slices, reads) in [(Slices::Full, 61), (Slices::Sparse, 19)] {
-        let t = texture_with(
-            SynthParams {
-                correction: Correction::Colour,
-                slices,
-                ..SynthParams::default()
-            },
-            1 << 20,
-        );
-        let chain = t.dependency_chain(&[[0, 0, 0]], 0).unwrap();
-        assert_eq!(chain.len(), 3);
-        assert_eq!(
-            chain[0].0, reads,
-            "{slices:?}: a correction reads {reads} neighbours"
-        );
-        if slices == Slices::Sparse {
-            let full = texture().dependency_chain_for(&[[0, 0, 0]], 0, 5).unwrap();
-            let total = |c: &[(u64, u64)]| c.iter().map(|l| l.0).sum::<u64>();
-            assert!(
-                total(&chain) * 3 < total(&full),
-                "sparse chain {chain:?}, full {full:?}"
-            );
-        }
-    }
+    // A correction reads its 19 direct neighbours (and predicts the rest
+    // of its neighbourhood from them). With one finest pass, voxel 0 (first
+    // subpass) reads them at version 0, so its finest chain is exactly
+    // those voxels; reading N×N slices (radius N/2) would cost three times
+    // as many.
+    let chain = texture().dependency_chain(&[[0, 0, 0]], 0).unwrap();
+    assert_eq!(chain.len(), 3);
+    assert_eq!(chain[0].0, 19, "a correction reads 19 neighbours");
+    let full = texture().dependency_chain_for(&[[0, 0, 0]], 0, 5).unwrap();
+    let total = |c: &[(u64, u64)]| c.iter().map(|l| l.0).sum::<u64>();
+    assert!(
+        total(&chain) * 3 < total(&full),
+        "sparse chain {chain:?}, full {full:?}"
+    );
 }
 
 #[test]
@@ -503,8 +469,7 @@ fn dual_grid_saves_more_with_larger_neighbourhoods() {
             .map(|l| l.0)
             .sum()
     };
-    // Sparse slices (the default) read like N = 3; full slices read the
-    // analysed N.
+    // A correction reads its direct neighbours: like N = 3.
     assert_eq!(
         dual.dependency_chain(&plane, 0).unwrap(),
         dual.dependency_chain_for(&plane, 0, 3).unwrap()
@@ -545,104 +510,6 @@ fn a_long_slice_does_not_repeat_at_the_exemplar_period() {
         "slice repeats at the exemplar period: {at_period} vs {baseline}"
     );
 }
-
-#[test]
-fn golden_regions_are_pinned() {
-    // Any change to the method changes these on purpose; update them only
-    // together with a note on why the output changed. They pin the colour
-    // correction, which textures stored before the appearance correction
-    // keep (the default's bytes are pinned by `GOLDEN_APPEARANCE`).
-    // One fine level, N-thick slabs, two finest passes, no consistency
-    // penalty and full slices were the defaults when the stored textures of earlier versions
-    // were written: their bytes stay pinned. All of them tiled the slab in
-    // blocks.
-    for (slices, finest_passes, fine_levels, consistency, slab_thickness, golden) in [
-        (
-            Slices::Sparse,
-            1,
-            2,
-            SynthParams::default().consistency,
-            1,
-            GOLDEN_SPARSE,
-        ),
-        (
-            Slices::Sparse,
-            1,
-            1,
-            SynthParams::default().consistency,
-            1,
-            GOLDEN_SPARSE_ONE_FINE_LEVEL,
-        ),
-        (
-            Slices::Sparse,
-            1,
-            1,
-            SynthParams::default().consistency,
-            5,
-            GOLDEN_SPARSE_THICK_SLAB,
-        ),
-        (
-            Slices::Sparse,
-            2,
-            1,
-            0.0,
-            5,
-            GOLDEN_SPARSE_TWO_FINEST_PASSES,
-        ),
-        (Slices::Full, 2, 1, 0.0, 5, GOLDEN_FULL_TWO_FINEST_PASSES),
-    ] {
-        let t = texture_with(
-            SynthParams {
-                correction: Correction::Colour,
-                slices,
-                finest_passes,
-                fine_levels,
-                consistency,
-                slab_thickness,
-                slab_tiling: SlabTiling::Blocks,
-                ..SynthParams::default()
-            },
-            256 << 20,
-        );
-        let a = region(&t, [0, 0, 0], [16, 16, 2]);
-        let b = region(&t, [-1000, 77, -5], [7, 9, 3]);
-        let (c, _) = t.slice(Axis::X, 12, -4, 9, 20, 10, 1).unwrap();
-        let got = [fnv(&a), fnv(&b), fnv(&c)];
-        let case = format!(
-            "{slices:?}, {finest_passes} finest passes on {fine_levels} levels, slab {slab_thickness}"
-        );
-        println!("golden {case}: {got:?}");
-        assert_eq!(got, golden, "{case}");
-    }
-}
-
-const GOLDEN_SPARSE: [u64; 3] = [
-    6973526302261758673,
-    4735467199559300683,
-    9007905815778258688,
-];
-
-const GOLDEN_SPARSE_ONE_FINE_LEVEL: [u64; 3] = [
-    6684542806508697053,
-    2443003119394448522,
-    4237861342871352536,
-];
-const GOLDEN_SPARSE_THICK_SLAB: [u64; 3] = [
-    6508731602706587002,
-    13488874625118448901,
-    10059312106329182518,
-];
-const GOLDEN_SPARSE_TWO_FINEST_PASSES: [u64; 3] = [
-    18340570835836485773,
-    8913077148175013555,
-    9278384172460047680,
-];
-
-const GOLDEN_FULL_TWO_FINEST_PASSES: [u64; 3] = [
-    2667286515723417090,
-    14953532832689202602,
-    16306211498347164830,
-];
 
 #[test]
 fn consistency_at_the_ends_of_its_range_synthesizes() {
@@ -796,31 +663,15 @@ fn where_a_slice_lies_changes_its_chain() {
 }
 
 fn appearance_texture(cache_bytes: usize) -> Texture {
-    texture_with(
-        SynthParams {
-            correction: Correction::Appearance,
-            ..SynthParams::default()
-        },
-        cache_bytes,
-    )
+    texture_with(SynthParams::default(), cache_bytes)
 }
 
 #[test]
 fn the_appearance_correction_reads_its_direct_neighbours_and_keeps_its_bytes() {
-    // Whatever the slices setting, it reads the 19 direct neighbours: its
-    // 12 diagonal locations are predicted from them.
-    for slices in [Slices::Sparse, Slices::Full] {
-        let t = texture_with(
-            SynthParams {
-                correction: Correction::Appearance,
-                slices,
-                ..SynthParams::default()
-            },
-            1 << 20,
-        );
-        let chain = t.dependency_chain(&[[0, 0, 0]], 0).unwrap();
-        assert_eq!(chain[0].0, 19, "{slices:?}: {chain:?}");
-    }
+    // It reads the 19 direct neighbours: its 12 diagonal locations are
+    // predicted from them.
+    let chain = texture().dependency_chain(&[[0, 0, 0]], 0).unwrap();
+    assert_eq!(chain[0].0, 19, "{chain:?}");
     let (o, s) = ([3, -5, 7], [9u32, 6, 5]);
     let alone = region(&appearance_texture(256 << 20), o, s);
     let (bo, bs) = ([-10, -20, 0], [40u32, 30, 20]);
@@ -835,17 +686,6 @@ fn the_appearance_correction_reads_its_direct_neighbours_and_keeps_its_bytes() {
     };
     assert_eq!(threads(1), alone);
     assert_eq!(threads(3), alone);
-    // It is the default, and a different synthesis from the colour
-    // correction's.
-    assert_eq!(alone, region(&texture(), o, s));
-    let colour = texture_with(
-        SynthParams {
-            correction: Correction::Colour,
-            ..SynthParams::default()
-        },
-        1 << 20,
-    );
-    assert_ne!(alone, region(&colour, o, s));
     // Pinned like the other goldens: the default, and the blocks that
     // textures stored before slab cells keep.
     let far = ([-1000, 77, -5], [7, 9, 3]);

@@ -137,8 +137,8 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         w,
         "Voxels produced / corrections performed per level (level 0 is the finest), \
          counted by the planner without synthesizing (`solidtex plan` shows the same). \
-         The texture uses sparse slices (the default: a correction reads its direct \
-         neighbours only) and one pass at the two finest levels; the rows marked full slices \
+         A correction reads its direct neighbours only, and the texture has one pass at the \
+         two finest levels; the rows marked full slices \
          count the chains of corrections that read every voxel of their N×N slices with \
          two passes at every level (Dong et al.'s and Zhang et al.'s setting), geometry only.\n"
     );

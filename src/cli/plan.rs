@@ -4,7 +4,7 @@
 use super::source::{SourceArgs, load_source};
 use anyhow::bail;
 use clap::Args;
-use solidtex_core::{Axis, Region, Scheme, Slices, SynthParams, Texture, TileCache};
+use solidtex_core::{Axis, Region, Scheme, SynthParams, Texture, TileCache};
 use std::sync::Arc;
 
 #[derive(Args)]
@@ -129,7 +129,7 @@ pub fn run(a: &PlanArgs) -> anyhow::Result<()> {
     if a.json {
         print_json(&rows, &region, &what, a)
     } else {
-        print_table(&rows, &what, voxels, a, base.params().slices);
+        print_table(&rows, &what, voxels, a);
         Ok(())
     }
 }
@@ -212,14 +212,11 @@ fn print_json(rows: &[Counts], region: &Region, what: &str, a: &PlanArgs) -> any
     Ok(())
 }
 
-fn print_table(rows: &[Counts], what: &str, voxels: u64, a: &PlanArgs, slices: Slices) {
+fn print_table(rows: &[Counts], what: &str, voxels: u64, a: &PlanArgs) {
     println!(
-        "{what} at lod {} (level 0 = finest; what the engine computes from a cold cache), {} slices",
+        "{what} at lod {} (level 0 = finest; what the engine computes from a cold cache; \
+         corrections read their direct neighbours)",
         a.src.lod,
-        match slices {
-            Slices::Sparse => "sparse (corrections read their direct neighbours)",
-            Slices::Full => "full (corrections read N/2 voxels away)",
-        }
     );
     println!(
         "{:<10} {:>5} {:>14} {:>14}",

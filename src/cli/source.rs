@@ -6,8 +6,8 @@ use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use solidtex_core::{
-    AnalysisParams, Candidates, Correction, Exemplar, ExemplarSet, Field, Scheme, SlabTiling,
-    Slices, Stage, SynthParams, SynthStats, Texture, TileCache,
+    AnalysisParams, Candidates, Exemplar, ExemplarSet, Field, Scheme, SlabTiling, Stage,
+    SynthParams, SynthStats, Texture, TileCache,
 };
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -61,10 +61,6 @@ pub struct SynthArgs {
     /// Gain on correction queries around their mean colour (1 disables).
     #[arg(long, default_value_t = SynthParams::default().contrast)]
     contrast: f32,
-    /// Voxels the colour correction reads: sparse (direct neighbours, the rest of
-    /// each N×N slice extrapolated) or full (every voxel of the slices).
-    #[arg(long, default_value = "sparse")]
-    slices: Slices,
     /// Penalty on coherent triples whose three exemplar colours disagree
     /// (0 disables).
     #[arg(long, default_value_t = SynthParams::default().consistency)]
@@ -77,11 +73,6 @@ pub struct SynthArgs {
     /// every angle) or blocks (axis-aligned squares).
     #[arg(long, default_value_t = SynthParams::default().slab_tiling)]
     slab_tiling: SlabTiling,
-    /// What a correction matches: appearance (sparse appearance-space
-    /// neighbourhoods, 12 diagonal locations) or colour (N×N colour
-    /// neighbourhoods).
-    #[arg(long, default_value_t = SynthParams::default().correction)]
-    correction: Correction,
     /// A field of local frames the texture follows: a preset
     /// (`slant:ANGLE`, `circular[:CX,CY]`, `emissive[:CX,CY]`,
     /// `zigzag:ANGLE,PERIOD`, `slant3d:DX,DY,DZ`), a JSON object, or
@@ -119,11 +110,9 @@ impl SynthArgs {
             jitter: self.jitter,
             subpass_side: self.subpass_side,
             contrast: self.contrast,
-            slices: self.slices,
             consistency: self.consistency,
             slab_thickness: self.slab_thickness,
             slab_tiling: self.slab_tiling,
-            correction: self.correction,
             field: self.field.clone(),
             ..base
         }

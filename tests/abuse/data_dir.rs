@@ -132,8 +132,11 @@ struct SynthParamsVersion1 {
     contrast: f32,
 }
 
+/// Textures of the first layout matched colour neighbourhoods, a correction
+/// that is gone: they are not served (their bytes cannot be made again),
+/// and their files are left for an older server.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn data_directories_of_the_first_layout_still_load() {
+async fn data_directories_of_the_first_layout_are_kept_but_not_served() {
     let (dir, s, c, new_id) = server_with_texture(26).await;
     s.stop().await;
 
@@ -153,7 +156,7 @@ async fn data_directories_of_the_first_layout_still_load() {
     ] {
         params.remove(k).unwrap();
     }
-    let stored = solidtex_server::spec::TextureParams::from_stored(params).unwrap();
+    let stored = solidtex_server::spec::TextureParams::from_flat(params).unwrap();
     let then = SynthParamsVersion1 {
         seed: stored.synth.seed,
         passes: stored.synth.passes,
@@ -192,15 +195,24 @@ async fn data_directories_of_the_first_layout_still_load() {
     write_meta(dir.path(), &old_id, &meta);
 
     let s = TestServer::start(test_args(dir.path())).await;
-    let v = wait_ready(&c, &s, &old_id).await;
-    assert_eq!(v["params"]["slices"], "full");
-    assert_eq!(refused(&s), 0.0);
+    assert_eq!(status_of(&c, &s, &old_id).await, 404);
     let text = s.state.metrics.encode();
     assert_eq!(
         metric(&text, "solidtex_textures_loaded_total"),
-        1.0,
+        0.0,
         "{text}"
     );
+    assert!(tex.join(&old_id).join("exemplar.png").exists());
+    // The same exemplar uploaded again is a texture of today's layout.
+    let (status, v) = upload(
+        &c,
+        &s,
+        fs::read(tex.join(&old_id).join("exemplar.png")).unwrap(),
+        "levels=3&seed=26",
+    )
+    .await;
+    assert!((200..300).contains(&status), "{status} {v}");
+    assert_ne!(v["id"], old_id.as_str());
     s.stop().await;
 }
 

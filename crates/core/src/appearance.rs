@@ -169,11 +169,6 @@ impl Projector {
         }
     }
 
-    /// Number of output dimensions.
-    pub fn dims(&self) -> usize {
-        self.dims
-    }
-
     /// Projects `v` (`input` floats) into `out` (at least `dims` floats).
     #[inline]
     pub fn project(&self, v: &[f32], out: &mut [f32]) {
@@ -397,7 +392,6 @@ mod tests {
                 .collect();
             let pca = Pca::fit(&samples, input, dims);
             let projector = Projector::new(&pca);
-            assert_eq!(projector.dims(), dims);
             for v in samples.chunks_exact(input) {
                 let mut want = vec![0f32; dims];
                 pca.project(v, &mut want);

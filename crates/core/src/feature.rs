@@ -246,7 +246,11 @@ mod tests {
         let rgb: Vec<u8> = (0..side * side)
             .flat_map(|i| {
                 let x = i % side;
-                let l = if x % 16 < 2 { 30 } else { 200 + (i * 13 % 7) as u8 };
+                let l = if x % 16 < 2 {
+                    30
+                } else {
+                    200 + (i * 13 % 7) as u8
+                };
                 [l, l, l]
             })
             .collect();

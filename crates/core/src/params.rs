@@ -35,7 +35,7 @@ pub struct AnalysisParams {
     /// Weight of the feature-distance channel in the appearance vectors,
     /// relative to the luminance (see [`crate::feature`]); 0 leaves the
     /// vectors to colour alone. Not written when 0, so textures without
-    /// the channel keep their ids. Needs the appearance correction.
+    /// the channel keep their ids.
     #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
     pub feature_weight: f32,
 }
@@ -116,8 +116,8 @@ pub struct Arrangement {
     /// down), in degrees: 0, 90, 180 or 270. 90 and 270 need a square
     /// exemplar (all planes share one size).
     pub rotate: [u32; 3],
-    /// Weight of the plane's neighbourhood in the appearance correction's
-    /// matching, 0 to 1 (the colour correction weighs the planes alike).
+    /// Weight of the plane's neighbourhood in the correction's matching,
+    /// 0 to 1.
     #[serde(serialize_with = "shortest_f32s")]
     pub weights: [f32; 3],
 }
@@ -236,61 +236,66 @@ impl std::str::FromStr for Scheme {
     }
 }
 
-/// Which voxels a correction reads for its N×N slice neighbourhoods (see
-/// [`SynthParams::slices`]).
+/// Which voxels a correction reads (see [`SynthParams::slices`]). One
+/// value is left: `full` slices belonged to the colour correction, which
+/// is gone; the key stays so that texture ids do not change.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Hash)]
-#[serde(rename_all = "kebab-case")]
+#[serde(rename_all = "kebab-case", try_from = "String")]
 pub enum Slices {
-    /// Every voxel of the three slices (Dong et al.): the dependency radius
-    /// is N/2.
-    Full,
-    /// Only the direct neighbours (the 3×3 square of each slice); the rest of
-    /// each slice is extrapolated from the nearest direct neighbour's triple
-    /// moved by its offset. Like the sparse appearance-space neighbourhoods
-    /// of Lefebvre and Hoppe and of the vector-field thesis, the query still
-    /// describes N×N pixels while the dependency radius drops to 1, which
-    /// shrinks every dependency chain about fourfold at N = 5.
+    /// Only the direct neighbours: the dependency radius is 1.
     #[default]
     Sparse,
+}
+
+impl TryFrom<String> for Slices {
+    type Error = Error;
+    fn try_from(s: String) -> Result<Self> {
+        s.parse()
+    }
 }
 
 impl std::str::FromStr for Slices {
     type Err = Error;
     fn from_str(s: &str) -> Result<Self> {
         match s {
-            "full" => Ok(Slices::Full),
             "sparse" => Ok(Slices::Sparse),
+            "full" => Err(Error::InvalidRequest(
+                "slices `full` was removed with the colour correction (only sparse is left)".into(),
+            )),
             _ => Err(Error::InvalidRequest(format!(
-                "unknown slices `{s}` (expected full or sparse)"
+                "unknown slices `{s}` (expected sparse)"
             ))),
         }
     }
 }
 
-/// What a correction matches (see [`SynthParams::correction`]).
+/// What a correction matches (see [`SynthParams::correction`]). One value
+/// is left: the colour correction (N×N colour neighbourhoods projected per
+/// query, Dong et al.) lost to this one on every measure and is gone; the
+/// key stays so that texture ids do not change.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Hash)]
-#[serde(rename_all = "kebab-case")]
+#[serde(rename_all = "kebab-case", try_from = "String")]
 pub enum Correction {
     /// Sparse appearance-space neighbourhoods (Lin 2009 §3.4.3, after
     /// Lefebvre and Hoppe 2006): in each plane the appearance vectors at
     /// the 4 diagonal locations, each averaged over the 3 direct
-    /// neighbours that predict it; candidates by k-coherence. It keeps
-    /// thin features (veins, cracks, mortar) that `Colour` blurs
-    /// (docs/quality.md).
+    /// neighbours that predict it; candidates by k-coherence.
     #[default]
     Appearance,
-    /// N×N colour neighbourhoods projected per query (Dong et al.), with
-    /// the colour blend that couples the planes. Textures stored before
-    /// the appearance correction keep it.
-    Colour,
 }
 
 impl std::fmt::Display for Correction {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
             Correction::Appearance => "appearance",
-            Correction::Colour => "colour",
         })
+    }
+}
+
+impl TryFrom<String> for Correction {
+    type Error = Error;
+    fn try_from(s: String) -> Result<Self> {
+        s.parse()
     }
 }
 
@@ -299,9 +304,11 @@ impl std::str::FromStr for Correction {
     fn from_str(s: &str) -> Result<Self> {
         match s {
             "appearance" => Ok(Correction::Appearance),
-            "colour" | "color" => Ok(Correction::Colour),
+            "colour" | "color" => Err(Error::InvalidRequest(
+                "the colour correction was removed (only appearance is left)".into(),
+            )),
             _ => Err(Error::InvalidRequest(format!(
-                "unknown correction `{s}` (expected appearance or colour)"
+                "unknown correction `{s}` (expected appearance)"
             ))),
         }
     }
@@ -389,17 +396,15 @@ pub struct SynthParams {
     /// Also correct the initialisation level after jitter.
     pub correct_init_level: bool,
     /// Gain on a correction's query around its mean colour before matching
-    /// (1 leaves it as it is): on the colour neighbourhoods, or on each
-    /// appearance-space location around the flat neighbourhood of its mean
-    /// colour. A voxel's colour is the mean of three exemplar colours, so
+    /// (1 leaves it as it is): on each appearance-space location around the
+    /// flat neighbourhood of its mean colour. A voxel's colour is the mean of three exemplar colours, so
     /// synthesized neighbourhoods are flatter than the exemplar's and,
     /// matched as they are, pick its calm regions: rare dark or bright
     /// features fade (docs/quality.md).
     #[serde(serialize_with = "shortest_f32")]
     pub contrast: f32,
-    /// Which voxels the colour correction reads for its slice
-    /// neighbourhoods (the appearance correction always reads its direct
-    /// neighbours).
+    /// Which voxels a correction reads: its direct neighbours (the only
+    /// value left).
     pub slices: Slices,
     /// Penalty on coherent triples whose three exemplar colours disagree,
     /// per squared colour difference (in units of a quantised
@@ -419,11 +424,10 @@ pub struct SynthParams {
     pub slab_thickness: u32,
     /// How the slab is cut into pieces that are tiled with hashed offsets.
     pub slab_tiling: SlabTiling,
-    /// What a correction matches.
+    /// What a correction matches (appearance space, the only value left).
     pub correction: Correction,
     /// The field of local frames the texture follows (see [`Field`]);
-    /// none keeps every voxel's frame on the world axes. Needs the
-    /// appearance correction.
+    /// none keeps every voxel's frame on the world axes.
     #[serde(
         skip_serializing_if = "Option::is_none",
         deserialize_with = "field_or_text"
@@ -483,18 +487,6 @@ impl SynthParams {
         }
     }
 
-    /// Checks that these synthesis parameters can run on candidates
-    /// analysed with `analysis`.
-    pub fn validate_with(&self, analysis: &AnalysisParams) -> Result<()> {
-        if analysis.feature_weight > 0.0 && self.correction != Correction::Appearance {
-            return Err(Error::InvalidRequest(
-                "feature_weight: a feature-distance channel needs the appearance correction"
-                    .into(),
-            ));
-        }
-        Ok(())
-    }
-
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
         range("passes", self.passes, 0, 6)?;
@@ -508,11 +500,6 @@ impl SynthParams {
         range("slab_thickness", self.slab_thickness, 1, 9)?;
         if let Some(field) = &self.field {
             field.validate()?;
-            if self.correction != Correction::Appearance {
-                return Err(Error::InvalidRequest(
-                    "field: a field needs the appearance correction".into(),
-                ));
-            }
         }
         Ok(())
     }
@@ -580,26 +567,42 @@ mod tests {
     }
 
     #[test]
-    fn a_feature_channel_needs_the_appearance_correction() {
-        let analysis = AnalysisParams {
-            feature_weight: 0.5,
-            ..AnalysisParams::default()
-        };
-        assert!(analysis.validate().is_ok());
-        assert!(SynthParams::default().validate_with(&analysis).is_ok());
-        let colour = SynthParams {
-            correction: Correction::Colour,
-            ..SynthParams::default()
-        };
-        assert!(colour.validate_with(&analysis).is_err());
-        assert!(colour.validate_with(&AnalysisParams::default()).is_ok());
-        for bad in [-0.5, 4.5, f32::NAN] {
+    fn feature_weights_out_of_range_are_refused() {
+        for (w, ok) in [
+            (0.0, true),
+            (0.5, true),
+            (4.0, true),
+            (-0.5, false),
+            (4.5, false),
+            (f32::NAN, false),
+        ] {
             let a = AnalysisParams {
-                feature_weight: bad,
+                feature_weight: w,
                 ..AnalysisParams::default()
             };
-            assert!(a.validate().is_err(), "{bad}");
+            assert_eq!(a.validate().is_ok(), ok, "{w}");
         }
+    }
+
+    #[test]
+    fn the_removed_correction_and_slices_are_refused_by_name() {
+        for (text, removed) in [("colour", true), ("color", true), ("dense", false)] {
+            let e = text.parse::<Correction>().unwrap_err().to_string();
+            assert_eq!(e.contains("removed"), removed, "{e}");
+        }
+        assert!(
+            "full"
+                .parse::<Slices>()
+                .unwrap_err()
+                .to_string()
+                .contains("removed")
+        );
+        assert!(serde_json::from_str::<SynthParams>(r#"{"correction": "colour"}"#).is_err());
+        assert!(serde_json::from_str::<SynthParams>(r#"{"slices": "full"}"#).is_err());
+        let json = serde_json::to_string(&SynthParams::default()).unwrap();
+        assert!(
+            json.contains(r#""slices":"sparse""#) && json.contains(r#""correction":"appearance""#)
+        );
     }
 
     #[test]

@@ -30,7 +30,6 @@ impl Texture {
         cache: Arc<TileCache>,
     ) -> Result<Texture> {
         params.validate()?;
-        params.validate_with(candidates.params())?;
         Ok(Texture {
             engine: Arc::new(Engine::new(candidates, params, cache)?),
         })
@@ -185,8 +184,7 @@ impl Texture {
 
     /// Exact voxel-level dependency chain of a few voxels at `lod`:
     /// version-0 voxels and corrections per level, finest first. It follows
-    /// what a correction reads: radius 1 with sparse slices, N/2 with full
-    /// ones.
+    /// what a correction reads: its direct neighbours (radius 1).
     pub fn dependency_chain(&self, voxels: &[[i64; 3]], lod: u32) -> Result<Vec<(u64, u64)>> {
         self.check_lod(lod)?;
         self.chain(voxels, lod, self.engine.radius())

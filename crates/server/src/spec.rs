@@ -109,7 +109,6 @@ impl TextureParams {
             serde_json::from_value(Value::Object(s)).map_err(|e| invalid_params(e.to_string()))?;
         analysis.validate()?;
         synth.validate()?;
-        synth.validate_with(&analysis)?;
         Ok(TextureParams { analysis, synth })
     }
 
@@ -496,11 +495,10 @@ mod tests {
             solidtex_core::Slices::Sparse
         );
         // ...but a stored texture written before the key existed was
-        // synthesized with full slices and must stay so.
-        assert_eq!(
-            TextureParams::from_stored(&old).unwrap().synth.slices,
-            solidtex_core::Slices::Full
-        );
+        // synthesized with full slices, which went with the colour
+        // correction: it is refused, never served with other bytes.
+        let e = TextureParams::from_stored(&old).unwrap_err();
+        assert!(format!("{e:?}").contains("removed"), "{e:?}");
         assert_eq!(
             TextureParams::from_stored(&new).unwrap(),
             TextureParams::default()
@@ -548,11 +546,13 @@ mod tests {
             TextureParams::from_flat(&old).unwrap().synth.consistency,
             SynthParams::default().consistency
         );
-        // It matched colour neighbourhoods.
-        old.remove("correction");
-        assert_eq!(
-            TextureParams::from_stored(&old).unwrap().synth.correction,
-            solidtex_core::Correction::Colour
+        // It matched colour neighbourhoods, which is refused likewise.
+        let mut colour = old.clone();
+        colour.remove("correction");
+        let e = TextureParams::from_stored(&colour).unwrap_err();
+        assert!(
+            format!("{e:?}").contains("colour correction was removed"),
+            "{e:?}"
         );
         // Its slab was N thick.
         old.remove("slab_thickness");
@@ -642,13 +642,10 @@ mod tests {
         let p = TextureParams::from_json(r#"{"feature_weight": 0.5}"#).unwrap();
         assert_eq!(p.analysis.feature_weight, 0.5);
         assert_eq!(p.to_flat()["feature_weight"], 0.5);
-        assert!(!TextureParams::default().to_flat().contains_key("feature_weight"));
-        assert_eq!(
-            code(
-                TextureParams::from_json(r#"{"feature_weight": 0.5, "correction": "colour"}"#)
-                    .unwrap_err()
-            ),
-            "invalid_request"
+        assert!(
+            !TextureParams::default()
+                .to_flat()
+                .contains_key("feature_weight")
         );
         assert_eq!(
             code(TextureParams::from_json(r#"{"feature_weight": 9}"#).unwrap_err()),
@@ -670,12 +667,12 @@ mod tests {
             ("jitter", "0.5"),
             ("correct_init_level", "false"),
             ("contrast", "1.25"),
-            ("slices", "full"),
+            ("slices", "sparse"),
             ("slab_tiling", "blocks"),
         ];
         let flat = TextureParams::flat_from_pairs(pairs.into_iter());
         let p = TextureParams::from_flat(&flat).unwrap();
-        assert_eq!(p.synth.slices, solidtex_core::Slices::Full);
+        assert_eq!(p.synth.slices, solidtex_core::Slices::Sparse);
         assert_eq!(p.synth.slab_tiling, solidtex_core::SlabTiling::Blocks);
         assert_eq!(p.synth.seed, 7);
         assert_eq!(p.synth.jitter, 0.5);
@@ -714,7 +711,6 @@ mod tests {
             r#"{"field": {"kind": "zigzag", "angle": 10, "period": 0}}"#,
             r#"{"field": {"kind": "slant", "angle": "x"}}"#,
             r#"{"field": 3}"#,
-            r#"{"field": "slant:30", "correction": "colour"}"#,
         ] {
             assert!(TextureParams::from_json(bad).is_err(), "{bad}");
         }
@@ -826,20 +822,16 @@ mod tests {
         hash_json(&mut h, &now.params.analysis);
         hash_json(&mut h, &then);
         let id_then = hex(&h.finalize()[..16]);
-        let loaded = TextureSpec {
-            planes: now.planes.clone(),
-            params: TextureParams::from_stored(&old).unwrap(),
-        };
-        assert_ne!(loaded.content_hash(), id_then);
-        assert_eq!(loaded.content_hash_as_stored(&old), id_then);
+        // Such a texture matched colour neighbourhoods, which are gone, so
+        // it is no longer served; hashing only the keys a texture stored is
+        // still how the ids of later layouts are checked.
+        assert!(TextureParams::from_stored(&old).is_err());
+        assert_ne!(now.content_hash(), id_then);
+        assert_eq!(now.content_hash_as_stored(&old), id_then);
         // Another seed or other pixels do not match.
-        let mut other = old.clone();
-        other.insert("seed".into(), Value::from(8));
-        let loaded = TextureSpec {
-            planes: now.planes.clone(),
-            params: TextureParams::from_stored(&other).unwrap(),
-        };
-        assert_ne!(loaded.content_hash_as_stored(&other), id_then);
+        let mut other = now.clone();
+        other.params.synth.seed = 8;
+        assert_ne!(other.content_hash_as_stored(&old), id_then);
     }
 
     /// The analysis parameters before orientations, in their order then.

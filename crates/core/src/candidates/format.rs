@@ -1,9 +1,11 @@
 //! The `.stx` file: magic, format version, payload length, CRC-32 of the
 //! payload, then the payload (parameters as JSON, exemplar pixels as given,
-//! the layout of the planes (version 2), and per level the PCA bases,
+//! the layout of the planes (since version 2), and per level the PCA bases,
 //! similarity sets and candidate triples of the planes as analysed).
 //! Version 1 files, written before the layout, are read with every plane
-//! as given. Derived data
+//! as given. Versions 1 and 2 also stored per level the joint PCA of a
+//! triple's three appearance vectors, which only the colour correction
+//! read; it is skipped. Derived data
 //! (stacks, appearance vectors, quantised neighbourhoods) is recomputed on
 //! load, deterministically. Every read is bounds-checked: a truncated or
 //! corrupt file is an error, never a panic or a wrong result.
@@ -16,7 +18,7 @@ use crate::orientation::{Grain, Layout};
 use crate::params::{AnalysisParams, Arrangement, Orientation};
 
 const MAGIC: &[u8; 8] = b"SOLIDTEX";
-const VERSION: u32 = 2;
+const VERSION: u32 = 3;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 struct Writer(Vec<u8>);
@@ -123,6 +125,12 @@ impl<'a> Reader<'a> {
 }
 
 pub(super) fn encode(c: &Candidates) -> Vec<u8> {
+    encode_version(c, VERSION)
+}
+
+/// [`encode`] in the layout of `version` (older ones for the tests of
+/// reading them: their joint PCA, which is skipped, is written as zeros).
+fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
     let single = c.exemplars.is_single();
     let planes = if c.analysed.is_single() { 1 } else { 3 };
     let npx = c.dims.len() as u32;
@@ -136,15 +144,17 @@ pub(super) fn encode(c: &Candidates) -> Vec<u8> {
         w.0.extend_from_slice(&c.exemplars.plane(p).to_rgb_bytes());
     }
     let layout = &c.layout;
-    for r in layout.arrangement.rotate {
-        w.u8((r / 90) as u8);
+    if version >= 2 {
+        for r in layout.arrangement.rotate {
+            w.u8((r / 90) as u8);
+        }
+        for v in layout.arrangement.weights {
+            w.f32(v);
+        }
+        w.u8(layout.detected as u8);
+        w.f32(layout.grain.coherence);
+        w.f32(layout.grain.degrees);
     }
-    for v in layout.arrangement.weights {
-        w.f32(v);
-    }
-    w.u8(layout.detected as u8);
-    w.f32(layout.grain.coherence);
-    w.f32(layout.grain.degrees);
     for l in c.stored_levels() {
         for p in 0..planes {
             w.pca(&l.appearance_pca[p]);
@@ -155,8 +165,17 @@ pub(super) fn encode(c: &Candidates) -> Vec<u8> {
                 w.coord(s, wide);
             }
         }
-        w.pca(&l.joint_pca);
-        w.f32(l.quant_scale);
+        if version < 3 {
+            let input = (0..planes).map(|p| l.appearance_pca[p].dims).sum::<usize>()
+                * if planes == 1 { 3 } else { 1 };
+            w.pca(&Pca {
+                input,
+                dims: 8,
+                mean: vec![0.0; input],
+                basis: vec![0.0; 8 * input],
+            });
+            w.f32(1.0);
+        }
         for p in 0..planes {
             let cand = &l.candidates[p];
             for px in 0..npx {
@@ -175,7 +194,7 @@ pub(super) fn encode(c: &Candidates) -> Vec<u8> {
     let payload = w.0;
     let mut out = Vec::with_capacity(HEADER + payload.len());
     out.extend_from_slice(MAGIC);
-    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&version.to_le_bytes());
     out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
     out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
     out.extend_from_slice(&payload);
@@ -190,7 +209,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
         return Err(Error::CorruptFile(CorruptKind::Truncated));
     }
     let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
-    if version != 1 && version != VERSION {
+    if !(1..=VERSION).contains(&version) {
         return Err(Error::CorruptFile(CorruptKind::Version(version)));
     }
     let len = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
@@ -279,10 +298,12 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
                 .collect::<Result<Vec<_>>>()?;
             similar.push(s);
         }
-        let joint_input: usize =
-            pcas.iter().map(|p| p.dims).sum::<usize>() * if single { 3 } else { 1 };
-        let joint_pca = r.pca(joint_input, 16)?;
-        let quant_scale = r.f32()?;
+        if version < 3 {
+            let joint_input: usize =
+                pcas.iter().map(|p| p.dims).sum::<usize>() * if single { 3 } else { 1 };
+            r.pca(joint_input, 16)?;
+            r.f32()?;
+        }
         let mut cands = Vec::new();
         for p in 0..planes {
             let counts = r.take(npx as usize)?.to_vec();
@@ -335,8 +356,6 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
             candidates: cands,
             similar,
             k2,
-            joint_pca,
-            quant_scale,
         });
     }
     if r.pos != payload.len() {
@@ -428,29 +447,36 @@ mod tests {
         4 + json + 1 + 8 + planes * c.dims.len() * 3
     }
 
-    const LAYOUT_BYTES: usize = 3 + 3 * 4 + 1 + 2 * 4;
-
     #[test]
-    fn files_written_before_orientations_load_with_every_plane_as_given() {
+    fn files_of_earlier_versions_load() {
         let c = compute(grain(16), Orientation::None);
-        let v2 = encode(&c);
-        // As version 1 wrote it: no orientation among the parameters, no
-        // layout record.
-        let payload = &v2[HEADER..];
-        let at = layout_at(&c, payload);
-        let json = std::str::from_utf8(&payload[4..at - 9 - c.dims.len() * 3]).unwrap();
+        let now = encode(&c);
+        // Version 2: a joint PCA per level besides, which is skipped.
+        let v2 = encode_version(&c, 2);
+        assert!(v2.len() > now.len());
+        assert_eq!(encode(&decode(&v2).unwrap()), now);
+        // Version 1 had no orientation among the parameters and no layout
+        // record: every plane as given.
+        let v1 = encode_version(&c, 1);
+        let payload = &v1[HEADER..];
+        let json_len = u32::from_le_bytes(payload[..4].try_into().unwrap()) as usize;
+        let json = std::str::from_utf8(&payload[4..4 + json_len]).unwrap();
         let old_json = json.replace(r#","orientation":"none""#, "");
         assert_ne!(old_json, json);
         let mut old = (old_json.len() as u32).to_le_bytes().to_vec();
         old.extend_from_slice(old_json.as_bytes());
-        old.extend_from_slice(&payload[4 + json.len()..at]);
-        old.extend_from_slice(&payload[at + LAYOUT_BYTES..]);
+        old.extend_from_slice(&payload[4 + json_len..]);
         let loaded = decode(&with_header(1, &old)).unwrap();
         // Oriented as it is, although `auto` would turn this exemplar.
         assert_eq!(loaded.params().orientation, Orientation::None);
         assert!(loaded.layout().detected);
         assert_eq!(loaded.layout().arrangement, Arrangement::default());
-        assert_eq!(encode(&loaded), v2);
+        assert_eq!(encode(&loaded), now);
+        // A version from the future is refused.
+        assert!(matches!(
+            decode(&with_header(VERSION + 1, &now[HEADER..])),
+            Err(Error::CorruptFile(CorruptKind::Version(_)))
+        ));
     }
 
     #[test]

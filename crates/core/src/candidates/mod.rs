@@ -11,7 +11,7 @@ pub mod geometry;
 pub mod search;
 pub mod sparse;
 
-use crate::appearance::{self, AppearanceLevel, Pca, Projector};
+use crate::appearance::{self, AppearanceLevel, Pca};
 use crate::error::{Error, Result};
 use crate::exemplar::ExemplarSet;
 use crate::feature;
@@ -131,10 +131,6 @@ pub(crate) struct StoredLevel {
     /// `k2` most similar pixels per pixel (itself first), per plane.
     pub similar: [Vec<u32>; 3],
     pub k2: usize,
-    /// PCA of the concatenated appearance vectors of a triple's three pixels.
-    pub joint_pca: Pca,
-    /// Quantisation scale of joint vectors: byte = round(v·scale) + 128.
-    pub quant_scale: f32,
 }
 
 /// One level, with derived data for synthesis.
@@ -143,21 +139,6 @@ pub struct Level {
     pub(crate) stored: StoredLevel,
     /// Appearance vectors per plane.
     pub appearance: [AppearanceLevel; 3],
-    /// Quantised 3-neighbourhood vector of every candidate, per plane,
-    /// `joint_dims` bytes each, in candidate order.
-    pub vectors: [Vec<u8>; 3],
-    /// The appearance vectors of each pixel's 2D similarity set, quantised
-    /// and stored beside the set, so that one correction reads one cache
-    /// line per neighbour instead of chasing every similar pixel.
-    /// With one exemplar, only plane 0's (see [`Level::alias`]).
-    similar_vectors: [Vec<[i16; SIMILAR_DIMS]>; 3],
-    /// Scale of [`Level::similar_vectors`] per plane (see [`quantise_wide`]).
-    similar_scale: [f32; 3],
-    /// Each pixel's share of the joint projection, per plane (`joint_dims`
-    /// floats per pixel): the joint vector of any triple is the sum of its
-    /// three shares less the projected mean, so triples that are not
-    /// precomputed candidates (coherent ones) are scored cheaply.
-    joint_shares: [Vec<f32>; 3],
     /// The plane whose 2D tables (similarity sets and their vectors) plane
     /// p reads: with one exemplar for all three planes those tables are
     /// equal, and reading one copy keeps it in cache where three would not
@@ -180,43 +161,6 @@ impl Level {
     pub fn similar(&self, p: usize, c: u32) -> &[u32] {
         let k2 = self.stored.k2;
         &self.stored.similar[self.alias[p]][c as usize * k2..(c as usize + 1) * k2]
-    }
-
-    /// Quantised appearance vectors of the similarity set of pixel `c` in
-    /// plane `p`, in the order of [`Level::similar`].
-    #[inline]
-    pub fn similar_vectors(&self, p: usize, c: u32) -> &[[i16; SIMILAR_DIMS]] {
-        let k2 = self.stored.k2;
-        &self.similar_vectors[self.alias[p]][c as usize * k2..(c as usize + 1) * k2]
-    }
-
-    /// Quantises an appearance vector of plane `p` like
-    /// [`Level::similar_vectors`] (the first [`SIMILAR_DIMS`] dimensions).
-    #[inline]
-    pub fn quantise_appearance(&self, p: usize, v: &[f32]) -> [i16; SIMILAR_DIMS] {
-        quantise_wide_vector(v, self.similar_scale[p])
-    }
-
-    /// Plane `p`'s share of the joint projection of pixel `c`.
-    #[inline]
-    pub fn joint_share(&self, p: usize, c: u32) -> &[f32] {
-        let d = self.stored.joint_pca.dims;
-        &self.joint_shares[p][c as usize * d..(c as usize + 1) * d]
-    }
-
-    /// Dimensions of the quantised 3-neighbourhood vectors.
-    pub fn joint_dims(&self) -> usize {
-        self.stored.joint_pca.dims
-    }
-
-    /// The joint PCA.
-    pub fn joint_pca(&self) -> &Pca {
-        &self.stored.joint_pca
-    }
-
-    /// Quantisation scale of the 3-neighbourhood vectors.
-    pub fn quant_scale(&self) -> f32 {
-        self.stored.quant_scale
     }
 
     /// The sparse appearance-space tables of this level (level `k` of an
@@ -262,42 +206,8 @@ impl std::fmt::Debug for Candidates {
     }
 }
 
-/// Appearance dimensions used by the similarity k-d tree and the first
-/// stage of correction.
+/// Appearance dimensions used by the similarity k-d tree.
 pub const SIMILAR_DIMS: usize = 8;
-
-/// Largest magnitude of a [`quantise_wide`] value: squared differences of
-/// [`SIMILAR_DIMS`] such values fit an `i32` sum.
-const WIDE_MAX: f32 = 4095.0;
-
-/// The first [`SIMILAR_DIMS`] coordinates of `v`, [`quantise_wide`]d
-/// (missing ones are zero).
-fn quantise_wide_vector(v: &[f32], scale: f32) -> [i16; SIMILAR_DIMS] {
-    let mut q = [0i16; SIMILAR_DIMS];
-    for (o, &x) in q.iter_mut().zip(v) {
-        *o = quantise_wide(x, scale);
-    }
-    q
-}
-
-/// Sum of the squares of 16-bit differences, taken in pairs so that eight
-/// lanes are one `pmaddwd` (`N` even). Quantised distances of both
-/// corrections end here.
-#[inline(always)]
-pub fn sum_of_squares<const N: usize>(e: &[i16; N]) -> u32 {
-    let (pairs, _) = e.as_chunks::<2>();
-    pairs
-        .iter()
-        .map(|p| p[0] as i32 * p[0] as i32 + p[1] as i32 * p[1] as i32)
-        .sum::<i32>() as u32
-}
-
-/// Quantises an appearance coordinate to a 13-bit signed integer.
-#[inline]
-pub fn quantise_wide(v: f32, scale: f32) -> i16 {
-    // Rounds half up through a non-negative truncation (see [`quantise`]).
-    ((v * scale).clamp(-WIDE_MAX, WIDE_MAX) + (WIDE_MAX + 0.5)) as i32 as i16 - WIDE_MAX as i16
-}
 
 impl Candidates {
     /// Heap bytes that [`Candidates::compute`] is expected to peak at for
@@ -321,13 +231,13 @@ impl Candidates {
         let search = (searched * levels + 1.7) * list;
         // With few triples the peak comes later, in the coherence filter and
         // the final tables.
-        let later = 1000.0 * searched * levels;
+        let later = 500.0 * searched * levels;
         let n = f64::from(params.neighbourhood);
         let wider = 11.0 * (n * n - 25.0).max(0.0);
         let kept = 40.0 * (f64::from(params.max_candidates) - 12.0).max(0.0);
         let per_pixel = search.max(later) + wider + kept;
         // Small exemplars peak at fixed costs (samples of set sizes, trees).
-        ((pixels * per_pixel) as u64 + (4 << 20)).max(10 << 20)
+        ((pixels * per_pixel) as u64 + (4 << 20)).max(6 << 20)
     }
 
     /// Runs the whole precomputation; `progress(stage, fraction 0..1)` is
@@ -527,7 +437,7 @@ impl Candidates {
             for p in 0..3 {
                 let c = &l.stored.candidates[p];
                 total += c.triples.len() * 16 + c.offsets.len() * 4;
-                total += l.vectors[p].len() + l.stored.similar[p].len() * 4;
+                total += l.stored.similar[p].len() * 4;
                 total += l.appearance[p].vectors.len() * 4;
             }
             total += l.sparse.get().map_or(0, |t| t.memory_bytes());
@@ -689,16 +599,11 @@ impl Stages<'_> {
                     similar_sets(&appearance[2], self.dims, k2, spacing(k) as i64),
                 ]
             };
-            let joint_dims = joint_dims(k, levels_n);
-            let joint_pca = fit_joint(&appearance, &candidates, joint_dims);
-            let quant_scale = quant_scale(&appearance, &candidates, &joint_pca);
             stored.push(StoredLevel {
                 appearance_pca: pcas,
                 candidates,
                 similar,
                 k2,
-                joint_pca,
-                quant_scale,
             });
             (self.progress)(Stage::Finish, (k + 1) as f32 / levels_n as f32);
         }
@@ -718,7 +623,10 @@ fn build_stacks(exemplars: &ExemplarSet, levels: usize, feature_weight: f32) -> 
     let stack = |p: usize| {
         let s = GaussianStack::new(exemplars.plane(p), levels);
         if feature_weight > 0.0 {
-            s.with_feature(feature::feature_distance(exemplars.plane(p), feature_weight))
+            s.with_feature(feature::feature_distance(
+                exemplars.plane(p),
+                feature_weight,
+            ))
         } else {
             s
         }
@@ -729,83 +637,6 @@ fn build_stacks(exemplars: &ExemplarSet, levels: usize, feature_weight: f32) -> 
     } else {
         [0, 1, 2].map(stack)
     }
-}
-
-/// Joint 3-neighbourhood dimensions: 12 at the coarsest level down to 8 at
-/// the finest (coarse levels capture less variance per component).
-fn joint_dims(k: usize, levels: usize) -> usize {
-    if levels <= 1 {
-        return 8;
-    }
-    8 + (4 * k + (levels - 1) / 2) / (levels - 1)
-}
-
-/// Plane `p`'s block of the joint basis applied to every pixel's
-/// appearance vector.
-fn joint_shares(appearance: &[AppearanceLevel; 3], joint: &Pca, p: usize) -> Vec<f32> {
-    let start: usize = appearance[..p].iter().map(|a| a.pca.dims).sum();
-    let app = &appearance[p];
-    let d = app.pca.dims;
-    let pixels = app.vectors.len() / d;
-    let mut out = vec![0f32; pixels * joint.dims];
-    out.par_chunks_mut(joint.dims)
-        .enumerate()
-        .for_each(|(c, dst)| {
-            let v = app.vector(c);
-            for (j, o) in dst.iter_mut().enumerate() {
-                let row = &joint.basis[j * joint.input + start..j * joint.input + start + d];
-                *o = appearance::dot(v, row);
-            }
-        });
-    out
-}
-
-fn concat(appearance: &[AppearanceLevel], t: [u32; 3], out: &mut Vec<f32>) {
-    out.clear();
-    for (p, a) in appearance.iter().enumerate() {
-        out.extend_from_slice(a.vector(t[p] as usize));
-    }
-}
-
-fn fit_joint(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], dims: usize) -> Pca {
-    let input: usize = appearance.iter().map(|a| a.pca.dims).sum();
-    let total: usize = planes.iter().map(|c| c.triples.len()).sum();
-    let stride = (total / 20000).max(1);
-    let mut sample = Vec::new();
-    let mut buf = Vec::new();
-    for c in planes {
-        for t in c.triples.iter().step_by(stride) {
-            concat(appearance, *t, &mut buf);
-            sample.extend_from_slice(&buf);
-        }
-    }
-    Pca::fit(&sample, input, dims)
-}
-
-fn quant_scale(appearance: &[AppearanceLevel], planes: &[PlaneCandidates; 3], pca: &Pca) -> f32 {
-    let mut max = 1e-6f32;
-    let mut buf = Vec::new();
-    let mut out = vec![0f32; pca.dims];
-    let projector = Projector::new(pca);
-    for c in planes {
-        for t in &c.triples {
-            concat(appearance, *t, &mut buf);
-            projector.project(&buf, &mut out);
-            for v in &out {
-                max = max.max(v.abs());
-            }
-        }
-    }
-    127.0 / max
-}
-
-/// Quantises a projected vector: byte = round(v·scale) + 128 (halves up),
-/// clamped.
-#[inline]
-pub fn quantise(v: f32, scale: f32) -> u8 {
-    // Rounds half up by truncating a non-negative value: no libm call in
-    // the correction's inner loop.
-    (v * scale + 128.5).clamp(0.0, 255.0) as u8
 }
 
 /// Derives each level's synthesis tables. `single`: one exemplar serves
@@ -829,60 +660,9 @@ fn derive_levels(
             } else {
                 [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &s.appearance_pca[p]))
             };
-            // The projected mean once per level, not once per candidate
-            // (`Projector` computes what `Pca::project` does, bit for bit).
-            let joint = Projector::new(&s.joint_pca);
-            let vectors = [0, 1, 2].map(|p| {
-                let c = &s.candidates[p];
-                let d = s.joint_pca.dims;
-                let mut bytes = vec![0u8; c.triples.len() * d];
-                bytes
-                    .par_chunks_mut(d)
-                    .zip(c.triples.par_iter())
-                    .for_each_init(
-                        || (Vec::new(), vec![0f32; d]),
-                        |(buf, out), (dst, t)| {
-                            concat(&appearance, *t, buf);
-                            joint.project(buf, out);
-                            for (b, v) in dst.iter_mut().zip(out.iter()) {
-                                *b = quantise(*v, s.quant_scale);
-                            }
-                        },
-                    );
-                bytes
-            });
-            let similar_scale = [0, 1, 2].map(|p| {
-                let d = appearance[p].pca.dims.min(SIMILAR_DIMS);
-                let max = appearance[p]
-                    .vectors
-                    .chunks_exact(appearance[p].pca.dims)
-                    .flat_map(|v| &v[..d])
-                    .fold(1e-6f32, |m, v| m.max(v.abs()));
-                WIDE_MAX / max
-            });
-            let similar_vectors = [0, 1, 2].map(|p| {
-                if alias[p] != p {
-                    return Vec::new();
-                }
-                let d = appearance[p].pca.dims.min(SIMILAR_DIMS);
-                s.similar[p]
-                    .iter()
-                    .map(|&c| {
-                        quantise_wide_vector(
-                            &appearance[p].vector(c as usize)[..d],
-                            similar_scale[p],
-                        )
-                    })
-                    .collect()
-            });
-            let joint_shares = [0, 1, 2].map(|p| joint_shares(&appearance, &s.joint_pca, p));
             Level {
                 stored: s,
                 appearance,
-                vectors,
-                similar_vectors,
-                similar_scale,
-                joint_shares,
                 alias,
                 weights,
                 sparse: std::sync::OnceLock::new(),
@@ -1051,7 +831,6 @@ mod tests {
             for p in 1..3 {
                 assert_eq!(level.stored.similar[p], level.stored.similar[0]);
                 assert_eq!(level.appearance[p].vectors, level.appearance[0].vectors);
-                assert_eq!(level.similar_scale[p], level.similar_scale[0]);
             }
         }
         let reloaded = Candidates::load(&single.to_bytes()).unwrap();
@@ -1062,10 +841,7 @@ mod tests {
         for level in &triple.levels {
             assert_eq!(level.alias, [0, 1, 2]);
             assert_ne!(level.stored.similar[1], level.stored.similar[0]);
-            assert_eq!(
-                level.similar_vectors[2].len(),
-                level.similar_vectors[0].len()
-            );
+            assert_eq!(level.stored.similar[2].len(), level.stored.similar[0].len());
         }
     }
 }

@@ -5,7 +5,7 @@
 
 use super::cache::{Tile, TileData};
 use super::colour::colour;
-use super::correction::{Corrector, Scratch, Work};
+use super::correction::{Corrector, Work};
 use super::grid::{Box3, Grid};
 use super::{Acc, Engine, MAX_GROUP_TILES, TILE, cancel, init, plan, tile_masks, tile_voxels};
 use rayon::prelude::*;
@@ -207,14 +207,14 @@ impl Engine {
             let w = &work;
             let new: Vec<(usize, [u32; 3], [f32; 3])> = voxels
                 .par_iter()
-                .map_init(Scratch::default, |s, &p| {
+                .map(|&p| {
                     let barrier = barrier_cell.map(|m| {
                         let c = p.map(|v| (v - offset).div_euclid(m) * m + offset);
                         Box3::new(c, [m; 3])
                     });
                     let t = match (start, barrier) {
-                        (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p, s),
-                        _ => corrector.correct(w, None, p, s),
+                        (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p),
+                        _ => corrector.correct(w, None, p),
                     };
                     (w.triples.index(p), t, colour(&self.cands, k, t))
                 })

@@ -38,7 +38,7 @@ mod stats;
 use crate::candidates::Candidates;
 use crate::error::Result;
 use crate::field::FrameField;
-use crate::params::{Correction, Scheme, SynthParams};
+use crate::params::{Scheme, SynthParams};
 use crate::request::{CutPlane, Filter, Region};
 use cache::{Claim, Tile, TileCache, TileKey};
 use colour::{colour, rgb8, triple_rgb8};
@@ -172,16 +172,14 @@ impl Engine {
         let key = crate::hash::fingerprint(&bytes);
         let steps = steps_for(&params, params.passes);
         let finest_steps = steps_for(&params, params.finest_passes);
-        if params.correction == Correction::Appearance {
-            // The appearance tables are built with the texture, not by its
-            // first request.
-            (0..cands.level_count())
-                .into_par_iter()
-                .for_each(|k| _ = cands.level(k).sparse_tables(cands.dims(), k));
-        }
+        // The appearance tables are built with the texture, not by its
+        // first request.
+        (0..cands.level_count())
+            .into_par_iter()
+            .for_each(|k| _ = cands.level(k).sparse_tables(cands.dims(), k));
         let mut engine = Engine {
             init_level: cands.level_count() - 1,
-            radius: correction::reach(&params, cands.params().neighbourhood),
+            radius: correction::REACH,
             cell: params.grid as i64,
             cands,
             params,

@@ -225,7 +225,7 @@ function renderList() {
 }
 
 // The parameters a user is likely to care about come first.
-const PARAM_ORDER = ["seed", "correction", "passes", "finest_passes", "fine_levels", "levels", "neighbourhood", "scheme", "grid", "jitter", "contrast", "consistency", "slices", "slab_thickness"];
+const PARAM_ORDER = ["seed", "feature_weight", "passes", "finest_passes", "fine_levels", "levels", "neighbourhood", "scheme", "grid", "jitter", "contrast", "consistency", "slices", "slab_thickness"];
 
 function renderInfo() {
   const box = $("info");
@@ -352,7 +352,8 @@ function uploadParams() {
   const seed = $("p-seed").value.trim();
   if (seed !== "") p.seed = Number(seed);
   if ($("p-preset").value) p.preset = $("p-preset").value;
-  if ($("p-correction").value) p.correction = $("p-correction").value;
+  const feature = $("p-feature-weight").value.trim();
+  if (feature !== "") p.feature_weight = Number(feature);
   const passes = $("p-passes").value.trim();
   if (passes !== "") p.passes = Number(passes);
   return p;

@@ -14,8 +14,7 @@
 //! a voxel's colour (a seam in the yz coordinates along x is invisible to
 //! the yz query), so each prediction also carries its voxel's colour
 //! offset from the plane's own exemplar colour, as a uniform offset of the
-//! whole neighbourhood in appearance space: the planes are coupled as in
-//! the colour correction's blend of voxel and own colours.
+//! whole neighbourhood in appearance space, which couples the planes.
 //!
 //! Averages of three predictions and of three exemplar colours are flatter
 //! than any exemplar neighbourhood, and flat queries pick the exemplar's
@@ -32,7 +31,7 @@
 //! precomputed 3D candidates. The coherent triples
 //! (each direct neighbour's triple moved back) compete on equal terms,
 //! with a penalty when their three exemplar colours disagree; a bonus for
-//! them, as the colour correction gives, left upsampled blocks standing.
+//! them left upsampled blocks standing (docs/quality.md).
 //! The best by distance of the quantised 12-location vectors wins.
 
 use super::{
