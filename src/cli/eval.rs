@@ -1,6 +1,7 @@
 //! `solidtex eval`: scores synthesized slices against their exemplar
 //! (nearest-patch coherence and completeness, colour histogram distance,
-//! and for axis slices the anisotropy against the exemplar's) in the xy,
+//! the band spectrum's distance, and for axis slices the anisotropy and
+//! the gradient directions against the exemplar's) in the xy,
 //! yz, zx and an oblique orientation (an axis slice against its plane's
 //! exemplar, turned where the orientation turned it), next to two baselines computed the
 //! same way: the slab initialisation without correction, and a per-pixel
@@ -8,7 +9,9 @@
 
 use super::source::{SynthArgs, open_exemplar};
 use clap::Args;
-use solidtex_core::eval::{RgbView, SliceScores, anisotropy, score_slice, shuffled_exemplar};
+use solidtex_core::eval::{
+    RgbView, SliceScores, Structure, anisotropy, score_slice, shuffled_exemplar, structure,
+};
 use solidtex_core::{
     AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Scheme, SynthParams,
     Texture, TileCache,
@@ -83,6 +86,14 @@ pub struct Score {
     /// see [`solidtex_core::eval::anisotropy`]). None for the oblique cut and
     /// the shuffle, which have no matching exemplar axes.
     pub anisotropy: Option<f64>,
+    /// Mean |ln| ratio of the luminance energy per octave band, slice
+    /// against exemplar (lower is better; see
+    /// [`solidtex_core::eval::Structure`]).
+    pub spectrum: f64,
+    /// Distance between the gradient direction histograms, 0 to 1 (lower
+    /// is better). None for the oblique cut, whose plane turns the
+    /// exemplar's directions.
+    pub directions: Option<f64>,
 }
 
 fn slices(tex: &Texture, side: u32) -> anyhow::Result<Vec<(&'static str, Vec<u8>)>> {
@@ -163,7 +174,8 @@ pub fn evaluate(
                 orientation: &str,
                 method: &str,
                 s: SliceScores,
-                anisotropy: Option<f64>| {
+                anisotropy: Option<f64>,
+                st: Structure| {
         out.push(Score {
             exemplar: name.to_string(),
             orientation: orientation.to_string(),
@@ -172,6 +184,8 @@ pub fn evaluate(
             completeness: s.completeness,
             histogram: s.histogram,
             anisotropy,
+            spectrum: st.spectrum,
+            directions: (orientation != "oblique").then_some(st.orientation),
         })
     };
     for (method, params) in methods {
@@ -192,6 +206,7 @@ pub fn evaluate(
                 method,
                 score_slice(view, own, 7),
                 aniso,
+                structure(view, own),
             );
         }
     }
@@ -201,7 +216,14 @@ pub fn evaluate(
         height: side,
         rgb: &shuffled,
     };
-    push(&mut out, "any", "shuffled", score_slice(view, ex, 7), None);
+    push(
+        &mut out,
+        "any",
+        "shuffled",
+        score_slice(view, ex, 7),
+        None,
+        structure(view, ex),
+    );
     Ok(out)
 }
 
@@ -210,11 +232,20 @@ pub fn print(scores: &[Score]) {
     println!("Every score is a distance: lower is better. `worse than slab` marks a corrected");
     println!("slice that scores worse than the uncorrected slab initialisation it started from.");
     println!(
-        "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10} {:>10}  note",
-        "exemplar", "plane", "method", "coherence", "completeness", "histogram", "anisotropy"
+        "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10} {:>10} {:>9} {:>10}  note",
+        "exemplar",
+        "plane",
+        "method",
+        "coherence",
+        "completeness",
+        "histogram",
+        "anisotropy",
+        "spectrum",
+        "directions"
     );
     for s in scores {
         let aniso = s.anisotropy.map_or("-".to_string(), |a| format!("{a:.3}"));
+        let directions = s.directions.map_or("-".to_string(), |a| format!("{a:.3}"));
         let losses = losses_to_slab(scores, s);
         let note = if losses.is_empty() {
             String::new()
@@ -222,8 +253,16 @@ pub fn print(scores: &[Score]) {
             format!("worse than slab: {}", losses.join(", "))
         };
         println!(
-            "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4} {:>10}  {note}",
-            s.exemplar, s.orientation, s.method, s.coherence, s.completeness, s.histogram, aniso
+            "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4} {:>10} {:>9.3} {:>10}  {note}",
+            s.exemplar,
+            s.orientation,
+            s.method,
+            s.coherence,
+            s.completeness,
+            s.histogram,
+            aniso,
+            s.spectrum,
+            directions
         );
     }
 }
@@ -254,6 +293,14 @@ fn losses_to_slab(scores: &[Score], s: &Score) -> Vec<&'static str> {
     {
         out.push("anisotropy");
     }
+    if s.spectrum > slab.spectrum {
+        out.push("spectrum");
+    }
+    if let (Some(a), Some(b)) = (s.directions, slab.directions)
+        && a > b
+    {
+        out.push("directions");
+    }
     out
 }
 
@@ -271,6 +318,8 @@ mod tests {
             completeness: 1.0,
             histogram: h,
             anisotropy: None,
+            spectrum: 0.5,
+            directions: Some(0.1),
         };
         let scores = [
             row("slab-only", 2.0, 0.1),
@@ -309,6 +358,17 @@ mod tests {
             .map(|r| r.anisotropy.is_some_and(f64::is_finite))
             .collect();
         assert_eq!(has_anisotropy, [true, true, true, false]);
+        let has_directions: Vec<bool> = default
+            .iter()
+            .filter(|r| r.method == "dual-grid")
+            .map(|r| r.directions.is_some())
+            .collect();
+        assert_eq!(has_directions, [true, true, true, false]);
+        assert!(
+            default
+                .iter()
+                .all(|r| r.spectrum.is_finite() && r.spectrum >= 0.0)
+        );
         assert_ne!(rows(&default, "dual-grid"), rows(&flat, "dual-grid"));
         assert_eq!(rows(&default, "slab-only"), rows(&flat, "slab-only"));
     }

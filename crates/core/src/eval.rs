@@ -12,7 +12,8 @@
 //!
 //! [`anisotropy`] adds what patch distances miss: whether a slice is
 //! stretched along one of its axes (streaks, extruded blocks) more than
-//! the exemplar is along the matching axis.
+//! the exemplar is along the matching axis. [`structure`] compares texture
+//! statistics: the luminance's energy per octave band and per direction.
 //!
 //! # Nearest-patch search
 //!
@@ -54,6 +55,10 @@
 //! final sum, so results do not depend on the number of rayon threads.
 
 #![deny(unsafe_code)]
+
+mod structure;
+
+pub use structure::{BANDS, Structure, structure};
 
 use crate::hash::mix;
 use nalgebra::{DMatrix, SymmetricEigen};
