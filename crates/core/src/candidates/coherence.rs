@@ -41,12 +41,16 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
     let mut iterations = 0;
     while iterations < MAX_ITERATIONS && lists.iter().any(|l| l.len() > max) {
         iterations += 1;
-        // Per pixel and plane, the sorted coordinates its candidates use.
+        // Per pixel and foreign plane, the sorted coordinates its
+        // candidates use (plane p's own coordinate is the pixel itself).
         let coords: Vec<[Vec<u32>; 3]> = lists
             .par_iter()
             .map(|l| {
                 let mut out: [Vec<u32>; 3] = Default::default();
                 for (j, o) in out.iter_mut().enumerate() {
+                    if j == p {
+                        continue;
+                    }
                     *o = l.iter().map(|s| snap(dims, s.triple[j], h)).collect();
                     o.sort_unstable();
                     o.dedup();
