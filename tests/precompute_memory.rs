@@ -62,6 +62,14 @@ fn the_estimate_bounds_the_measured_peak() {
                 ..AnalysisParams::default()
             },
         ),
+        (
+            // The feature-distance channel widens every neighbourhood.
+            ExemplarSet::single(generated_exemplar(48, 8)),
+            AnalysisParams {
+                feature_weight: 4.0,
+                ..AnalysisParams::default()
+            },
+        ),
         (three, AnalysisParams::default()),
     ];
     for (set, params) in cases {

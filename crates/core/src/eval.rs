@@ -58,7 +58,7 @@
 
 mod structure;
 
-pub use structure::{BANDS, Structure, structure};
+pub use structure::{Structure, structure};
 
 use crate::hash::mix;
 use nalgebra::{DMatrix, SymmetricEigen};

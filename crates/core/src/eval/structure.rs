@@ -8,7 +8,7 @@
 use super::RgbView;
 
 /// Octave bands of [`band_energies`], finest first.
-pub const BANDS: usize = 4;
+const BANDS: usize = 4;
 
 /// Orientation bins over 180° of [`orientation_histogram`].
 const ORIENTATION_BINS: usize = 12;
@@ -17,7 +17,7 @@ const ORIENTATION_BINS: usize = 12;
 /// both 0 for an image against itself).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Structure {
-    /// Mean over the [`BANDS`] octave bands of |ln(slice ÷ exemplar)| of
+    /// Mean over four octave bands of |ln(slice ÷ exemplar)| of
     /// the band's luminance energy: 0.7 is a band with half (or twice) the
     /// exemplar's energy. Blur lowers the fine bands, lost large features
     /// the coarse ones, noise raises the fine ones.
