@@ -94,3 +94,51 @@ fn a_bad_vector_is_refused_with_its_reason() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("is not three numbers"), "{err}");
 }
+
+#[test]
+fn precompute_takes_a_feature_mask_and_keeps_it_in_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let side = 32u32;
+    let exemplar: Vec<u8> = (0..side * side * 3).map(|i| (i * 37 % 251) as u8).collect();
+    let mask: Vec<u8> = (0..side * side)
+        .flat_map(|i| {
+            let l = if (i / side) % 8 < 2 { 255 } else { 0 };
+            [l, l, l]
+        })
+        .collect();
+    let (e, m) = (dir.path().join("e.png"), dir.path().join("m.png"));
+    image::save_buffer(&e, &exemplar, side, side, image::ColorType::Rgb8).unwrap();
+    image::save_buffer(&m, &mask, side, side, image::ColorType::Rgb8).unwrap();
+    let stx = dir.path().join("e.stx");
+    let args = |weight: &str| {
+        [
+            "precompute",
+            e.to_str().unwrap(),
+            "-o",
+            stx.to_str().unwrap(),
+            "--levels",
+            "2",
+            "--feature-mask",
+            m.to_str().unwrap(),
+            "--feature-weight",
+            weight,
+        ]
+        .map(String::from)
+    };
+    solidtex(&args("1").each_ref().map(String::as_str));
+    let c = solidtex_core::Candidates::load(&std::fs::read(&stx).unwrap()).unwrap();
+    let kept = c.exemplars().plane(0).feature_mask().unwrap();
+    assert_eq!(
+        kept.iter().filter(|&&f| f).count(),
+        (side * side / 4) as usize
+    );
+    assert!(kept[0] && !kept[(3 * side) as usize]);
+    // Without the channel the mask would do nothing: refused, saying why.
+    let out = Command::new(env!("CARGO_BIN_EXE_solidtex"))
+        .args(args("0"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("feature_weight"), "{stderr}");
+}

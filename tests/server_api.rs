@@ -1454,3 +1454,140 @@ async fn textures_beyond_the_memory_bound_are_evicted_and_loaded_again() {
     s.stop().await;
     fresh.stop().await;
 }
+
+/// A `side`² mask image: light diagonal bands two pixels wide.
+fn mask_png(side: u32) -> Vec<u8> {
+    let rgb: Vec<u8> = (0..side * side)
+        .flat_map(|i| {
+            let l = if (i % side + i / side) % 8 < 2 {
+                255
+            } else {
+                0
+            };
+            [l, l, l]
+        })
+        .collect();
+    solidtex_core::png::encode(side, side, &rgb).unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn feature_masks_make_their_own_texture_and_survive_a_restart() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let c = client();
+    let part = |b: Vec<u8>| {
+        reqwest::multipart::Part::bytes(b)
+            .file_name("e.png")
+            .mime_str("image/png")
+            .unwrap()
+    };
+    let params = r#"{"levels": 3, "feature_weight": 1}"#;
+    let form = reqwest::multipart::Form::new()
+        .part("image", part(exemplar_png(32, 7)))
+        .part("feature_mask", part(mask_png(32)))
+        .text("params", params);
+    let (status, v) = upload_form(&c, &s, form).await;
+    assert_eq!(status, 202, "{v}");
+    assert_eq!(v["exemplar"]["feature_masks"], 1);
+    let id = v["id"].as_str().unwrap().to_string();
+    // The same exemplar and parameters without the mask: another texture,
+    // whose view says nothing of masks.
+    let form = reqwest::multipart::Form::new()
+        .part("image", part(exemplar_png(32, 7)))
+        .text("params", params);
+    let (_, plain) = upload_form(&c, &s, form).await;
+    assert_ne!(plain["id"], v["id"]);
+    assert!(plain["exemplar"].get("feature_masks").is_none(), "{plain}");
+    let plain_id = plain["id"].as_str().unwrap().to_string();
+    wait_ready(&c, &s, &id).await;
+    wait_ready(&c, &s, &plain_id).await;
+    let slice = |id: &str| format!("/v1/textures/{id}/slices/z/3.png?w=24&h=24");
+    let (st, _, masked_png) = get(&c, &s.url(&slice(&id))).await;
+    assert_eq!(st, 200);
+    let (_, _, plain_png) = get(&c, &s.url(&slice(&plain_id))).await;
+    assert_ne!(masked_png, plain_png, "the mask changes the voxels");
+    s.stop().await;
+
+    // Stored with the texture: after a restart the same id is ready with
+    // the same bytes, and no precompute ran.
+    let s = TestServer::start(test_args(dir.path())).await;
+    let meta = get_json(&c, &s, &format!("/v1/textures/{id}")).await;
+    assert_eq!(meta["status"], "ready");
+    assert_eq!(meta["exemplar"]["feature_masks"], 1);
+    let (_, _, again) = get(&c, &s.url(&slice(&id))).await;
+    assert_eq!(again, masked_png);
+    assert_eq!(
+        metric(
+            &metrics(&c, &s).await,
+            r#"solidtex_precomputes_total{outcome="ok"}"#
+        ),
+        0.0
+    );
+
+    // Masks that cannot be used.
+    let cases: Vec<(reqwest::multipart::Form, &str)> = vec![
+        // Without the feature-distance channel nothing reads it.
+        (
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 7)))
+                .part("feature_mask", part(mask_png(32))),
+            "invalid_request",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 7)))
+                .part("feature_mask", part(mask_png(16)))
+                .text("params", params),
+            "size_mismatch",
+        ),
+        // All dark: no feature at all.
+        (
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 7)))
+                .part(
+                    "feature_mask",
+                    part(solidtex_core::png::encode(32, 32, &[0u8; 32 * 32 * 3]).unwrap()),
+                )
+                .text("params", params),
+            "invalid_request",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 7)))
+                .part("feature_mask_xy", part(mask_png(32)))
+                .text("params", params),
+            "invalid_request",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("xy", part(exemplar_png(32, 1)))
+                .part("yz", part(exemplar_png(32, 2)))
+                .part("zx", part(exemplar_png(32, 3)))
+                .part("feature_mask", part(mask_png(32)))
+                .text("params", params),
+            "invalid_request",
+        ),
+        (
+            reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 7)))
+                .part("feature_mask", part(b"not a png".to_vec()))
+                .text("params", params),
+            "malformed_image",
+        ),
+    ];
+    for (form, code) in cases {
+        let (st, h, b) = post_form(&c, &s.url("/v1/textures"), form).await;
+        assert_error(st, &h, &b, 400, code);
+    }
+    // One mask of three planes is fine.
+    let form = reqwest::multipart::Form::new()
+        .part("xy", part(exemplar_png(32, 1)))
+        .part("yz", part(exemplar_png(32, 2)))
+        .part("zx", part(exemplar_png(32, 3)))
+        .part("feature_mask_yz", part(mask_png(32)))
+        .text("params", params);
+    let (status, v) = upload_form(&c, &s, form).await;
+    assert_eq!(status, 202, "{v}");
+    assert_eq!(v["exemplar"]["feature_masks"], 1);
+    s.stop().await;
+}

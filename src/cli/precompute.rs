@@ -1,9 +1,9 @@
 //! `solidtex precompute`: 3D candidates of an exemplar into a `.stx` file.
 
 use super::source::{open_exemplar, precompute, write_atomically};
-use anyhow::bail;
+use anyhow::{Context, bail};
 use clap::Args;
-use solidtex_core::{AnalysisParams, Candidates, ExemplarSet, Layout, Orientation};
+use solidtex_core::{AnalysisParams, Candidates, Exemplar, ExemplarSet, Layout, Orientation};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -17,6 +17,18 @@ pub struct PrecomputeArgs {
     /// Exemplar for the zx plane.
     #[arg(long)]
     zx: Option<PathBuf>,
+    /// Feature mask of the exemplar (of the xy plane with --yz/--zx): an
+    /// image of its size, features (veins, cracks, mortar) light, the rest
+    /// dark. The feature-distance channel measures from it instead of a
+    /// threshold of the luminance; needs --feature-weight above 0.
+    #[arg(long)]
+    feature_mask: Option<PathBuf>,
+    /// Feature mask of the yz exemplar.
+    #[arg(long, requires = "yz")]
+    feature_mask_yz: Option<PathBuf>,
+    /// Feature mask of the zx exemplar.
+    #[arg(long, requires = "zx")]
+    feature_mask_zx: Option<PathBuf>,
     /// Output `.stx` file.
     #[arg(short, long)]
     output: PathBuf,
@@ -40,10 +52,14 @@ pub struct PrecomputeArgs {
 
 /// Runs `solidtex precompute`.
 pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
-    let xy = open_exemplar(&a.exemplar)?;
+    let xy = masked(open_exemplar(&a.exemplar)?, a.feature_mask.as_deref())?;
     let set = match (&a.yz, &a.zx) {
         (None, None) => ExemplarSet::single(xy),
-        (Some(yz), Some(zx)) => ExemplarSet::triple(xy, open_exemplar(yz)?, open_exemplar(zx)?)?,
+        (Some(yz), Some(zx)) => ExemplarSet::triple(
+            xy,
+            masked(open_exemplar(yz)?, a.feature_mask_yz.as_deref())?,
+            masked(open_exemplar(zx)?, a.feature_mask_zx.as_deref())?,
+        )?,
         _ => bail!("give both --yz and --zx, or neither"),
     };
     let params = AnalysisParams {
@@ -70,6 +86,14 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
         mib(estimate)
     );
     Ok(())
+}
+
+/// `e` with the feature mask drawn in the image at `mask`, if any.
+fn masked(e: Exemplar, mask: Option<&Path>) -> anyhow::Result<Exemplar> {
+    let Some(path) = mask else { return Ok(e) };
+    let image = open_exemplar(path)?;
+    e.with_mask_image(&image)
+        .with_context(|| format!("feature mask {}", path.display()))
 }
 
 fn print_report(c: &Candidates, path: &Path, total: f64, file_bytes: usize, verbose: bool) {

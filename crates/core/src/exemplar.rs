@@ -14,17 +14,24 @@ pub const MAX_SIDE: u32 = 512;
 /// [`MAX_SIDE`] (a 24-megapixel camera image, 6000×4000, fits).
 pub const MAX_PHOTO_SIDE: u32 = 6000;
 
-/// An RGB8 image, row-major, toroidally addressed by the synthesis.
+/// An RGB8 image, row-major, toroidally addressed by the synthesis, with
+/// an optional feature mask: which pixels belong to the exemplar's
+/// features (veins, cracks, mortar), as drawn by a user.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Exemplar {
     width: u32,
     height: u32,
     pixels: Vec<[u8; 3]>,
+    feature_mask: Option<Vec<bool>>,
 }
 
 impl std::fmt::Debug for Exemplar {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "Exemplar({}x{})", self.width, self.height)
+        write!(f, "Exemplar({}x{}", self.width, self.height)?;
+        if self.feature_mask.is_some() {
+            write!(f, ", feature mask")?;
+        }
+        write!(f, ")")
     }
 }
 
@@ -47,6 +54,70 @@ impl Exemplar {
             width,
             height,
             pixels,
+            feature_mask: None,
+        })
+    }
+
+    /// The same exemplar with `mask` (one flag per pixel, row-major; true
+    /// for feature pixels) as its feature mask. A mask of one class only
+    /// has no edges to measure a distance to, and is refused.
+    pub fn with_feature_mask(mut self, mask: Vec<bool>) -> Result<Self> {
+        if mask.len() != self.pixels.len() {
+            return Err(Error::SizeMismatch(format!(
+                "the feature mask has {} pixels but the exemplar {}x{} has {}",
+                mask.len(),
+                self.width,
+                self.height,
+                self.pixels.len()
+            )));
+        }
+        let features = mask.iter().filter(|&&f| f).count();
+        if features == 0 || features == mask.len() {
+            return Err(Error::InvalidRequest(format!(
+                "the feature mask is {} everywhere: mark the features in white \
+                 and the rest in black",
+                if features == 0 { "black" } else { "white" }
+            )));
+        }
+        self.feature_mask = Some(mask);
+        Ok(self)
+    }
+
+    /// The same exemplar with the feature mask drawn in `image`, an image of
+    /// the same size: pixels of luminance at least 128 (light) are
+    /// features.
+    pub fn with_mask_image(self, image: &Exemplar) -> Result<Self> {
+        if (image.width, image.height) != (self.width, self.height) {
+            return Err(Error::SizeMismatch(format!(
+                "the feature mask is {}x{} but the exemplar is {}x{}",
+                image.width, image.height, self.width, self.height
+            )));
+        }
+        let mask = image
+            .pixels
+            .iter()
+            .map(|&[r, g, b]| 299 * r as u32 + 587 * g as u32 + 114 * b as u32 >= 128_000)
+            .collect();
+        self.with_feature_mask(mask)
+    }
+
+    /// The feature mask, when one was given: a flag per pixel, row-major.
+    pub fn feature_mask(&self) -> Option<&[bool]> {
+        self.feature_mask.as_deref()
+    }
+
+    /// The feature mask as an RGB8 image (features white, the rest black),
+    /// when one was given.
+    pub fn feature_mask_image(&self) -> Option<Exemplar> {
+        let mask = self.feature_mask.as_ref()?;
+        Some(Exemplar {
+            width: self.width,
+            height: self.height,
+            pixels: mask
+                .iter()
+                .map(|&f| if f { [255; 3] } else { [0; 3] })
+                .collect(),
+            feature_mask: None,
         })
     }
 
@@ -126,21 +197,22 @@ impl Exemplar {
     /// `degrees`: 0, 90, 180 or 270 (anything else is taken modulo 360 and
     /// rounded down to a quarter turn). A quarter turn swaps width and
     /// height.
+    /// The feature mask turns with the image.
     pub fn rotated(&self, degrees: u32) -> Exemplar {
+        let quarters = degrees % 360 / 90;
+        if quarters == 0 {
+            return self.clone();
+        }
         let (w, h) = (self.width as usize, self.height as usize);
-        let at = |u: usize, v: usize| self.pixels[v * w + u];
-        let (width, height, pixels): (usize, usize, Vec<[u8; 3]>) = match degrees % 360 / 90 {
-            0 => return self.clone(),
-            // The left column, bottom to top, becomes the top row.
-            1 => (h, w, grid(h, w, |u, v| at(v, h - 1 - u))),
-            2 => (w, h, grid(w, h, |u, v| at(w - 1 - u, h - 1 - v))),
-            // The right column, top to bottom, becomes the top row.
-            _ => (h, w, grid(h, w, |u, v| at(w - 1 - v, u))),
-        };
+        let (width, height) = if quarters == 2 { (w, h) } else { (h, w) };
         Exemplar {
             width: width as u32,
             height: height as u32,
-            pixels,
+            pixels: turned(&self.pixels, w, h, quarters),
+            feature_mask: self
+                .feature_mask
+                .as_ref()
+                .map(|m| turned(m, w, h, quarters)),
         }
     }
 
@@ -150,8 +222,21 @@ impl Exemplar {
     }
 }
 
+/// The `w`×`h` row-major image `image` turned clockwise by `quarters`
+/// quarter turns (1 to 3).
+fn turned<T: Copy>(image: &[T], w: usize, h: usize, quarters: u32) -> Vec<T> {
+    let at = |u: usize, v: usize| image[v * w + u];
+    match quarters {
+        // The left column, bottom to top, becomes the top row.
+        1 => grid(h, w, |u, v| at(v, h - 1 - u)),
+        2 => grid(w, h, |u, v| at(w - 1 - u, h - 1 - v)),
+        // The right column, top to bottom, becomes the top row.
+        _ => grid(h, w, |u, v| at(w - 1 - v, u)),
+    }
+}
+
 /// A `width`×`height` image, row-major, from a function of (u, v).
-fn grid(width: usize, height: usize, f: impl Fn(usize, usize) -> [u8; 3]) -> Vec<[u8; 3]> {
+fn grid<T>(width: usize, height: usize, f: impl Fn(usize, usize) -> T) -> Vec<T> {
     (0..height)
         .flat_map(|v| (0..width).map(move |u| (u, v)))
         .map(|(u, v)| f(u, v))
@@ -248,6 +333,11 @@ impl ExemplarSet {
         self.planes[0] == self.planes[1] && self.planes[1] == self.planes[2]
     }
 
+    /// True when some plane has a feature mask.
+    pub fn has_feature_mask(&self) -> bool {
+        self.planes.iter().any(|e| e.feature_mask.is_some())
+    }
+
     /// Width of every plane.
     pub fn width(&self) -> u32 {
         self.planes[0].width
@@ -316,5 +406,52 @@ mod tests {
         assert_eq!(size_error(600, 16), (600, 16));
         // The strict decoder still refuses anything over MAX_SIDE.
         assert!(Exemplar::decode(&png(MAX_SIDE + 1, 20)).is_err());
+    }
+
+    #[test]
+    fn a_feature_mask_turns_with_the_image_and_needs_both_classes() {
+        let (w, h) = (16u32, 20u32);
+        let rgb: Vec<u8> = (0..w * h * 3).map(|i| (i % 251) as u8).collect();
+        let e = Exemplar::from_rgb(w, h, &rgb).unwrap();
+        // A light mask pixel at (3, 1) and at (0, 19) marks the features.
+        let mut mask_rgb = vec![0u8; (w * h * 3) as usize];
+        for (u, v) in [(3u32, 1u32), (0, 19)] {
+            mask_rgb[((v * w + u) * 3) as usize..][..3].copy_from_slice(&[250, 240, 200]);
+        }
+        let image = Exemplar::from_rgb(w, h, &mask_rgb).unwrap();
+        let masked = e.clone().with_mask_image(&image).unwrap();
+        let mask = masked.feature_mask().unwrap();
+        assert_eq!(mask.iter().filter(|&&f| f).count(), 2);
+        assert!(mask[(w + 3) as usize] && mask[(19 * w) as usize]);
+        assert_ne!(masked, e, "the mask is part of the exemplar");
+        assert_eq!(masked.feature_mask_image().unwrap(), {
+            let white: Vec<u8> = mask
+                .iter()
+                .flat_map(|&f| if f { [255; 3] } else { [0; 3] })
+                .collect();
+            Exemplar::from_rgb(w, h, &white).unwrap()
+        });
+        // Turned, the mask follows its pixels: the bottom-left corner comes
+        // to the top left.
+        for degrees in [90, 180, 270] {
+            let turned = masked.rotated(degrees);
+            let want = image.rotated(degrees);
+            let flags: Vec<bool> = want.pixels().iter().map(|p| p[0] > 128).collect();
+            assert_eq!(turned.feature_mask().unwrap(), &flags[..], "{degrees}°");
+            assert_eq!(turned.pixels(), e.rotated(degrees).pixels());
+        }
+        assert!(masked.rotated(90).feature_mask().unwrap()[0]);
+        // One class only, or another size, is refused.
+        let black = Exemplar::from_rgb(w, h, &vec![0u8; (w * h * 3) as usize]).unwrap();
+        assert!(matches!(
+            e.clone().with_mask_image(&black),
+            Err(Error::InvalidRequest(_))
+        ));
+        let white = Exemplar::from_rgb(w, h, &vec![255u8; (w * h * 3) as usize]).unwrap();
+        assert!(e.clone().with_mask_image(&white).is_err());
+        assert!(matches!(
+            e.with_mask_image(&image.rotated(90)),
+            Err(Error::SizeMismatch(_))
+        ));
     }
 }

@@ -6,9 +6,10 @@
 //! is from the nearest feature, so neighbourhoods next to a vein match
 //! only pixels next to a vein, and the vein continues.
 //!
-//! The feature is found automatically: the exemplar's luminance, lightly
-//! blurred, is split in two by Otsu's threshold, and the smaller class is
-//! the feature. The distance is clamped to a radius that grows with the
+//! The feature is the exemplar's feature mask when one was given (drawn by
+//! the user, Zhang et al. Fig. 16). Otherwise it is found automatically:
+//! the exemplar's luminance, lightly blurred, is split in two by Otsu's
+//! threshold, and the smaller class is the feature. The distance is clamped to a radius that grows with the
 //! exemplar and scaled so its spread is `weight` times the luminance's.
 
 use crate::exemplar::Exemplar;
@@ -20,14 +21,10 @@ use crate::exemplar::Exemplar;
 pub fn feature_distance(e: &Exemplar, weight: f32) -> Vec<f32> {
     let (w, h) = (e.width() as usize, e.height() as usize);
     let luma = smoothed_luminance(e);
-    let threshold = otsu(&luma);
-    let above = luma.iter().filter(|&&l| l > threshold).count();
-    // The feature is the smaller class (the darker one on a tie).
-    let dark_feature = above * 2 >= luma.len();
-    let mask: Vec<bool> = luma
-        .iter()
-        .map(|&l| (l > threshold) != dark_feature)
-        .collect();
+    let mask = match e.feature_mask() {
+        Some(given) => given.to_vec(),
+        None => automatic_mask(&luma),
+    };
     let radius = (w.min(h) / 16).max(4);
     let signed = signed_distance(&mask, w, h, radius);
     let spread = |v: &[f32]| {
@@ -41,6 +38,18 @@ pub fn feature_distance(e: &Exemplar, weight: f32) -> Vec<f32> {
     }
     let gain = (weight as f64 * sl / sd) as f32;
     signed.into_iter().map(|s| s * gain).collect()
+}
+
+/// The feature found in the (smoothed) luminance: Otsu's threshold splits
+/// it in two, and the smaller class (the darker one on a tie) is the
+/// feature.
+fn automatic_mask(luma: &[f32]) -> Vec<bool> {
+    let threshold = otsu(luma);
+    let above = luma.iter().filter(|&&l| l > threshold).count();
+    let dark_feature = above * 2 >= luma.len();
+    luma.iter()
+        .map(|&l| (l > threshold) != dark_feature)
+        .collect()
 }
 
 /// Rec. 601 luminance blurred by the 3×3 binomial kernel, so that single
@@ -266,5 +275,40 @@ mod tests {
         // No feature at all: a flat exemplar gets a zero channel.
         let flat = Exemplar::from_rgb(16, 16, &[90u8; 16 * 16 * 3]).unwrap();
         assert!(feature_distance(&flat, 1.0).iter().all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn a_given_mask_is_the_feature_whatever_the_colours() {
+        // The same dark lines, but the mask marks a horizontal band that no
+        // colour shows: the distance follows the mask.
+        let side = 32u32;
+        let rgb: Vec<u8> = (0..side * side)
+            .flat_map(|i| {
+                let l = if i % side % 8 < 2 { 30 } else { 200 };
+                [l, l, l]
+            })
+            .collect();
+        let e = Exemplar::from_rgb(side, side, &rgb).unwrap();
+        let mask: Vec<bool> = (0..side * side)
+            .map(|i| (10..13).contains(&(i / side)))
+            .collect();
+        let masked = e.clone().with_feature_mask(mask).unwrap();
+        let f = feature_distance(&masked, 1.0);
+        let at = |x: u32, y: u32| f[(y * side + x) as usize];
+        // Inside the band positive, outside negative, along every column
+        // alike (the lines do not matter).
+        assert!(at(0, 11) > 0.0 && at(5, 11) > 0.0);
+        assert!(at(0, 20) < 0.0 && at(5, 20) < 0.0);
+        for x in 0..side {
+            assert_eq!(at(x, 20), at(0, 20), "column {x}");
+            assert!(at(x, 14) > at(x, 20), "column {x}");
+        }
+        // Without the mask the lines are the feature, and giving the mask
+        // found automatically changes nothing.
+        let auto = feature_distance(&e, 1.0);
+        assert!(auto[0] > 0.0 && auto[5] < 0.0);
+        let found = automatic_mask(&smoothed_luminance(&e));
+        let given = e.with_feature_mask(found).unwrap();
+        assert_eq!(feature_distance(&given, 1.0), auto);
     }
 }

@@ -3,6 +3,7 @@
 //! synthesis parameters shape the voxels produced from them.
 
 use crate::error::{Error, Result};
+use crate::exemplar::ExemplarSet;
 use crate::field::Field;
 use serde::{Deserialize, Serialize};
 
@@ -67,6 +68,21 @@ fn is_zero(v: &f32) -> bool {
 }
 
 impl AnalysisParams {
+    /// [`AnalysisParams::validate`], and that the parameters can use what
+    /// `exemplars` bring: a feature mask needs the feature-distance channel
+    /// (`feature_weight` above 0), which is the only thing that reads it.
+    pub fn validate_for(&self, exemplars: &ExemplarSet) -> Result<()> {
+        self.validate()?;
+        if exemplars.has_feature_mask() && self.feature_weight <= 0.0 {
+            return Err(Error::InvalidRequest(
+                "a feature mask is only used by the feature-distance channel: \
+                 give feature_weight above 0 with it"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
         range("neighbourhood", self.neighbourhood, 3, 9)?;

@@ -154,6 +154,7 @@ impl Entry {
                 width,
                 height,
                 planes: planes_n,
+                feature_masks: spec.planes.feature_masks(),
             },
             params: spec.params,
             layout,

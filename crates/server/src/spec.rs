@@ -300,6 +300,14 @@ impl Planes {
         }
     }
 
+    /// How many of the images have a feature mask.
+    pub fn feature_masks(&self) -> u32 {
+        self.named()
+            .iter()
+            .filter(|(_, e)| e.feature_mask().is_some())
+            .count() as u32
+    }
+
     /// Width and height of every plane.
     pub fn size(&self) -> (u32, u32) {
         let e = self.named()[0].1;
@@ -317,8 +325,9 @@ pub struct TextureSpec {
 }
 
 impl TextureSpec {
-    /// The content hash: SHA-256 over a version tag, the pixels of the xy,
-    /// yz and zx exemplars (a single exemplar counts for all three) and the
+    /// The content hash: SHA-256 over a version tag, the pixels (and
+    /// feature masks, where given) of the xy, yz and zx exemplars (a single
+    /// exemplar counts for all three) and the
     /// canonical JSON of the complete parameters; 32 hex digits.
     pub fn content_hash(&self) -> String {
         let mut h = Sha256::new();
@@ -355,9 +364,12 @@ impl TextureSpec {
 
     /// How the exemplars are laid on the planes (what the precompute will
     /// use): refused when the orientation asks a quarter turn of a
-    /// non-square exemplar.
+    /// non-square exemplar, or when the analysis parameters cannot use
+    /// the exemplars (a feature mask without the feature-distance channel).
     pub fn layout(&self) -> solidtex_core::Result<Layout> {
-        Layout::resolve(&self.planes.to_set()?, &self.params.analysis.orientation)
+        let set = self.planes.to_set()?;
+        self.params.analysis.validate_for(&set)?;
+        Layout::resolve(&set, &self.params.analysis.orientation)
     }
 
     fn hash_planes(&self, h: &mut Sha256) {
@@ -370,6 +382,12 @@ impl TextureSpec {
             h.update(e.height().to_le_bytes());
             for p in e.pixels() {
                 h.update(p);
+            }
+            // Only a masked plane hashes more, so ids of textures without
+            // masks stay as they were.
+            if let Some(mask) = e.feature_mask() {
+                h.update(b"feature mask\0");
+                h.update(mask.iter().map(|&f| f as u8).collect::<Vec<u8>>());
             }
         }
     }
@@ -427,6 +445,14 @@ pub struct ExemplarInfo {
     pub height: u32,
     /// 1 (one image for all planes) or 3.
     pub planes: u32,
+    /// How many of the images came with a feature mask (not written when
+    /// none did, so metadata stored before masks reads the same).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub feature_masks: u32,
+}
+
+fn is_zero(n: &u32) -> bool {
+    *n == 0
 }
 
 #[cfg(test)]

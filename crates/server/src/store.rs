@@ -41,12 +41,16 @@ const DELETING_SUFFIX: &str = ".deleting.tmp";
 pub const LOCK_FILE: &str = "solidtex.lock";
 /// The files the server writes in a texture directory (besides their
 /// temporaries): only these are ever removed.
-const WRITTEN: [&str; 6] = [
+const WRITTEN: [&str; 10] = [
     "meta.json",
     "exemplar.png",
     "xy.png",
     "yz.png",
     "zx.png",
+    "exemplar.mask.png",
+    "xy.mask.png",
+    "yz.mask.png",
+    "zx.mask.png",
     "candidates.stx",
 ];
 
@@ -190,9 +194,14 @@ impl Store {
         }
         fs::create_dir_all(&dir)?;
         for (name, e) in planes.named() {
-            let png = solidtex_core::png::encode(e.width(), e.height(), &e.to_rgb_bytes())
-                .map_err(io::Error::other)?;
-            write_atomic(&dir.join(format!("{name}.png")), &png)?;
+            let png = |e: &Exemplar| {
+                solidtex_core::png::encode(e.width(), e.height(), &e.to_rgb_bytes())
+                    .map_err(io::Error::other)
+            };
+            write_atomic(&dir.join(format!("{name}.png")), &png(e)?)?;
+            if let Some(mask) = e.feature_mask_image() {
+                write_atomic(&dir.join(format!("{name}.mask.png")), &png(&mask)?)?;
+            }
         }
         self.write_meta(meta)?;
         sync_dir(&self.root.join("textures"))
@@ -219,10 +228,19 @@ impl Store {
         fs::read(self.dir(id).join("candidates.stx"))
     }
 
-    /// Reads a texture's exemplars back.
+    /// Reads a texture's exemplars back, each with its feature mask if
+    /// one was stored.
     pub fn read_planes(&self, meta: &StoredMeta) -> solidtex_core::Result<Planes> {
         let dir = self.dir(&meta.id);
-        let open = |n: &str| Exemplar::open(dir.join(format!("{n}.png")));
+        let open = |n: &str| {
+            let e = Exemplar::open(dir.join(format!("{n}.png")))?;
+            let mask = dir.join(format!("{n}.mask.png"));
+            if mask.exists() {
+                e.with_mask_image(&Exemplar::open(mask)?)
+            } else {
+                Ok(e)
+            }
+        };
         if meta.exemplar.planes == 1 {
             Ok(Planes::Single(open("exemplar")?))
         } else {
@@ -425,6 +443,7 @@ mod tests {
                 width: 16,
                 height: 16,
                 planes: 1,
+                feature_masks: 0,
             },
             params: Map::new(),
             status,

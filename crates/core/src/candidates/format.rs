@@ -5,7 +5,8 @@
 //! Version 1 files, written before the layout, are read with every plane
 //! as given. Versions 1 and 2 also stored per level the joint PCA of a
 //! triple's three appearance vectors, which only the colour correction
-//! read; it is skipped. Derived data
+//! read; it is skipped. Since version 4 each exemplar is followed by its
+//! feature mask, if it has one. Derived data
 //! (stacks, appearance vectors, quantised neighbourhoods) is recomputed on
 //! load, deterministically. Every read is bounds-checked: a truncated or
 //! corrupt file is an error, never a panic or a wrong result.
@@ -18,7 +19,7 @@ use crate::orientation::{Grain, Layout};
 use crate::params::{AnalysisParams, Arrangement, Orientation};
 
 const MAGIC: &[u8; 8] = b"SOLIDTEX";
-const VERSION: u32 = 3;
+const VERSION: u32 = 4;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 struct Writer(Vec<u8>);
@@ -141,7 +142,17 @@ fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
     w.u32(c.dims.w);
     w.u32(c.dims.h);
     for p in 0..if single { 1 } else { 3 } {
-        w.0.extend_from_slice(&c.exemplars.plane(p).to_rgb_bytes());
+        let e = c.exemplars.plane(p);
+        w.0.extend_from_slice(&e.to_rgb_bytes());
+        if version >= 4 {
+            match e.feature_mask() {
+                Some(mask) => {
+                    w.u8(1);
+                    w.0.extend(mask.iter().map(|&f| f as u8));
+                }
+                None => w.u8(0),
+            }
+        }
     }
     let layout = &c.layout;
     if version >= 2 {
@@ -254,8 +265,29 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
             .checked_mul(height as usize)
             .and_then(|n| n.checked_mul(3))
             .ok_or_else(|| invalid("size"))?;
-        let e =
+        let mut e =
             Exemplar::from_rgb(width, height, r.take(n)?).map_err(|e| invalid(&e.to_string()))?;
+        if version >= 4 {
+            let masked = match r.u8()? {
+                0 => false,
+                1 => true,
+                _ => return Err(invalid("feature mask flag")),
+            };
+            if masked {
+                let mask = r
+                    .take(n / 3)?
+                    .iter()
+                    .map(|&b| match b {
+                        0 => Ok(false),
+                        1 => Ok(true),
+                        _ => Err(invalid("feature mask")),
+                    })
+                    .collect::<Result<Vec<bool>>>()?;
+                e = e
+                    .with_feature_mask(mask)
+                    .map_err(|e| invalid(&e.to_string()))?;
+            }
+        }
         exemplars.push(e);
     }
     let set = if single {
@@ -440,17 +472,22 @@ mod tests {
         out
     }
 
-    /// Where the layout record starts in the payload of `c`'s file.
+    /// Where the layout record starts in the payload of `c`'s file (its
+    /// exemplars without feature masks).
     fn layout_at(c: &Candidates, payload: &[u8]) -> usize {
         let json = u32::from_le_bytes(payload[..4].try_into().unwrap()) as usize;
         let planes = if c.exemplars.is_single() { 1 } else { 3 };
-        4 + json + 1 + 8 + planes * c.dims.len() * 3
+        4 + json + 1 + 8 + planes * (c.dims.len() * 3 + 1)
     }
 
     #[test]
     fn files_of_earlier_versions_load() {
         let c = compute(grain(16), Orientation::None);
         let now = encode(&c);
+        // Version 3: no feature-mask flags.
+        let v3 = encode_version(&c, 3);
+        assert_eq!(v3.len() + 1, now.len());
+        assert_eq!(encode(&decode(&v3).unwrap()), now);
         // Version 2: a joint PCA per level besides, which is skipped.
         let v2 = encode_version(&c, 2);
         assert!(v2.len() > now.len());
@@ -507,6 +544,51 @@ mod tests {
             plain.level(0).appearance[0].vectors,
             c.level(0).appearance[0].vectors
         );
+    }
+
+    #[test]
+    fn a_feature_mask_round_trips_and_changes_the_candidates() {
+        let params = AnalysisParams {
+            levels: 2,
+            feature_weight: 1.0,
+            ..AnalysisParams::default()
+        };
+        let e = grain(32);
+        // A mask that no colour threshold would find: a diagonal band.
+        let mask: Vec<bool> = (0..32 * 32).map(|i| (i % 32 + i / 32) % 16 < 3).collect();
+        let masked = e.clone().with_feature_mask(mask.clone()).unwrap();
+        let c = Candidates::compute(&ExemplarSet::single(masked), &params, &|_, _| {}).unwrap();
+        let bytes = encode(&c);
+        let back = decode(&bytes).unwrap();
+        assert_eq!(back.exemplars().plane(0).feature_mask(), Some(&mask[..]));
+        assert_eq!(back.level(0).appearance, c.level(0).appearance);
+        assert_eq!(encode(&back), bytes);
+        let auto = Candidates::compute(&ExemplarSet::single(e), &params, &|_, _| {}).unwrap();
+        assert_ne!(
+            auto.level(0).appearance[0].vectors,
+            c.level(0).appearance[0].vectors
+        );
+        // A mask flag other than 0 or 1 is a corrupt file.
+        let mut payload = bytes[HEADER..].to_vec();
+        // Right after the pixels, where an unmasked file's layout would
+        // start less its one flag byte.
+        let flag = layout_at(&c, &payload) - 1;
+        assert_eq!(payload[flag], 1);
+        payload[flag] = 2;
+        assert!(matches!(
+            decode(&with_header(VERSION, &payload)),
+            Err(Error::CorruptFile(CorruptKind::Invalid(_)))
+        ));
+        // Without the channel nothing would read the mask: refused.
+        let plain = AnalysisParams {
+            feature_weight: 0.0,
+            ..params
+        };
+        let masked = grain(32).with_feature_mask(mask).unwrap();
+        assert!(matches!(
+            Candidates::compute(&ExemplarSet::single(masked), &plain, &|_, _| {}),
+            Err(Error::InvalidRequest(_))
+        ));
     }
 
     #[test]

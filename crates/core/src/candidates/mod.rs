@@ -248,7 +248,7 @@ impl Candidates {
         params: &AnalysisParams,
         progress: &(dyn Fn(Stage, f32) + Sync),
     ) -> Result<Candidates> {
-        params.validate()?;
+        params.validate_for(exemplars)?;
         let layout = Layout::resolve(exemplars, &params.orientation)?;
         let given = exemplars;
         // Turned planes differ from each other: the search takes the

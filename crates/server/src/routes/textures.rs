@@ -117,10 +117,11 @@ pub async fn remove(
     Ok(StatusCode::NO_CONTENT)
 }
 
-/// Exemplar images as uploaded, before decoding.
+/// Exemplar images as uploaded, before decoding, each with its feature
+/// mask image if one was sent.
 enum RawPlanes {
-    Single(Bytes),
-    Triple([Bytes; 3]),
+    Single(Bytes, Option<Bytes>),
+    Triple([Bytes; 3], [Option<Bytes>; 3]),
 }
 
 /// Longest texture name kept, in characters.
@@ -141,8 +142,9 @@ fn display_name(raw: &str) -> Option<String> {
 }
 
 /// `POST /v1/textures`: a PNG body, or multipart `xy`/`yz`/`zx` (or one
-/// `image`) with optional JSON `params`; parameters may also be given in
-/// the query string.
+/// `image`) with optional JSON `params` and optional feature masks
+/// (`feature_mask` with `image`, `feature_mask_xy` … with the planes);
+/// parameters may also be given in the query string.
 pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response, ApiError> {
     let query = Query::parse(req.uri().query())?;
     // `name` labels the texture; it is not a parameter and not in the id.
@@ -162,7 +164,7 @@ pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response,
         .to_ascii_lowercase();
     let limit = s.max_upload_bytes;
     let raw = match essence.as_str() {
-        "image/png" | "image/jpeg" => RawPlanes::Single(read_body(req, limit).await?),
+        "image/png" | "image/jpeg" => RawPlanes::Single(read_body(req, limit).await?, None),
         "multipart/form-data" => read_multipart(req, &mut flat, &mut name).await?,
         "" => {
             return Err(unsupported(
@@ -261,6 +263,7 @@ async fn read_multipart(
         )
     })?;
     let (mut single, mut xy, mut yz, mut zx) = (None, None, None, None);
+    let mut masks: [Option<Bytes>; 4] = Default::default();
     let mut params_given = false;
     while let Some(field) = mp.next_field().await.map_err(multipart_error)? {
         let name = field.name().unwrap_or("").to_string();
@@ -273,6 +276,10 @@ async fn read_multipart(
             "xy" => &mut xy,
             "yz" => &mut yz,
             "zx" => &mut zx,
+            "feature_mask" => &mut masks[0],
+            "feature_mask_xy" => &mut masks[1],
+            "feature_mask_yz" => &mut masks[2],
+            "feature_mask_zx" => &mut masks[3],
             "params" => {
                 if std::mem::replace(&mut params_given, true) {
                     return Err(ApiError::new(
@@ -305,7 +312,8 @@ async fn read_multipart(
                     StatusCode::BAD_REQUEST,
                     "invalid_request",
                     format!(
-                        "unknown form field `{other}` (expected xy, yz, zx or image, and params)"
+                        "unknown form field `{other}` (expected xy, yz, zx or image, \
+                         their feature masks, and params)"
                     ),
                 ));
             }
@@ -318,9 +326,31 @@ async fn read_multipart(
             ));
         }
     }
+    let [mask, mask_xy, mask_yz, mask_zx] = masks;
+    let misplaced = |field: &str, with: &str| {
+        Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "invalid_request",
+            format!("form field `{field}` goes with {with}"),
+        ))
+    };
     match (single, xy, yz, zx) {
-        (Some(one), None, None, None) => Ok(RawPlanes::Single(one)),
-        (None, Some(a), Some(b), Some(c)) => Ok(RawPlanes::Triple([a, b, c])),
+        (Some(_), None, None, None)
+            if mask_xy.is_some() || mask_yz.is_some() || mask_zx.is_some() =>
+        {
+            misplaced(
+                "feature_mask_xy/_yz/_zx",
+                "xy, yz and zx (with image, send feature_mask)",
+            )
+        }
+        (None, Some(_), Some(_), Some(_)) if mask.is_some() => misplaced(
+            "feature_mask",
+            "image (with xy, yz and zx, send feature_mask_xy, _yz, _zx)",
+        ),
+        (Some(one), None, None, None) => Ok(RawPlanes::Single(one, mask)),
+        (None, Some(a), Some(b), Some(c)) => {
+            Ok(RawPlanes::Triple([a, b, c], [mask_xy, mask_yz, mask_zx]))
+        }
         (None, None, None, None) => Err(ApiError::new(
             StatusCode::BAD_REQUEST,
             "missing_exemplar",
@@ -360,15 +390,40 @@ fn decode_one(name: &str, bytes: &[u8], notes: &mut Vec<String>) -> Result<Exemp
     Ok(e)
 }
 
+/// Decodes one uploaded image and its feature mask, if one was sent (the
+/// mask is downscaled like the image, then split at half brightness).
+fn decode_masked(
+    name: &str,
+    bytes: &[u8],
+    mask: Option<&[u8]>,
+    notes: &mut Vec<String>,
+) -> Result<Exemplar, ApiError> {
+    let e = decode_one(name, bytes, notes)?;
+    let Some(mask) = mask else { return Ok(e) };
+    let field = if name == "image" {
+        "feature_mask".to_string()
+    } else {
+        format!("feature_mask_{name}")
+    };
+    let image = decode_one(&field, mask, &mut Vec::new())?;
+    e.with_mask_image(&image).map_err(|e| {
+        let mut a = ApiError::from(e);
+        a.message = format!("{field}: {}", a.message);
+        a
+    })
+}
+
 fn decode(raw: RawPlanes, params: TextureParams) -> Result<(TextureSpec, Vec<String>), ApiError> {
     let mut notes = Vec::new();
     let planes = match raw {
-        RawPlanes::Single(b) => Planes::Single(decode_one("image", &b, &mut notes)?),
-        RawPlanes::Triple([a, b, c]) => {
+        RawPlanes::Single(b, mask) => {
+            Planes::Single(decode_masked("image", &b, mask.as_deref(), &mut notes)?)
+        }
+        RawPlanes::Triple([a, b, c], [ma, mb, mc]) => {
             let t = [
-                decode_one("xy", &a, &mut notes)?,
-                decode_one("yz", &b, &mut notes)?,
-                decode_one("zx", &c, &mut notes)?,
+                decode_masked("xy", &a, ma.as_deref(), &mut notes)?,
+                decode_masked("yz", &b, mb.as_deref(), &mut notes)?,
+                decode_masked("zx", &c, mc.as_deref(), &mut notes)?,
             ];
             let p = Planes::Triple(Box::new(t));
             p.to_set()?;

@@ -375,6 +375,14 @@ async function upload(file) {
   // whatever client uploads it.
   const form = new FormData();
   form.append("image", file, file.name || "exemplar.png");
+  const mask = $("p-feature-mask").files[0];
+  if (mask) {
+    if (!(params.feature_weight > 0)) {
+      say("a feature mask needs a feature weight above 0", true);
+      return;
+    }
+    form.append("feature_mask", mask, mask.name || "mask.png");
+  }
   if (Object.keys(params).length) form.append("params", JSON.stringify(params));
   say(`uploading ${file.name}…`);
   let res;
