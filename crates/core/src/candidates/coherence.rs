@@ -51,7 +51,7 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
                     if j == p {
                         continue;
                     }
-                    *o = l.iter().map(|s| snap(dims, s.triple[j], h)).collect();
+                    *o = l.iter().map(|s| dims.snap(s.triple[j], h as u32)).collect();
                     o.sort_unstable();
                     o.dedup();
                 }
@@ -105,20 +105,8 @@ fn coherent(
             let (ju, jv) = project(j, d);
             let want = dims.shift(t[j], ju * h, jv * h);
             coords[neighbour as usize][j]
-                .binary_search(&snap(dims, want, h))
+                .binary_search(&dims.snap(want, h as u32))
                 .is_ok()
         })
     })
-}
-
-/// A coordinate rounded to the level's sampling grid (multiples of h):
-/// at spacing h, coordinates closer than h/2 sample the same content, so
-/// continuity is tested at that resolution.
-fn snap(dims: Dims, c: u32, h: i64) -> u32 {
-    if h == 1 {
-        return c;
-    }
-    let (x, y) = dims.xy(c);
-    let round = |v: i64| (v + h / 2).div_euclid(h) * h;
-    dims.index(round(x), round(y))
 }

@@ -40,9 +40,38 @@ impl Dims {
     /// Column of pixel `c`.
     #[inline(always)]
     fn column(self, c: u32) -> u32 {
+        self.column_row(c).0
+    }
+
+    /// Column and row of pixel `c`, without a division.
+    #[inline(always)]
+    fn column_row(self, c: u32) -> (u32, u32) {
         debug_assert!(c < 1 << 20);
         let q = ((c as u64 * self.recip) >> RECIP_SHIFT) as u32;
-        c - q * self.w
+        (c - q * self.w, q)
+    }
+
+    /// Pixel `c` moved to the nearest point of the grid of multiples of
+    /// `h` (a power of two) in each coordinate, halves rounding up,
+    /// wrapping: at spacing h, coordinates closer than h/2 sample the same
+    /// content. No division: the coherence filter calls it for every
+    /// candidate it tests.
+    #[inline]
+    pub fn snap(self, c: u32, h: u32) -> u32 {
+        debug_assert!(h.is_power_of_two());
+        if h == 1 {
+            return c;
+        }
+        let (x, y) = self.column_row(c);
+        let shift = h.trailing_zeros();
+        let round = |v: u32, n: u32| {
+            let mut r = ((v + h / 2) >> shift) << shift;
+            while r >= n {
+                r -= n;
+            }
+            r
+        };
+        round(y, self.h) * self.w + round(x, self.w)
     }
 
     /// Number of pixels.
@@ -132,6 +161,24 @@ mod tests {
                 for x in [0, 1, w / 2, w - 1].into_iter().filter(|&x| x < w) {
                     let c = y * w + x;
                     assert_eq!(dims.column(c), x, "w {w}, pixel {c}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn snapping_rounds_each_coordinate_to_the_grid_and_wraps() {
+        for (w, h) in [(16, 16), (17, 23), (100, 100), (128, 96), (13, 40)] {
+            let dims = Dims::new(w, h);
+            for step in [1, 2, 4, 8, 16, 32] {
+                for c in 0..dims.len() as u32 {
+                    let (x, y) = dims.xy(c);
+                    let round = |v: i64| (v + step / 2).div_euclid(step) * step;
+                    assert_eq!(
+                        dims.snap(c, step as u32),
+                        dims.index(round(x), round(y)),
+                        "{w}×{h}, spacing {step}, pixel {c}"
+                    );
                 }
             }
         }
