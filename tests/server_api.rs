@@ -537,12 +537,7 @@ async fn multipart_uploads() {
     let dir = tempfile::tempdir().unwrap();
     let s = TestServer::start(test_args(dir.path())).await;
     let c = client();
-    let part = |b: Vec<u8>| {
-        reqwest::multipart::Part::bytes(b)
-            .file_name("e.png")
-            .mime_str("image/png")
-            .unwrap()
-    };
+    let part = png_part;
 
     let form = reqwest::multipart::Form::new()
         .part("xy", part(exemplar_png(32, 1)))
@@ -1475,12 +1470,7 @@ async fn feature_masks_make_their_own_texture_and_survive_a_restart() {
     let dir = tempfile::tempdir().unwrap();
     let s = TestServer::start(test_args(dir.path())).await;
     let c = client();
-    let part = |b: Vec<u8>| {
-        reqwest::multipart::Part::bytes(b)
-            .file_name("e.png")
-            .mime_str("image/png")
-            .unwrap()
-    };
+    let part = png_part;
     let params = r#"{"levels": 3, "feature_weight": 1}"#;
     let form = reqwest::multipart::Form::new()
         .part("image", part(exemplar_png(32, 7)))
@@ -1524,58 +1514,48 @@ async fn feature_masks_make_their_own_texture_and_survive_a_restart() {
         0.0
     );
 
-    // Masks that cannot be used.
-    let cases: Vec<(reqwest::multipart::Form, &str)> = vec![
+    // Masks that cannot be used, beside the one image: (field, mask,
+    // whether the channel is on, the error).
+    let black = solidtex_core::png::encode(32, 32, &[0u8; 32 * 32 * 3]).unwrap();
+    let cases: Vec<(&str, Vec<u8>, bool, &str)> = vec![
         // Without the feature-distance channel nothing reads it.
-        (
-            reqwest::multipart::Form::new()
-                .part("image", part(exemplar_png(32, 7)))
-                .part("feature_mask", part(mask_png(32))),
-            "invalid_request",
-        ),
-        (
-            reqwest::multipart::Form::new()
-                .part("image", part(exemplar_png(32, 7)))
-                .part("feature_mask", part(mask_png(16)))
-                .text("params", params),
-            "size_mismatch",
-        ),
+        ("feature_mask", mask_png(32), false, "invalid_request"),
+        ("feature_mask", mask_png(16), true, "size_mismatch"),
         // All dark: no feature at all.
+        ("feature_mask", black, true, "invalid_request"),
+        ("feature_mask_xy", mask_png(32), true, "invalid_request"),
         (
-            reqwest::multipart::Form::new()
-                .part("image", part(exemplar_png(32, 7)))
-                .part(
-                    "feature_mask",
-                    part(solidtex_core::png::encode(32, 32, &[0u8; 32 * 32 * 3]).unwrap()),
-                )
-                .text("params", params),
-            "invalid_request",
-        ),
-        (
-            reqwest::multipart::Form::new()
-                .part("image", part(exemplar_png(32, 7)))
-                .part("feature_mask_xy", part(mask_png(32)))
-                .text("params", params),
-            "invalid_request",
-        ),
-        (
-            reqwest::multipart::Form::new()
-                .part("xy", part(exemplar_png(32, 1)))
-                .part("yz", part(exemplar_png(32, 2)))
-                .part("zx", part(exemplar_png(32, 3)))
-                .part("feature_mask", part(mask_png(32)))
-                .text("params", params),
-            "invalid_request",
-        ),
-        (
-            reqwest::multipart::Form::new()
-                .part("image", part(exemplar_png(32, 7)))
-                .part("feature_mask", part(b"not a png".to_vec()))
-                .text("params", params),
+            "feature_mask",
+            b"not a png".to_vec(),
+            true,
             "malformed_image",
         ),
     ];
-    for (form, code) in cases {
+    let mut forms: Vec<(reqwest::multipart::Form, &str)> = cases
+        .into_iter()
+        .map(|(field, mask, channel, code)| {
+            let form = reqwest::multipart::Form::new()
+                .part("image", part(exemplar_png(32, 7)))
+                .part(field, part(mask));
+            let form = if channel {
+                form.text("params", params)
+            } else {
+                form
+            };
+            (form, code)
+        })
+        .collect();
+    // The single image's mask field beside three planes.
+    forms.push((
+        reqwest::multipart::Form::new()
+            .part("xy", part(exemplar_png(32, 1)))
+            .part("yz", part(exemplar_png(32, 2)))
+            .part("zx", part(exemplar_png(32, 3)))
+            .part("feature_mask", part(mask_png(32)))
+            .text("params", params),
+        "invalid_request",
+    ));
+    for (form, code) in forms {
         let (st, h, b) = post_form(&c, &s.url("/v1/textures"), form).await;
         assert_error(st, &h, &b, 400, code);
     }

@@ -157,15 +157,9 @@ async fn parameters_given_twice_are_refused() {
     assert_eq!(st, 400, "{v}");
     assert_eq!(v["error"]["code"], "invalid_parameter");
 
-    let part = || {
-        reqwest::multipart::Part::bytes(exemplar_png(32, 6))
-            .file_name("e.png")
-            .mime_str("image/png")
-            .unwrap()
-    };
     let form = |params: &[&str]| {
         params.iter().fold(
-            reqwest::multipart::Form::new().part("image", part()),
+            reqwest::multipart::Form::new().part("image", png_part(exemplar_png(32, 6))),
             |f, p| f.text("params", p.to_string()),
         )
     };

@@ -101,6 +101,14 @@ pub async fn upload(
     (status, r.json().await.unwrap())
 }
 
+/// A multipart form part holding PNG bytes, as a browser sends a file.
+pub fn png_part(bytes: Vec<u8>) -> reqwest::multipart::Part {
+    reqwest::multipart::Part::bytes(bytes)
+        .file_name("e.png")
+        .mime_str("image/png")
+        .unwrap()
+}
+
 /// Uploads a multipart form; returns (status, body).
 pub async fn upload_form(
     c: &reqwest::Client,
