@@ -1570,4 +1570,19 @@ async fn feature_masks_make_their_own_texture_and_survive_a_restart() {
     assert_eq!(status, 202, "{v}");
     assert_eq!(v["exemplar"]["feature_masks"], 1);
     s.stop().await;
+
+    // A stored mask that went missing makes the pixels disagree with the
+    // id: the texture is not served rather than served without its mask.
+    let mask = dir
+        .path()
+        .join("textures")
+        .join(&id)
+        .join("exemplar.mask.png");
+    std::fs::remove_file(&mask).unwrap();
+    let s = TestServer::start(test_args(dir.path())).await;
+    let (st, _, _) = get(&c, &s.url(&format!("/v1/textures/{id}"))).await;
+    assert_eq!(st, 404);
+    let (st, _, _) = get(&c, &s.url(&format!("/v1/textures/{plain_id}"))).await;
+    assert_eq!(st, 200);
+    s.stop().await;
 }
