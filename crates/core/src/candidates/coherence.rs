@@ -58,18 +58,17 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
                 out
             })
             .collect();
-        let next: Vec<Vec<Scored>> = lists
-            .par_iter()
+        // The test reads `coords`, taken before any removal, so filtering
+        // in place is still simultaneous.
+        let changed = lists
+            .par_iter_mut()
             .enumerate()
             .map(|(c, l)| {
-                l.iter()
-                    .copied()
-                    .filter(|s| coherent(p, s.triple, c as u32, &coords, &steps, dims, h))
-                    .collect()
+                let before = l.len();
+                l.retain(|s| coherent(p, s.triple, c as u32, &coords, &steps, dims, h));
+                l.len() != before
             })
-            .collect();
-        let changed = next.iter().zip(&lists).any(|(n, l)| n.len() != l.len());
-        lists = next;
+            .reduce(|| false, |a, b| a || b);
         if !changed {
             break;
         }
