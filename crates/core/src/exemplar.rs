@@ -96,7 +96,7 @@ impl Exemplar {
         let mask = image
             .pixels
             .iter()
-            .map(|&[r, g, b]| 299 * r as u32 + 587 * g as u32 + 114 * b as u32 >= 128_000)
+            .map(|&p| luminance(p) >= 128.0)
             .collect();
         self.with_feature_mask(mask)
     }
@@ -220,6 +220,11 @@ impl Exemplar {
     pub fn to_rgb_bytes(&self) -> Vec<u8> {
         self.pixels.iter().flatten().copied().collect()
     }
+}
+
+/// Rec. 601 luminance of an RGB8 pixel.
+pub(crate) fn luminance(p: [u8; 3]) -> f64 {
+    0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64
 }
 
 /// The `w`×`h` row-major image `image` turned clockwise by `quarters`

@@ -9,8 +9,9 @@
 //! The feature is the exemplar's feature mask when one was given (drawn by
 //! the user, Zhang et al. Fig. 16). Otherwise it is found automatically:
 //! the exemplar's luminance, lightly blurred, is split in two by Otsu's
-//! threshold, and the smaller class is the feature. The distance is clamped to a radius that grows with the
-//! exemplar and scaled so its spread is `weight` times the luminance's.
+//! threshold, and the smaller class is the feature. The distance is
+//! clamped to a radius that grows with the exemplar and scaled so its
+//! spread is `weight` times the luminance's.
 
 use crate::exemplar::Exemplar;
 

@@ -29,7 +29,7 @@
 //! wrap-around.
 
 use crate::error::{Error, Result};
-use crate::exemplar::{Exemplar, ExemplarSet};
+use crate::exemplar::{Exemplar, ExemplarSet, luminance};
 use crate::params::{Arrangement, Orientation};
 
 /// Coherence from which an exemplar counts as strongly oriented: between
@@ -124,11 +124,6 @@ impl Grain {
             None
         }
     }
-}
-
-/// Rec. 601 luminance of an RGB8 pixel.
-pub(crate) fn luminance(p: [u8; 3]) -> f64 {
-    0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64
 }
 
 /// The arrangement a texture's candidates are computed with, and what was

@@ -59,7 +59,8 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
             })
             .collect();
         // The test reads `coords`, taken before any removal, so filtering
-        // in place is still simultaneous.
+        // in place is still simultaneous. Every list must be filtered: a
+        // reduction, not a short-circuiting `any`.
         let changed = lists
             .par_iter_mut()
             .enumerate()

@@ -66,7 +66,7 @@ impl Luma {
         let n = image.pixel_count();
         let v = image.rgb[..n * 3]
             .chunks_exact(3)
-            .map(|c| 0.299 * c[0] as f64 + 0.587 * c[1] as f64 + 0.114 * c[2] as f64)
+            .map(|c| crate::exemplar::luminance([c[0], c[1], c[2]]))
             .collect();
         Luma {
             w: image.width as i64,
