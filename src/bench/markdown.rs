@@ -79,8 +79,14 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
     let d = solidtex_core::SynthParams::default();
     let _ = writeln!(
         w,
-        "| synthesis exemplar | {} ({} levels; otherwise default parameters: {} passes, {} at the {} finest levels, dual grid M = {}) |\n",
-        r.synthesis_exemplar, r.levels, d.passes, d.finest_passes, d.fine_levels, d.grid
+        "| synthesis exemplar | {} ({} levels; otherwise default parameters: {} passes, {} at the {}, parity subpasses at the {}, dual grid M = {}) |\n",
+        r.synthesis_exemplar,
+        r.levels,
+        d.passes,
+        d.finest_passes,
+        finest(d.fine_levels),
+        finest(d.parity_levels),
+        d.grid
     );
     let _ = writeln!(
         w,
@@ -189,4 +195,12 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         let _ = write!(w, "{}", super::service::table(&r.load));
     }
     out
+}
+
+/// "finest level" or "N finest levels".
+fn finest(n: u32) -> String {
+    match n {
+        1 => "finest level".to_string(),
+        n => format!("{n} finest levels"),
+    }
 }

@@ -385,6 +385,7 @@ fn full_slice_chain(
         SynthParams {
             scheme,
             finest_passes: 2,
+            parity_levels: 0,
             grid,
             ..SynthParams::default()
         },

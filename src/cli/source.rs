@@ -55,7 +55,13 @@ pub struct SynthArgs {
     /// Jitter strength (0 disables).
     #[arg(long, default_value_t = SynthParams::default().jitter)]
     jitter: f32,
-    /// Subpass block side s (s³ subpasses per pass; 1 disables subpasses).
+    /// Levels, counted from the finest, whose passes run as two parity
+    /// subpasses (even coordinate sums, then odd: short chains) instead
+    /// of s³ block subpasses.
+    #[arg(long, default_value_t = SynthParams::default().parity_levels)]
+    parity_levels: u32,
+    /// Subpass block side s of block subpasses (s³ subpasses per pass; 1
+    /// disables subpasses there).
     #[arg(long, default_value_t = SynthParams::default().subpass_side)]
     subpass_side: u32,
     /// Gain on correction queries around their mean colour (1 disables).
@@ -108,6 +114,7 @@ impl SynthArgs {
             scheme,
             grid: self.grid,
             jitter: self.jitter,
+            parity_levels: self.parity_levels,
             subpass_side: self.subpass_side,
             contrast: self.contrast,
             consistency: self.consistency,

@@ -153,6 +153,7 @@ async fn data_directories_of_the_first_layout_are_kept_but_not_served() {
         "finest_passes",
         "slab_thickness",
         "slab_tiling",
+        "parity_levels",
     ] {
         params.remove(k).unwrap();
     }

@@ -400,7 +400,21 @@ pub struct SynthParams {
     /// level 0. One pass at level 1 too makes cold slices much faster for
     /// a little patch coherence (docs/quality.md).
     pub fine_levels: u32,
-    /// Subpass block side s: s³ subpasses per pass (2 gives 8).
+    /// How many levels, counted from the finest, correct a pass in two
+    /// parity subpasses: the voxels whose coordinates sum to an even
+    /// number, then the odd ones, which read their six face neighbours
+    /// new. The other levels use s³ block subpasses (voxels congruent
+    /// modulo [`SynthParams::subpass_side`]), where a voxel reads half of
+    /// its neighbours new. Within a pass a voxel's chain steps back
+    /// through the earlier subpasses: once with parity, so a cold slice
+    /// needs its own plane and half of each plane beside it; up to five
+    /// planes of the level with blocks. The finest level's chains are the
+    /// largest part of a cold slice, and it changes the least; the coarser
+    /// levels, which lay out the structure, converge better with blocks
+    /// (docs/quality.md).
+    pub parity_levels: u32,
+    /// Subpass block side s of the block subpasses: s³ subpasses per pass
+    /// (2 gives 8).
     pub subpass_side: u32,
     /// Correction scheme.
     pub scheme: Scheme,
@@ -455,6 +469,10 @@ pub struct SynthParams {
 /// (docs/quality.md).
 pub const DEFAULT_FINE_LEVELS: u32 = 2;
 
+/// Default [`SynthParams::parity_levels`], measured on the shared
+/// exemplars (docs/quality.md).
+pub const DEFAULT_PARITY_LEVELS: u32 = 1;
+
 /// Default [`SynthParams::slab_thickness`], measured on the shared
 /// exemplars (docs/quality.md).
 pub const DEFAULT_SLAB_THICKNESS: u32 = 1;
@@ -470,6 +488,7 @@ impl Default for SynthParams {
             passes: 2,
             finest_passes: 1,
             fine_levels: DEFAULT_FINE_LEVELS,
+            parity_levels: DEFAULT_PARITY_LEVELS,
             subpass_side: 2,
             scheme: Scheme::DualGrid,
             grid: 12,
@@ -508,6 +527,7 @@ impl SynthParams {
         range("passes", self.passes, 0, 6)?;
         range("finest_passes", self.finest_passes, 0, 6)?;
         range("fine_levels", self.fine_levels, 1, 16)?;
+        range("parity_levels", self.parity_levels, 0, 16)?;
         range("subpass_side", self.subpass_side, 1, 3)?;
         range("grid", self.grid, 4, 64)?;
         range("jitter", self.jitter, 0.0, 4.0)?;

@@ -222,6 +222,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("orientation", r#""none""#),
     ("slab_tiling", r#""blocks""#),
     ("feature_weight", "0"),
+    ("parity_levels", "0"),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
@@ -625,6 +626,19 @@ mod tests {
             TextureParams::from_flat(&old).unwrap().synth.slab_tiling,
             solidtex_core::SlabTiling::Cells
         );
+        // Its passes ran as block subpasses at every level.
+        old.remove("parity_levels");
+        assert_eq!(
+            TextureParams::from_stored(&old)
+                .unwrap()
+                .synth
+                .parity_levels,
+            0
+        );
+        assert_eq!(
+            TextureParams::from_flat(&old).unwrap().synth.parity_levels,
+            SynthParams::default().parity_levels
+        );
     }
 
     #[test]
@@ -828,6 +842,7 @@ mod tests {
             "finest_passes",
             "slab_thickness",
             "slab_tiling",
+            "parity_levels",
         ] {
             old.remove(k);
         }

@@ -291,9 +291,33 @@ impl SparseTables {
     /// The vector of any triple, from its three shares.
     #[inline(always)]
     pub fn triple_vector(&self, t: [u32; 3]) -> WideVector {
-        let [a, b, c] = [0, 1, 2].map(|p| &self.shares[p][t[p] as usize].0);
+        let [a, b, c] = [0, 1, 2].map(|p| &self.shares[p][t[p] as usize]);
+        // A correction scores 19 of these: the same sums, in registers.
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::*;
+            // SAFETY: SSE2 is part of the x86_64 baseline; every vector is
+            // 32 bytes, 32-byte aligned.
+            #[allow(unsafe_code)]
+            unsafe {
+                let mut out = WideVector([0; SPARSE_DIMS]);
+                let (lo, hi) = (_mm_set1_epi16(WIDE_RANGE.0), _mm_set1_epi16(WIDE_RANGE.1));
+                for half in 0..2 {
+                    let at =
+                        |v: &WideVector| _mm_load_si128(v.0.as_ptr().cast::<__m128i>().add(half));
+                    let sum = _mm_add_epi16(
+                        _mm_add_epi16(at(a), at(b)),
+                        _mm_add_epi16(at(c), at(&self.bias)),
+                    );
+                    let clamped = _mm_min_epi16(_mm_max_epi16(sum, lo), hi);
+                    _mm_store_si128(out.0.as_mut_ptr().cast::<__m128i>().add(half), clamped);
+                }
+                out
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
         WideVector(std::array::from_fn(|j| {
-            (a[j] + b[j] + c[j] + self.bias.0[j]).clamp(WIDE_RANGE.0, WIDE_RANGE.1)
+            (a.0[j] + b.0[j] + c.0[j] + self.bias.0[j]).clamp(WIDE_RANGE.0, WIDE_RANGE.1)
         }))
     }
 

@@ -94,7 +94,7 @@ impl Engine {
             self.steps_at(k),
             self.radius,
             self.field.is_some(),
-            self.params.subpass_side as i64,
+            plan::Classes::at(&self.params, k),
             self.barrier_cell(),
             |pass, forward, voxels| {
                 if acc.dry {
@@ -181,7 +181,6 @@ impl Engine {
     ) -> (Grid<[u32; 3]>, HashMap<[i64; 3], u64>) {
         let steps = self.steps_at(k);
         let barrier_cell = self.barrier_cell();
-        let side = self.params.subpass_side as i64;
         // Voxels corrected in the current pass: their values after it,
         // cached once it ends.
         let mut ended: HashMap<[i64; 3], u64> = HashMap::default();
@@ -189,7 +188,7 @@ impl Engine {
         let corrector = Corrector::new(&self.cands, k, &self.params, self.field.as_deref());
         let mut step_start: Option<(usize, Work)> = None;
         let mut current_pass = 0;
-        let classes = (side * side * side) as usize;
+        let classes = plan::Classes::at(&self.params, k).count() as usize;
         for (forward, (si, voxels)) in chain.subpasses.iter().enumerate() {
             cancel::check(&acc.cancel);
             if forward / classes != current_pass {

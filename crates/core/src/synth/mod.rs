@@ -195,7 +195,7 @@ impl Engine {
                 known_reach(
                     engine.steps_at(k),
                     engine.radius,
-                    engine.params.subpass_side as i64,
+                    plan::Classes::at(&engine.params, k),
                     engine.barrier_cell(),
                 )
             })
@@ -484,9 +484,14 @@ impl Engine {
         lod: u32,
         radius: i64,
     ) -> Vec<plan::LevelPlan> {
-        let levels: Vec<Vec<Step>> = (0..=self.init_level)
+        let levels: Vec<(Vec<Step>, plan::Classes)> = (0..=self.init_level)
             .skip(lod as usize)
-            .map(|k| self.steps_at(k).to_vec())
+            .map(|k| {
+                (
+                    self.steps_at(k).to_vec(),
+                    plan::Classes::at(&self.params, k),
+                )
+            })
             .collect();
         let cell = match self.params.scheme {
             Scheme::DualGrid => Some(self.cell),
@@ -498,7 +503,6 @@ impl Engine {
             &levels,
             radius,
             self.field.is_some(),
-            self.params.subpass_side as i64,
             cell,
         )
     }
@@ -597,16 +601,21 @@ impl Engine {
 
 /// [`plan::reach`] of a level's steps, computed once per process for each
 /// set of steps: textures with the same synthesis parameters share it.
-fn known_reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> plan::Reach {
-    type Key = (Vec<Step>, i64, i64, Option<i64>);
+fn known_reach(
+    steps: &[Step],
+    radius: i64,
+    order: plan::Classes,
+    cell: Option<i64>,
+) -> plan::Reach {
+    type Key = (Vec<Step>, i64, plan::Classes, Option<i64>);
     static KNOWN: std::sync::LazyLock<parking_lot::Mutex<HashMap<Key, plan::Reach>>> =
         std::sync::LazyLock::new(Default::default);
-    let key = (steps.to_vec(), radius, side, cell);
+    let key = (steps.to_vec(), radius, order, cell);
     let lock = || KNOWN.lock();
     if let Some(r) = lock().get(&key) {
         return *r;
     }
-    let r = plan::reach(steps, radius, side, cell);
+    let r = plan::reach(steps, radius, order, cell);
     lock().insert(key, r);
     r
 }

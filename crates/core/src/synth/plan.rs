@@ -35,8 +35,69 @@ fn split(mut cells: Vec<[i64; 3]>, max: usize, out: &mut Vec<Vec<[i64; 3]>>) {
 
 use super::Step;
 use super::grid::{Box3, Grid};
+use crate::params::SynthParams;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
+
+/// The subpasses of a pass, as the planner and the synthesis walk them
+/// (see [`SynthParams::parity_levels`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Classes {
+    /// Voxels congruent modulo the side on every axis: side³ subpasses.
+    Blocks(i64),
+    /// Even coordinate sums, then odd ones.
+    Parity,
+}
+
+impl Classes {
+    /// The subpasses of level `k` (0 = finest) under a texture's
+    /// parameters.
+    pub fn at(params: &SynthParams, k: usize) -> Classes {
+        if k < params.parity_levels as usize {
+            Classes::Parity
+        } else {
+            Classes::Blocks(params.subpass_side as i64)
+        }
+    }
+
+    /// Subpasses per pass.
+    pub fn count(self) -> i64 {
+        match self {
+            Classes::Blocks(side) => side * side * side,
+            Classes::Parity => 2,
+        }
+    }
+
+    /// Period of the pattern along each axis.
+    fn period(self) -> i64 {
+        match self {
+            Classes::Blocks(side) => side,
+            Classes::Parity => 2,
+        }
+    }
+
+    /// Calls `f` for each voxel of `bounds` in subpass `class` (for reads
+    /// `radius` voxels away), x fastest.
+    fn for_class(self, bounds: &Box3, class: i64, radius: i64, mut f: impl FnMut([i64; 3])) {
+        match self {
+            Classes::Blocks(side) => {
+                bounds.for_class(subpass_phase(class, side, radius), side, f);
+            }
+            Classes::Parity => {
+                for z in bounds.lo[2]..bounds.hi[2] {
+                    for y in bounds.lo[1]..bounds.hi[1] {
+                        let lo = bounds.lo[0];
+                        let mut x = lo + (class - lo - y - z).rem_euclid(2);
+                        while x < bounds.hi[0] {
+                            f([x, y, z]);
+                            x += 2;
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
 
 /// Exact dependency counts of one level under a history-window scheme.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -266,11 +327,11 @@ pub fn backward(
     steps: &[Step],
     radius: i64,
     cube: bool,
-    side: i64,
+    order: Classes,
     cell: Option<i64>,
     mut known_after: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
 ) -> LevelChain {
-    let classes = side * side * side;
+    let classes = order.count();
     let first = targets.first().copied().unwrap_or([0; 3]);
     let bounds = targets.iter().fold(Box3::new(first, [1, 1, 1]), |b, p| {
         b.union(&Box3::new(*p, [1, 1, 1]))
@@ -292,9 +353,8 @@ pub fn backward(
         let first_of_step = forward_end - step_subpasses;
         for t in (0..step_subpasses).rev() {
             let class = t % classes;
-            let phase = subpass_phase(class, side, radius);
             let mut corrected = Vec::new();
-            need.bounds().for_class(phase, side, |v| {
+            order.for_class(&need.bounds(), class, radius, |v| {
                 if need.contains(v) {
                     corrected.push(v);
                 }
@@ -348,24 +408,23 @@ pub fn backward(
 /// "Mask ⊗ Neighborhood" chain, with Zhang et al.'s history windows),
 /// level by level from the finest: for each level, the version-0 voxels and
 /// the corrections needed. `steps_per_level[k]` lists the correction steps
-/// at level k (empty: no correction); `cell` is the dual-grid cell side, or
-/// `None` for the standard scheme.
+/// at level k (empty: no correction) and its subpasses; `cell` is the
+/// dual-grid cell side, or `None` for the standard scheme.
 pub fn exact_chain(
     request: &[[i64; 3]],
     levels: usize,
-    steps_per_level: &[Vec<Step>],
+    steps_per_level: &[(Vec<Step>, Classes)],
     radius: i64,
     cube: bool,
-    side: i64,
     cell: Option<i64>,
 ) -> Vec<LevelPlan> {
     let mut points: Vec<[i64; 3]> = request.to_vec();
     let mut out = Vec::new();
-    for steps in steps_per_level.iter().take(levels) {
+    for (steps, order) in steps_per_level.iter().take(levels) {
         if points.is_empty() {
             break;
         }
-        let chain = backward(&points, steps, radius, cube, side, cell, |_, _, _| {
+        let chain = backward(&points, steps, radius, cube, *order, cell, |_, _, _| {
             Vec::new()
         });
         out.push(LevelPlan {
@@ -401,23 +460,24 @@ const REACH_WALK_VOXELS: i64 = 1 << 25;
 
 /// The [`Reach`] of one level corrected by `steps` (see [`backward`]).
 ///
-/// The chains are periodic (the subpass classes repeat every `side`
-/// voxels, the cells every `cell`), so the largest reach below and above
+/// The chains are periodic (the subpass classes repeat every period of
+/// `order`, the cells every `cell`), so the largest reach below and above
 /// along axis `a` is found by walking back from one layer `a = c` of a
 /// period in the other two axes, for every `c` in a period: the need of a
 /// layer is the union of its voxels' needs. Where those walks would be
 /// large (long periods, many passes) the bound is taken from the scheme
 /// instead: a subpass reads `radius` further, and under the dual grid a
 /// step's chain stays within its cell and a ring of `radius` around it.
-pub fn reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> Reach {
+pub fn reach(steps: &[Step], radius: i64, order: Classes, cell: Option<i64>) -> Reach {
     if steps.is_empty() {
         return Reach::default();
     }
-    let classes = side * side * side;
+    let classes = order.count();
     let growth: i64 = steps
         .iter()
         .map(|s| s.passes as i64 * classes * radius + radius)
         .sum();
+    let side = order.period();
     let period = cell.map_or(side, |m| lcm(side, m));
     let walk = period + 2 * growth;
     if 3 * period * walk * walk * (1 + 2 * growth) > REACH_WALK_VOXELS {
@@ -448,7 +508,7 @@ pub fn reach(steps: &[Step], radius: i64, side: i64, cell: Option<i64>) -> Reach
                 }
             }
             // The cube reads no further along an axis than the planes.
-            let need = backward(&layer, steps, radius, false, side, cell, |_, _, _| {
+            let need = backward(&layer, steps, radius, false, order, cell, |_, _, _| {
                 Vec::new()
             })
             .need
@@ -543,8 +603,11 @@ mod tests {
             }];
             3
         ];
-        let dual = exact_chain(&[[5, 5, 5]], 3, &steps, 2, false, 2, Some(12));
-        let standard = exact_chain(&[[5, 5, 5]], 3, &standard_steps, 2, false, 2, None);
+        let blocks = |s: Vec<Vec<Step>>| -> Vec<_> {
+            s.into_iter().map(|s| (s, Classes::Blocks(2))).collect()
+        };
+        let dual = exact_chain(&[[5, 5, 5]], 3, &blocks(steps), 2, false, Some(12));
+        let standard = exact_chain(&[[5, 5, 5]], 3, &blocks(standard_steps), 2, false, None);
         let total = |v: &[LevelPlan]| v.iter().map(|l| l.voxels).sum::<u64>();
         assert!(total(&dual) < total(&standard), "{dual:?} vs {standard:?}");
     }
@@ -559,20 +622,24 @@ mod tests {
                 passes: 1,
             },
         ];
-        for (steps, radius, side, cell) in [
-            (vec![one(1)], 1, 2, None),
-            (vec![one(2)], 1, 2, None),
-            (dual.clone(), 1, 2, Some(6)),
-            (dual, 2, 2, Some(6)),
+        let blocks = Classes::Blocks(2);
+        for (steps, radius, order, cell) in [
+            (vec![one(1)], 1, blocks, None),
+            (vec![one(2)], 1, blocks, None),
+            (dual.clone(), 1, blocks, Some(6)),
+            (dual.clone(), 2, blocks, Some(6)),
+            (vec![one(1)], 1, Classes::Parity, None),
+            (vec![one(2)], 1, Classes::Parity, None),
+            (dual, 1, Classes::Parity, Some(6)),
         ] {
-            let r = reach(&steps, radius, side, cell);
-            let period = cell.map_or(side, |m| lcm(side, m));
+            let r = reach(&steps, radius, order, cell);
+            let period = cell.map_or(order.period(), |m| lcm(order.period(), m));
             let mut met = Reach::default();
             for z in 0..period {
                 for y in 0..period {
                     for x in 0..period {
                         let p = [x, y, z];
-                        let b = backward(&[p], &steps, radius, false, side, cell, |_, _, _| {
+                        let b = backward(&[p], &steps, radius, false, order, cell, |_, _, _| {
                             Vec::new()
                         })
                         .need
@@ -586,7 +653,21 @@ mod tests {
             }
             assert_eq!(r, met, "{steps:?} radius {radius} cell {cell:?}");
         }
-        assert_eq!(reach(&[], 1, 2, Some(12)), Reach::default());
+        assert_eq!(reach(&[], 1, blocks, Some(12)), Reach::default());
+    }
+
+    #[test]
+    fn parity_subpasses_split_a_box_by_coordinate_sum() {
+        let b = Box3::new([-3, 2, -1], [5, 4, 3]);
+        let mut seen = std::collections::HashSet::new();
+        for class in 0..Classes::Parity.count() {
+            Classes::Parity.for_class(&b, class, 1, |v| {
+                assert_eq!((v[0] + v[1] + v[2]).rem_euclid(2), class, "{v:?}");
+                assert!(b.contains(v), "{v:?}");
+                assert!(seen.insert(v), "{v:?} twice");
+            });
+        }
+        assert_eq!(seen.len() as u64, b.volume());
     }
 
     #[test]

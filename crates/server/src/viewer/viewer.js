@@ -225,7 +225,7 @@ function renderList() {
 }
 
 // The parameters a user is likely to care about come first.
-const PARAM_ORDER = ["seed", "feature_weight", "passes", "finest_passes", "fine_levels", "levels", "neighbourhood", "scheme", "grid", "jitter", "contrast", "consistency", "slices", "slab_thickness"];
+const PARAM_ORDER = ["seed", "feature_weight", "passes", "finest_passes", "fine_levels", "parity_levels", "levels", "neighbourhood", "scheme", "grid", "jitter", "contrast", "consistency", "slices", "slab_thickness"];
 
 function renderInfo() {
   const box = $("info");
