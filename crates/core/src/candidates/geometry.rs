@@ -136,7 +136,7 @@ pub fn project(p: usize, d: [i64; 3]) -> (i64, i64) {
 }
 
 /// A triple moved coherently by the 3D offset `d` scaled by `h`.
-#[inline]
+#[inline(always)]
 pub fn offset_triple(dims: Dims, t: [u32; 3], d: [i64; 3], h: i64) -> [u32; 3] {
     let mut out = t;
     for (p, o) in out.iter_mut().enumerate() {

@@ -291,8 +291,11 @@ impl SparseTables {
     /// The vector of any triple, from its three shares.
     #[inline(always)]
     pub fn triple_vector(&self, t: [u32; 3]) -> WideVector {
-        let [a, b, c] = [0, 1, 2].map(|p| &self.shares[p][t[p] as usize]);
-        // A correction scores 19 of these: the same sums, in registers.
+        // A correction scores 19 of these: the same sums, in registers (and
+        // no array `map`, which is compiled out of line).
+        let a = &self.shares[0][t[0] as usize];
+        let b = &self.shares[1][t[1] as usize];
+        let c = &self.shares[2][t[2] as usize];
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::x86_64::*;

@@ -316,7 +316,10 @@ fn disagreement(plane_colours: &[&[[f32; 3]]; 3], weight: f32, t: [u32; 3]) -> u
     if weight == 0.0 {
         return 0;
     }
-    let [a, b, c] = [0, 1, 2].map(|p| plane_colours[p][t[p] as usize]);
+    // Spelled out: an array `map` here is compiled out of line.
+    let a = plane_colours[0][t[0] as usize];
+    let b = plane_colours[1][t[1] as usize];
+    let c = plane_colours[2][t[2] as usize];
     let mut d = 0f32;
     for ch in 0..3 {
         d += (a[ch] - b[ch]).powi(2) + (b[ch] - c[ch]).powi(2) + (c[ch] - a[ch]).powi(2);

@@ -447,7 +447,10 @@ impl<'a> AppearanceCorrector<'a> {
         }
         // Rounds half up by truncating a non-negative value (no libm call).
         let (lo, hi) = (WIDE_RANGE.0 as f32, WIDE_RANGE.1 as f32);
-        let query = WideVector(q.map(|v| ((v.clamp(lo, hi) - lo + 0.5) as i32 + lo as i32) as i16));
+        let mut query = WideVector([0; SPARSE_DIMS]);
+        for (o, v) in query.0.iter_mut().zip(q) {
+            *o = ((v.clamp(lo, hi) - lo + 0.5) as i32 + lo as i32) as i16;
+        }
 
         // The smallest (distance, triple); a penalty is only worth working
         // out for a triple that could still win.
