@@ -311,7 +311,7 @@ fn gather_local<const BY_WALL: bool>(
 
 /// How much a triple's three exemplar colours disagree (squared
 /// differences of each pair), times `weight`.
-#[inline]
+#[inline(always)]
 fn disagreement(plane_colours: &[&[[f32; 3]]; 3], weight: f32, t: [u32; 3]) -> u32 {
     if weight == 0.0 {
         return 0;

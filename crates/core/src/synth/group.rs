@@ -207,9 +207,10 @@ impl Engine {
             let new: Vec<(usize, [u32; 3], [f32; 3])> = voxels
                 .par_iter()
                 .map(|&p| {
+                    // Spelled out: an array `map` here is compiled out of line.
                     let barrier = barrier_cell.map(|m| {
-                        let c = p.map(|v| (v - offset).div_euclid(m) * m + offset);
-                        Box3::new(c, [m; 3])
+                        let lo = |v: i64| (v - offset).div_euclid(m) * m + offset;
+                        Box3::new([lo(p[0]), lo(p[1]), lo(p[2])], [m; 3])
                     });
                     let t = match (start, barrier) {
                         (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p),

@@ -76,6 +76,34 @@ impl Classes {
         }
     }
 
+    /// [`Classes::for_class`] column by column: columns of 16×16 voxels
+    /// along z, y-major. The voxels of one subpass are independent, so
+    /// their order is free; in this one each thread's share of a subpass
+    /// reads a compact part of the working grid.
+    fn for_class_in_columns(
+        self,
+        bounds: &Box3,
+        class: i64,
+        radius: i64,
+        mut f: impl FnMut([i64; 3]),
+    ) {
+        const SIDE: i64 = 16;
+        if bounds.is_empty() {
+            return;
+        }
+        let columns =
+            |a: usize| bounds.lo[a].div_euclid(SIDE)..=(bounds.hi[a] - 1).div_euclid(SIDE);
+        for cy in columns(1) {
+            for cx in columns(0) {
+                let column = Box3 {
+                    lo: [cx * SIDE, cy * SIDE, bounds.lo[2]],
+                    hi: [(cx + 1) * SIDE, (cy + 1) * SIDE, bounds.hi[2]],
+                };
+                self.for_class(&bounds.intersect(&column), class, radius, &mut f);
+            }
+        }
+    }
+
     /// Calls `f` for each voxel of `bounds` in subpass `class` (for reads
     /// `radius` voxels away), x fastest.
     fn for_class(self, bounds: &Box3, class: i64, radius: i64, mut f: impl FnMut([i64; 3])) {
@@ -354,7 +382,7 @@ pub fn backward(
         for t in (0..step_subpasses).rev() {
             let class = t % classes;
             let mut corrected = Vec::new();
-            order.for_class(&need.bounds(), class, radius, |v| {
+            order.for_class_in_columns(&need.bounds(), class, radius, |v| {
                 if need.contains(v) {
                     corrected.push(v);
                 }
@@ -384,9 +412,6 @@ pub fn backward(
                         });
                     }
                 });
-            // Blocks of 16×16 columns keep each thread's reads local; the
-            // voxels of one subpass are independent, so order is free.
-            corrected.par_sort_unstable_by_key(|p| (p[1] >> 4, p[0] >> 4, p[2], p[1], p[0]));
             subpasses.push((si, corrected));
         }
         need.recount();
