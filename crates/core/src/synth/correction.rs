@@ -154,10 +154,11 @@ const DIRECT: [[i64; 3]; 19] = {
 /// How far along x [`gather_near`] prefetches, in voxels.
 const AHEAD: i64 = 16;
 
-/// The direct neighbours of `p`, each in the version its history window
-/// gives (`work` for offsets within `inside`, `start` beyond), and the
-/// coherent triples: each neighbour's triple moved back by its offset, in
-/// all three planes at once. Both by [`near_slot`].
+/// Fills `near` with the direct neighbours of `p`, each in the version its
+/// history window gives (`work` for offsets within `inside`, `start`
+/// beyond), and the coherent triples: each neighbour's triple moved back
+/// by its offset, in all three planes at once. Both by [`near_slot`].
+/// (Filled in place: returned, the table was copied out.)
 #[inline(always)]
 fn gather_near<const BY_WALL: bool>(
     work: &Work,
@@ -166,13 +167,12 @@ fn gather_near<const BY_WALL: bool>(
     p: [i64; 3],
     dims: Dims,
     h: i64,
-) -> (Near, [[u32; 3]; 27]) {
+    near: &mut Near,
+) {
     let strides = work.triples.strides();
     let centre = work.triples.index(p) as i64;
     let inside3 =
         |d: [i64; 3]| !BY_WALL || (0..3).all(|a| d[a] >= inside[a].0 && d[a] <= inside[a].1);
-    let mut near = Near::default();
-    let mut moved = [[u32::MAX; 3]; 27];
     // Corrections walk along x: fetch the neighbour rows a few voxels
     // ahead, so the next corrections find them in cache.
     for dz in -1..=1 {
@@ -193,9 +193,8 @@ fn gather_near<const BY_WALL: bool>(
         near.triples[k] = src.triples.data[idx];
         let [r, g, b] = src.colours.data[idx];
         near.colours[k] = [r, g, b, 0.0];
-        moved[k] = offset_triple(dims, near.triples[k], d.map(|v| -v), h);
+        near.moved[k] = offset_triple(dims, near.triples[k], d.map(|v| -v), h);
     }
-    (near, moved)
 }
 
 /// A voxel's neighbourhood in its local frame (Zhang et al. §4.3): which
@@ -286,11 +285,10 @@ fn gather_local<const BY_WALL: bool>(
     p: [i64; 3],
     dims: Dims,
     local: &Local,
-) -> (Near, [[u32; 3]; 27]) {
+    near: &mut Near,
+) {
     let strides = work.triples.strides();
     let centre = work.triples.index(p) as i64;
-    let mut near = Near::default();
-    let mut moved = [[u32::MAX; 3]; 27];
     for &k in local.used() {
         let k = k as usize;
         let d = [
@@ -304,9 +302,8 @@ fn gather_local<const BY_WALL: bool>(
         near.triples[k] = src.triples.data[idx];
         let [r, g, b] = src.colours.data[idx];
         near.colours[k] = [r, g, b, 0.0];
-        moved[k] = offset_triple(dims, near.triples[k], local.offset[k].map(|v| -v), 1);
+        near.moved[k] = offset_triple(dims, near.triples[k], local.offset[k].map(|v| -v), 1);
     }
-    (near, moved)
 }
 
 /// How much a triple's three exemplar colours disagree (squared
@@ -341,10 +338,12 @@ fn in_plane_slot(a: usize, i: i64, b: usize, j: i64) -> usize {
 }
 
 /// The direct neighbours' triples and colours, by [`near_slot`], in the
-/// version the correction's history window reads.
+/// version the correction's history window reads, and their triples moved
+/// back by their offsets (the coherent triples).
 struct Near {
     triples: [[u32; 3]; 27],
     colours: [[f32; 4]; 27],
+    moved: [[u32; 3]; 27],
 }
 
 impl Default for Near {
@@ -352,6 +351,7 @@ impl Default for Near {
         Near {
             triples: [[0; 3]; 27],
             colours: [[0.0; 4]; 27],
+            moved: [[u32::MAX; 3]; 27],
         }
     }
 }

@@ -35,7 +35,7 @@
 //! The best by distance of the quantised 12-location vectors wins.
 
 use super::{
-    DIRECT, Local, Work, disagreement, gather_local, gather_near, in_plane_slot, near_slot,
+    DIRECT, Local, Near, Work, disagreement, gather_local, gather_near, in_plane_slot, near_slot,
     prefetch,
 };
 use crate::candidates::geometry::{AXES, Dims};
@@ -332,11 +332,13 @@ impl<'a> AppearanceCorrector<'a> {
         local: &Local,
     ) -> [u32; 3] {
         let h = self.h;
-        let (near, moved) = if FIELD {
-            gather_local::<BY_WALL>(work, start, inside, p, self.dims, local)
+        let mut near = Near::default();
+        if FIELD {
+            gather_local::<BY_WALL>(work, start, inside, p, self.dims, local, &mut near);
         } else {
-            gather_near::<BY_WALL>(work, start, inside, p, self.dims, h)
-        };
+            gather_near::<BY_WALL>(work, start, inside, p, self.dims, h, &mut near);
+        }
+        let moved = &near.moved;
         // The near slot at in-plane offset (i, j) of a plane.
         let slot_of = |plane: usize, a: usize, i: i64, b: usize, j: i64| {
             if FIELD {
