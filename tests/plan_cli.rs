@@ -80,3 +80,19 @@ fn the_preview_flag_spells_out_the_preview_parameters() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--preview"));
 }
+
+#[test]
+fn parity_levels_reach_the_planner() {
+    // Odd x planes chain through the block subpasses into more planes of
+    // the finest level than parity subpasses, which need the plane and
+    // half of each plane beside it.
+    let finest = |extra: &[&str]| {
+        let v = plan(&[&["--slice", "16", "--axis", "x", "--at", "5"][..], extra].concat());
+        v["schemes"].as_array().unwrap()[0]["corrections_per_level"][0]
+            .as_u64()
+            .unwrap()
+    };
+    let (parity, blocks) = (finest(&[]), finest(&["--parity-levels", "0"]));
+    assert!((2 * 256..2 * 256 + 2 * 18).contains(&parity), "{parity}");
+    assert!(blocks > parity, "{blocks} {parity}");
+}

@@ -664,6 +664,14 @@ mod tests {
             "out_of_range"
         );
         assert_eq!(
+            code(TextureParams::from_json(r#"{"parity_levels": 17}"#).unwrap_err()),
+            "out_of_range"
+        );
+        assert_eq!(
+            code(TextureParams::from_json(r#"{"parity_levels": -1}"#).unwrap_err()),
+            "invalid_params"
+        );
+        assert_eq!(
             code(TextureParams::from_json(r#"{"slices": "dense"}"#).unwrap_err()),
             "invalid_params"
         );
