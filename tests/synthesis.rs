@@ -145,7 +145,7 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
 #[test]
 fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
     // Measured when written, over all levels: 11 % of the cold planes'
-    // corrections with parity subpasses at the fine levels, 20 % with
+    // corrections with parity subpasses at the finest level, 20 % with
     // block subpasses everywhere. Block subpasses correct a finest plane's
     // neighbours whole, so some planes come entirely from the cache;
     // parity ones correct half of each neighbour, so none do.

@@ -509,10 +509,10 @@ impl SynthParams {
     /// Parameters for previews and interactive cutting: one correction
     /// pass per level, and the finest level upsampled from level 1 without
     /// correction. A cold slice needs a quarter to an eighth of the
-    /// defaults' corrections (BENCHMARKS.md). The price is worse patch coherence and
-    /// visibly more broken-up features on spotted or blocky exemplars
-    /// (docs/quality.md). Their voxels differ
-    /// from the defaults', as any other parameter change makes them.
+    /// defaults' corrections (BENCHMARKS.md). The price is worse patch
+    /// coherence and visibly more broken-up features on spotted or blocky
+    /// exemplars (docs/quality.md). Their voxels differ from the
+    /// defaults', as any other parameter change makes them.
     pub fn preview() -> SynthParams {
         SynthParams {
             passes: 1,
