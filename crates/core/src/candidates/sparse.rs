@@ -291,11 +291,25 @@ impl SparseTables {
     /// The vector of any triple, from its three shares.
     #[inline(always)]
     pub fn triple_vector(&self, t: [u32; 3]) -> WideVector {
+        self.sum_shares(self.shares_of(t))
+    }
+
+    /// The three shares of triple `t`, one per plane.
+    #[inline(always)]
+    pub fn shares_of(&self, t: [u32; 3]) -> [&WideVector; 3] {
+        [
+            &self.shares[0][t[0] as usize],
+            &self.shares[1][t[1] as usize],
+            &self.shares[2][t[2] as usize],
+        ]
+    }
+
+    /// A triple's vector from its three shares (see
+    /// [`SparseTables::shares_of`]).
+    #[inline(always)]
+    pub fn sum_shares(&self, [a, b, c]: [&WideVector; 3]) -> WideVector {
         // A correction scores 19 of these: the same sums, in registers (and
         // no array `map`, which is compiled out of line).
-        let a = &self.shares[0][t[0] as usize];
-        let b = &self.shares[1][t[1] as usize];
-        let c = &self.shares[2][t[2] as usize];
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::x86_64::*;
@@ -354,12 +368,6 @@ impl SparseTables {
     #[inline]
     pub fn appearance_scale(&self, p: usize) -> f32 {
         self.appearance_scale[p]
-    }
-
-    /// Plane `p`'s share of pixel `c` (for prefetching).
-    #[inline]
-    pub fn share(&self, p: usize, c: u32) -> &WideVector {
-        &self.shares[p][c as usize]
     }
 
     /// Bytes held.

@@ -349,8 +349,10 @@ impl<'a> AppearanceCorrector<'a> {
         };
         // The exemplar pixel each of the 3 predictions of each location
         // reads, by plane and location; their vectors are fetched while
-        // the candidates are proposed.
+        // the candidates are proposed. The predictions' colour offsets
+        // are summed here, where their neighbours are at hand.
         let mut predicted = [[[0u32; 3]; 4]; 3];
+        let mut offsets = [[[0f32; 3]; 4]; 3];
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
                 for (k, (du, dv)) in [(i, j), (i, 0), (0, j)].into_iter().enumerate() {
@@ -364,6 +366,10 @@ impl<'a> AppearanceCorrector<'a> {
                     };
                     prefetch(&self.app[plane][c as usize * W..]);
                     predicted[plane][l][k] = c;
+                    let own = self.plane_colours[plane][t as usize];
+                    for ch in 0..3 {
+                        offsets[plane][l][ch] += near.colours[slot][ch] - own[ch];
+                    }
                 }
             }
         }
@@ -371,7 +377,9 @@ impl<'a> AppearanceCorrector<'a> {
         // triples alone: prefetch what scoring them reads, so the cache
         // misses overlap the query's arithmetic below. A pixel proposed
         // twice is scored twice.
-        let mut proposed = [(0u8, 0u32); MAX_PROPOSED];
+        // Their candidate lists, kept from the prefetch (the entries
+        // past `proposed_n` are placeholders).
+        let mut proposed = [self.tables.best(0, 0); MAX_PROPOSED];
         let mut proposed_n = 0;
         for (plane, &(a, b)) in AXES.iter().enumerate() {
             let mut bases = [u32::MAX; 9];
@@ -386,11 +394,11 @@ impl<'a> AppearanceCorrector<'a> {
                     bases[bases_n] = base;
                     bases_n += 1;
                     for &s in self.level.similar(plane, base) {
-                        let best = std::slice::from_ref(self.tables.best(plane, s));
-                        prefetch(best);
+                        let best = self.tables.best(plane, s);
+                        prefetch(std::slice::from_ref(best));
                         // The triples' line, for the candidates that win.
-                        prefetch(&best[0].triples[2..]);
-                        proposed[proposed_n] = (plane as u8, s);
+                        prefetch(&best.triples[2..]);
+                        proposed[proposed_n] = best;
                         proposed_n += 1;
                     }
                 }
@@ -414,31 +422,29 @@ impl<'a> AppearanceCorrector<'a> {
             DIRECT.len()
         };
         let coherent = &coherent[..coherent_n];
-        for t in coherent {
-            for (q, &c) in t.iter().enumerate() {
-                prefetch(std::slice::from_ref(self.tables.share(q, c)));
+        // Their shares, found once: fetched now, summed when scored.
+        let mut shares = [self.tables.shares_of([0; 3]); 27];
+        for (s, &t) in shares.iter_mut().zip(coherent) {
+            *s = self.tables.shares_of(t);
+            for share in *s {
+                prefetch(std::slice::from_ref(share));
             }
         }
 
         let mut q = self.map.constant;
-        for (plane, &(a, b)) in AXES.iter().enumerate() {
+        for plane in 0..3 {
             let app = self.app[plane];
-            for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
+            for l in 0..DIAGONALS.len() {
                 // W appearance sums, then 3 colour offsets.
                 let mut sum = [0f32; MAX_LOCATION_DIMS + 3];
-                for (k, (du, dv)) in [(i, j), (i, 0), (0, j)].into_iter().enumerate() {
-                    let slot = slot_of(plane, a, du, b, dv);
-                    let t = near.triples[slot][plane];
-                    let c = predicted[plane][l][k] as usize;
+                for &c in &predicted[plane][l] {
+                    let c = c as usize;
                     let row: &[i16; W] = app[c * W..(c + 1) * W].try_into().expect("W values");
                     for (o, &v) in sum[..W].iter_mut().zip(row) {
                         *o += v as f32;
                     }
-                    let own = self.plane_colours[plane][t as usize];
-                    for ch in 0..3 {
-                        sum[W + ch] += near.colours[slot][ch] - own[ch];
-                    }
                 }
+                sum[W..W + 3].copy_from_slice(&offsets[plane][l]);
                 let columns = &self.map.columns[(4 * plane + l) * (W + 3)..][..W + 3];
                 for (column, &x) in columns.iter().zip(&sum) {
                     for (o, w) in q.iter_mut().zip(column) {
@@ -457,8 +463,7 @@ impl<'a> AppearanceCorrector<'a> {
         // The smallest (distance, triple); a penalty is only worth working
         // out for a triple that could still win.
         let mut best = (u32::MAX, [u32::MAX; 3]);
-        for &(plane, px) in &proposed[..proposed_n] {
-            let cands = self.tables.best(plane as usize, px);
+        for cands in &proposed[..proposed_n] {
             let dists = best_distances::<AVX2>(&cands.vectors, &query);
             if dists.iter().all(|&dist| dist > best.0) {
                 continue;
@@ -471,8 +476,8 @@ impl<'a> AppearanceCorrector<'a> {
         }
         // Coherent triples last: with the proposals' best known, few are
         // close enough to need their penalty worked out.
-        for &t in coherent {
-            let dist = wide_distance(&self.tables.triple_vector(t), &query);
+        for (&t, &s) in coherent.iter().zip(&shares) {
+            let dist = wide_distance(&self.tables.sum_shares(s), &query);
             if dist <= best.0 {
                 // Saturating: a large `consistency` can push the penalty to u32::MAX.
                 let dist =
