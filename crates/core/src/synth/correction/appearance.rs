@@ -454,10 +454,12 @@ impl<'a> AppearanceCorrector<'a> {
             }
         }
         // Rounds half up by truncating a non-negative value (no libm call).
+        // `max` then `min` rather than `clamp`, which has to keep a NaN
+        // and so is not vectorised; a NaN comes out as `lo` either way.
         let (lo, hi) = (WIDE_RANGE.0 as f32, WIDE_RANGE.1 as f32);
         let mut query = WideVector([0; SPARSE_DIMS]);
         for (o, v) in query.0.iter_mut().zip(q) {
-            *o = ((v.clamp(lo, hi) - lo + 0.5) as i32 + lo as i32) as i16;
+            *o = ((v.max(lo).min(hi) - lo + 0.5) as i32 + lo as i32) as i16;
         }
 
         // The smallest (distance, triple); a penalty is only worth working
