@@ -1569,6 +1569,9 @@ async fn feature_masks_make_their_own_texture_and_survive_a_restart() {
     let (status, v) = upload_form(&c, &s, form).await;
     assert_eq!(status, 202, "{v}");
     assert_eq!(v["exemplar"]["feature_masks"], 1);
+    // Its precompute uses the data directory until it ends: the next
+    // server could not take the directory before then.
+    wait_ready(&c, &s, v["id"].as_str().unwrap()).await;
     s.stop().await;
 
     // A stored mask that went missing makes the pixels disagree with the

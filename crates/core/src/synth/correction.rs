@@ -151,6 +151,31 @@ const DIRECT: [[i64; 3]; 19] = {
     out
 };
 
+/// Calls `$m!(x, y, z)` for each offset of [`DIRECT`], in its order.
+macro_rules! for_each_direct {
+    ($m:ident) => {
+        $m!(0, -1, -1);
+        $m!(-1, 0, -1);
+        $m!(0, 0, -1);
+        $m!(1, 0, -1);
+        $m!(0, 1, -1);
+        $m!(-1, -1, 0);
+        $m!(0, -1, 0);
+        $m!(1, -1, 0);
+        $m!(-1, 0, 0);
+        $m!(0, 0, 0);
+        $m!(1, 0, 0);
+        $m!(-1, 1, 0);
+        $m!(0, 1, 0);
+        $m!(1, 1, 0);
+        $m!(0, -1, 1);
+        $m!(-1, 0, 1);
+        $m!(0, 0, 1);
+        $m!(1, 0, 1);
+        $m!(0, 1, 1);
+    };
+}
+
 /// How far along x [`gather_near`] prefetches, in voxels.
 const AHEAD: i64 = 16;
 
@@ -186,15 +211,21 @@ fn gather_near<const BY_WALL: bool>(
             }
         }
     }
-    for &d in &DIRECT {
-        let k = near_slot(d);
-        let idx = (centre + d[0] * strides[0] + d[1] * strides[1] + d[2] * strides[2]) as usize;
-        let src = if inside3(d) { work } else { start };
-        near.triples[k] = src.triples.data[idx];
-        let [r, g, b] = src.colours.data[idx];
-        near.colours[k] = [r, g, b, 0.0];
-        near.moved[k] = offset_triple(dims, near.triples[k], d.map(|v| -v), h);
+    // Written out per offset: with `d` a constant, the slot, the history
+    // test and which moves are zero are settled when compiling.
+    macro_rules! one {
+        ($x:literal, $y:literal, $z:literal) => {{
+            let d: [i64; 3] = [$x, $y, $z];
+            let k = near_slot(d);
+            let idx = (centre + d[0] * strides[0] + d[1] * strides[1] + d[2] * strides[2]) as usize;
+            let src = if inside3(d) { work } else { start };
+            near.triples[k] = src.triples.data[idx];
+            let [r, g, b] = src.colours.data[idx];
+            near.colours[k] = [r, g, b, 0.0];
+            near.moved[k] = offset_triple(dims, near.triples[k], [-$x, -$y, -$z], h);
+        }};
     }
+    for_each_direct!(one);
 }
 
 /// A voxel's neighbourhood in its local frame (Zhang et al. §4.3): which
@@ -400,5 +431,18 @@ mod tests {
         let mut direct = DIRECT.to_vec();
         direct.sort();
         assert_eq!(direct, windows);
+    }
+
+    /// The written-out gathering visits exactly [`DIRECT`], in order.
+    #[test]
+    fn each_direct_offset_is_written_out() {
+        let mut listed: Vec<[i64; 3]> = Vec::new();
+        macro_rules! push {
+            ($x:literal, $y:literal, $z:literal) => {
+                listed.push([$x, $y, $z])
+            };
+        }
+        for_each_direct!(push);
+        assert_eq!(listed, DIRECT.to_vec());
     }
 }

@@ -353,8 +353,13 @@ impl<'a> AppearanceCorrector<'a> {
         // are summed here, where their neighbours are at hand.
         let mut predicted = [[[0u32; 3]; 4]; 3];
         let mut offsets = [[[0f32; 3]; 4]; 3];
-        for (plane, &(a, b)) in AXES.iter().enumerate() {
-            for (l, &(i, j)) in DIAGONALS.iter().enumerate() {
+        // Written out per plane and location, so that the axes, the
+        // offsets and the slots are constants when compiling.
+        macro_rules! predict {
+            ($plane:literal, $l:literal) => {{
+                let plane: usize = $plane;
+                let (a, b) = AXES[$plane];
+                let (i, j) = DIAGONALS[$l];
                 for (k, (du, dv)) in [(i, j), (i, 0), (0, j)].into_iter().enumerate() {
                     let slot = slot_of(plane, a, du, b, dv);
                     let t = near.triples[slot][plane];
@@ -365,14 +370,26 @@ impl<'a> AppearanceCorrector<'a> {
                         self.dims.shift(t, (i - du) * h, (j - dv) * h)
                     };
                     prefetch(&self.app[plane][c as usize * W..]);
-                    predicted[plane][l][k] = c;
+                    predicted[plane][$l][k] = c;
                     let own = self.plane_colours[plane][t as usize];
                     for ch in 0..3 {
-                        offsets[plane][l][ch] += near.colours[slot][ch] - own[ch];
+                        offsets[plane][$l][ch] += near.colours[slot][ch] - own[ch];
                     }
                 }
-            }
+            }};
         }
+        predict!(0, 0);
+        predict!(0, 1);
+        predict!(0, 2);
+        predict!(0, 3);
+        predict!(1, 0);
+        predict!(1, 1);
+        predict!(1, 2);
+        predict!(1, 3);
+        predict!(2, 0);
+        predict!(2, 1);
+        predict!(2, 2);
+        predict!(2, 3);
         // The proposed pixels and the coherent triples are known from the
         // triples alone: prefetch what scoring them reads, so the cache
         // misses overlap the query's arithmetic below. A pixel proposed
