@@ -6,6 +6,7 @@
 
 use crate::stack::{GaussianStack, spacing};
 use nalgebra::{DMatrix, SymmetricEigen};
+use rayon::prelude::*;
 
 /// A PCA basis: `mean` and `dims` row vectors of length `input`.
 #[derive(Clone, Debug, PartialEq)]
@@ -92,18 +93,6 @@ impl Pca {
         for (d, o) in out.iter_mut().enumerate().take(self.dims) {
             let row = &self.basis[d * self.input..(d + 1) * self.input];
             *o = dot(v, row) - dot(&self.mean, row);
-        }
-    }
-
-    /// Projects many vectors (`input` floats each) into `out` (`dims`
-    /// floats each), with the same arithmetic as [`Pca::project`].
-    pub fn project_many(&self, vs: &[f32], out: &mut [f32]) {
-        let projector = Projector::new(self);
-        for (v, o) in vs
-            .chunks_exact(self.input)
-            .zip(out.chunks_exact_mut(self.dims))
-        {
-            projector.project(v, o);
         }
     }
 
@@ -258,7 +247,7 @@ impl Projector {
 }
 
 /// Whether the CPU runs AVX instructions.
-fn has_avx() -> bool {
+pub(crate) fn has_avx() -> bool {
     #[cfg(target_arch = "x86_64")]
     return std::arch::is_x86_feature_detected!("avx");
     #[cfg(not(target_arch = "x86_64"))]
@@ -352,11 +341,25 @@ pub fn all_neighbourhoods(stack: &GaussianStack, k: usize, n: u32) -> Vec<f32> {
     all
 }
 
-/// Projects every pixel's neighbourhood with `pca`.
+/// Projects every pixel's neighbourhood with `pca` (with the arithmetic of
+/// [`Pca::project`]), a row of pixels per task.
 pub fn project_all(stack: &GaussianStack, k: usize, n: u32, pca: &Pca) -> AppearanceLevel {
-    let all = all_neighbourhoods(stack, k, n);
-    let mut vectors = vec![0f32; (all.len() / pca.input) * pca.dims];
-    pca.project_many(&all, &mut vectors);
+    let w = stack.width() as usize;
+    let len = (n * n) as usize * stack.channels();
+    let projector = Projector::new(pca);
+    let mut vectors = vec![0f32; w * stack.height() as usize * pca.dims];
+    vectors
+        .par_chunks_mut(w * pca.dims)
+        .enumerate()
+        .for_each_init(
+            || vec![0f32; len],
+            |hood, (y, row)| {
+                for (x, out) in row.chunks_exact_mut(pca.dims).enumerate() {
+                    neighbourhood(stack, k, n, x as i64, y as i64, hood);
+                    projector.project(hood, out);
+                }
+            },
+        );
     AppearanceLevel {
         pca: pca.clone(),
         channels: stack.channels(),

@@ -27,15 +27,18 @@ pub struct Filtered {
 /// Filters `lists` (candidates of every pixel of plane `p`, sorted by
 /// error) until every pixel has at most `max` or nothing changes.
 pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize) -> Filtered {
+    // The four unit steps in plane p: each one's move in p (to the
+    // neighbouring pixel) and in every plane (for the coordinate there).
     let (a, b) = AXES[p];
-    let mut steps = Vec::new();
-    for axis in [a, b] {
-        for sign in [-1i64, 1] {
-            let mut d = [0i64; 3];
-            d[axis] = sign;
-            steps.push(d);
-        }
-    }
+    let steps: [Step; 4] = std::array::from_fn(|i| {
+        let mut d = [0i64; 3];
+        d[[a, b][i / 2]] = [-1, 1][i % 2];
+        let moves = [0, 1, 2].map(|j| {
+            let (u, v) = project(j, d);
+            (u * h, v * h)
+        });
+        Step { moves }
+    });
     let original: Vec<Option<Scored>> = lists.iter().map(|l| l.first().copied()).collect();
     let mut lists = lists;
     let mut iterations = 0;
@@ -66,7 +69,11 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
             .enumerate()
             .map(|(c, l)| {
                 let before = l.len();
-                l.retain(|s| coherent(p, s.triple, c as u32, &coords, &steps, dims, h));
+                let neighbours = steps.map(|st| {
+                    let (du, dv) = st.moves[p];
+                    dims.shift(c as u32, du, dv)
+                });
+                l.retain(|s| coherent(p, s.triple, &neighbours, &coords, &steps, dims, h));
                 l.len() != before
             })
             .reduce(|| false, |a, b| a || b);
@@ -89,21 +96,27 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
     }
 }
 
+/// A unit step of plane p, as (u, v) moves of `h` pixels in each plane.
+#[derive(Clone, Copy)]
+struct Step {
+    moves: [(i64, i64); 3],
+}
+
+/// Whether both foreign coordinates of triple `t` are continued by a
+/// candidate of one of the pixel's `neighbours` (one per step).
 fn coherent(
     p: usize,
     t: [u32; 3],
-    c: u32,
+    neighbours: &[u32; 4],
     coords: &[[Vec<u32>; 3]],
-    steps: &[[i64; 3]],
+    steps: &[Step; 4],
     dims: Dims,
     h: i64,
 ) -> bool {
     (0..3).filter(|&j| j != p).all(|j| {
-        steps.iter().any(|&d| {
-            let (du, dv) = project(p, d);
-            let neighbour = dims.shift(c, du * h, dv * h);
-            let (ju, jv) = project(j, d);
-            let want = dims.shift(t[j], ju * h, jv * h);
+        steps.iter().zip(neighbours).any(|(st, &neighbour)| {
+            let (ju, jv) = st.moves[j];
+            let want = dims.shift(t[j], ju, jv);
             coords[neighbour as usize][j]
                 .binary_search(&dims.snap(want, h as u32))
                 .is_ok()

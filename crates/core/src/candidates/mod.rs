@@ -258,7 +258,6 @@ impl Candidates {
         let dims = Dims::new(exemplars.width(), exemplars.height());
         let single = exemplars.is_single();
         let levels_n = params.levels as usize;
-        let n = params.neighbourhood;
         let mut report = PrecomputeReport::default();
         let mut timer = Instant::now();
         let mut lap = |report: &mut PrecomputeReport, name: &str| {
@@ -283,8 +282,8 @@ impl Candidates {
         lap(&mut report, "search");
         let filtered_levels = stages.filter_levels(raw_lists, &mut report);
         lap(&mut report, "coherence");
-        let stored = stages.finish_levels(filtered_levels, appearance_pca);
-        let levels = derive_levels(&stacks, stored, n, single, layout.arrangement.weights);
+        let (stored, appearance) = stages.finish_levels(filtered_levels, appearance_pca);
+        let levels = derive_levels(stored, appearance, single, layout.arrangement.weights);
         lap(&mut report, "finish");
         Ok(Candidates {
             exemplars: given.clone(),
@@ -316,13 +315,15 @@ impl Candidates {
             )));
         }
         let stacks = build_stacks(&analysed, stored.len(), params.feature_weight);
-        let levels = derive_levels(
-            &stacks,
-            stored,
-            params.neighbourhood,
-            analysed.is_single(),
-            layout.arrangement.weights,
-        );
+        let single = analysed.is_single();
+        let appearance = stored
+            .iter()
+            .enumerate()
+            .map(|(k, s)| {
+                level_appearance(&stacks, k, params.neighbourhood, &s.appearance_pca, single)
+            })
+            .collect();
+        let levels = derive_levels(stored, appearance, single, layout.arrangement.weights);
         Ok(Candidates {
             exemplars,
             analysed,
@@ -570,20 +571,19 @@ impl Stages<'_> {
         filtered_levels
     }
 
-    /// What is stored per level: the candidates with their appearance PCA,
-    /// similarity sets, and the joint projection of their neighbourhoods.
+    /// What is stored per level: the candidates with their appearance PCA
+    /// and similarity sets; and each level's appearance vectors.
     fn finish_levels(
         &self,
         filtered_levels: Vec<[PlaneCandidates; 3]>,
         appearance_pca: Vec<[Pca; 3]>,
-    ) -> Vec<StoredLevel> {
+    ) -> (Vec<StoredLevel>, Vec<[AppearanceLevel; 3]>) {
         let (levels_n, n) = (self.params.levels as usize, self.params.neighbourhood);
         let mut stored = Vec::new();
+        let mut vectors = Vec::new();
         for (k, candidates) in filtered_levels.into_iter().enumerate() {
             let pcas = appearance_pca[k].clone();
-            let appearance: Vec<AppearanceLevel> = (0..3)
-                .map(|p| appearance::project_all(&self.stacks[p], k, n, &pcas[p]))
-                .collect();
+            let appearance = level_appearance(self.stacks, k, n, &pcas, self.single);
             let k2 = if k == 0 {
                 self.params.similar_fine
             } else {
@@ -605,9 +605,10 @@ impl Stages<'_> {
                 similar,
                 k2,
             });
+            vectors.push(appearance);
             (self.progress)(Stage::Finish, (k + 1) as f32 / levels_n as f32);
         }
-        stored
+        (stored, vectors)
     }
 }
 
@@ -639,34 +640,43 @@ fn build_stacks(exemplars: &ExemplarSet, levels: usize, feature_weight: f32) -> 
     }
 }
 
-/// Derives each level's synthesis tables. `single`: one exemplar serves
-/// all three planes, so their stacks, PCAs and similarity sets are equal and
-/// the per-plane 2D tables are computed once.
-fn derive_levels(
+/// A level's appearance vectors per plane. `single`: one exemplar serves
+/// all three planes, so their stacks and PCAs are equal and the vectors are
+/// projected once.
+fn level_appearance(
     stacks: &[GaussianStack; 3],
-    stored: Vec<StoredLevel>,
+    k: usize,
     n: u32,
+    pcas: &[Pca; 3],
+    single: bool,
+) -> [AppearanceLevel; 3] {
+    if single {
+        let a = appearance::project_all(&stacks[0], k, n, &pcas[0]);
+        [a.clone(), a.clone(), a]
+    } else {
+        [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &pcas[p]))
+    }
+}
+
+/// Joins each stored level with its appearance vectors into the synthesis
+/// tables. `single`: one exemplar serves all three planes, so the per-plane
+/// 2D tables are computed once.
+fn derive_levels(
+    stored: Vec<StoredLevel>,
+    appearance: Vec<[AppearanceLevel; 3]>,
     single: bool,
     weights: [f32; 3],
 ) -> Vec<Level> {
     let alias = if single { [0, 0, 0] } else { [0, 1, 2] };
     stored
         .into_iter()
-        .enumerate()
-        .map(|(k, s)| {
-            let appearance: [AppearanceLevel; 3] = if single {
-                let a = appearance::project_all(&stacks[0], k, n, &s.appearance_pca[0]);
-                [a.clone(), a.clone(), a]
-            } else {
-                [0, 1, 2].map(|p| appearance::project_all(&stacks[p], k, n, &s.appearance_pca[p]))
-            };
-            Level {
-                stored: s,
-                appearance,
-                alias,
-                weights,
-                sparse: std::sync::OnceLock::new(),
-            }
+        .zip(appearance)
+        .map(|(s, appearance)| Level {
+            stored: s,
+            appearance,
+            alias,
+            weights,
+            sparse: std::sync::OnceLock::new(),
         })
         .collect()
 }

@@ -1,15 +1,16 @@
 //! Crossbar search (Dong et al., "3D candidates selection"). For a pixel of
 //! plane p, the two other planes' neighbourhoods meet p's neighbourhood along
-//! two strips of N pixels; the S strips most similar to them are found with a
-//! k-d tree over PCA-reduced strips (approximate nearest neighbours), and the
-//! S² resulting triples are ranked by the full crossbar error (the three
-//! pairwise strip differences).
+//! two strips of N pixels; the S strips most similar to them are found among
+//! the PCA-reduced strips with a k-d tree (nearest in the reduced space),
+//! and the S² resulting triples are ranked by the full crossbar error (the
+//! three pairwise strip differences).
 
 use super::geometry::Dims;
-use crate::appearance::{Pca, sq_dist};
+use crate::appearance::{Pca, has_avx, sq_dist};
 use crate::stack::{GaussianStack, spacing};
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
+use std::collections::BinaryHeap;
 use std::num::NonZero;
 
 /// Dimensions of the reduced strips the k-d trees index.
@@ -147,44 +148,313 @@ fn best_pairs(
     strips: [&Strips; 3],
     keep: usize,
 ) -> Vec<Scored> {
+    // Strips of N = 3 … 9 pixels are 2, 3 or 4 blocks of eight floats.
+    match strips[0].len / 8 {
+        ..=2 => best_pairs_blocks::<2>(p, c, qs, rs, strips, keep),
+        3 => best_pairs_blocks::<3>(p, c, qs, rs, strips, keep),
+        _ => best_pairs_blocks::<4>(p, c, qs, rs, strips, keep),
+    }
+}
+
+#[allow(unsafe_code)]
+fn best_pairs_blocks<const B: usize>(
+    p: usize,
+    c: u32,
+    qs: &[(f32, u32)],
+    rs: &[(f32, u32)],
+    strips: [&Strips; 3],
+    keep: usize,
+) -> Vec<Scored> {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx() {
+        // SAFETY: the CPU runs AVX instructions (checked above).
+        return unsafe { best_pairs_avx::<B>(p, c, qs, rs, strips, keep) };
+    }
+    best_pairs_with::<B>(p, c, qs, rs, strips, keep, |a, b| {
+        sq_dist(a.as_flattened(), b.as_flattened())
+    })
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn best_pairs_avx<const B: usize>(
+    p: usize,
+    c: u32,
+    qs: &[(f32, u32)],
+    rs: &[(f32, u32)],
+    strips: [&Strips; 3],
+    keep: usize,
+) -> Vec<Scored> {
+    best_pairs_with::<B>(p, c, qs, rs, strips, keep, |a, b| strip_dist_avx(a, b))
+}
+
+/// The first `B` blocks of eight floats of a strip.
+#[inline(always)]
+fn blocks<const B: usize>(strip: &[f32]) -> [[f32; 8]; B] {
+    std::array::from_fn(|i| std::array::from_fn(|l| strip[8 * i + l]))
+}
+
+/// An error's bits, reordered so that unsigned order is `f32::total_cmp`.
+fn error_key(e: f32) -> u32 {
+    let bits = e.to_bits();
+    if bits >> 31 == 1 {
+        !bits
+    } else {
+        bits | 1 << 31
+    }
+}
+
+fn key_error(key: u32) -> f32 {
+    f32::from_bits(if key >> 31 == 1 {
+        key & !(1 << 31)
+    } else {
+        !key
+    })
+}
+
+/// [`best_pairs`] with the strip distance given. The kept triples are a
+/// max-heap of (error, triple) packed in one integer, so its top is the
+/// triple a better one evicts: a triple enters only while the list is short
+/// or when it beats the worst kept error, and then it replaces that top.
+#[inline(always)]
+fn best_pairs_with<const B: usize>(
+    p: usize,
+    c: u32,
+    qs: &[(f32, u32)],
+    rs: &[(f32, u32)],
+    strips: [&Strips; 3],
+    keep: usize,
+    dist: impl Fn(&[[f32; 8]; B], &[[f32; 8]; B]) -> f32,
+) -> Vec<Scored> {
     let q = (p + 2) % 3;
     let r = (p + 1) % 3;
-    let mut best: Vec<Scored> = Vec::with_capacity(keep + 1);
-    let mut worst = f32::INFINITY;
-    for &(e1, qc) in qs {
-        if best.len() == keep && e1 + rs[0].0 >= worst {
+    // The triple's two foreign coordinates in plane order: with plane p's
+    // fixed at `c`, they order triples as `[u32; 3]` does.
+    let pack = |e: f32, qc: u32, rc: u32| {
+        let (a, b) = if q < r { (qc, rc) } else { (rc, qc) };
+        (error_key(e) as u128) << 64 | (a as u128) << 32 | b as u128
+    };
+    let r_strips: Vec<[[f32; 8]; B]> = rs.iter().map(|&(_, rc)| blocks(strips[r].v(rc))).collect();
+    let mut best: BinaryHeap<u128> = BinaryHeap::with_capacity(keep);
+    let top_error = |best: &BinaryHeap<u128>| {
+        best.peek()
+            .map_or(f32::INFINITY, |&t| key_error((t >> 64) as u32))
+    };
+    // The first `keep` pairs in loop order all enter.
+    let filled = keep.min(qs.len() * rs.len());
+    for t in 0..filled {
+        let (i, j) = (t / rs.len(), t % rs.len());
+        let ((e1, qc), (e2, rc)) = (qs[i], rs[j]);
+        let e = e1 + e2 + dist(&r_strips[j], &blocks(strips[q].u(qc)));
+        best.push(pack(e, qc, rc));
+    }
+    if best.len() < keep {
+        return unpack_all(best, p, c);
+    }
+    // Then a pair enters only below the worst kept error, replacing that
+    // triple; both lists ascend, so a row (and all rows) can stop early.
+    let mut worst = top_error(&best);
+    let (i0, j0) = (filled / rs.len(), filled % rs.len());
+    for (i, &(e1, qc)) in qs.iter().enumerate().skip(i0) {
+        if e1 + rs[0].0 >= worst {
             break;
         }
-        let qu = strips[q].u(qc);
-        for &(e2, rc) in rs {
+        let qu = blocks::<B>(strips[q].u(qc));
+        let start = if i == i0 { j0 } else { 0 };
+        for (&(e2, rc), rv) in rs[start..].iter().zip(&r_strips[start..]) {
             let partial = e1 + e2;
-            if best.len() == keep && partial >= worst {
+            if partial >= worst {
                 break;
             }
-            let e = partial + sq_dist(strips[r].v(rc), qu);
-            if best.len() == keep && e >= worst {
+            let e = partial + dist(rv, &qu);
+            if e >= worst {
                 continue;
             }
+            if let Some(mut top) = best.peek_mut() {
+                *top = pack(e, qc, rc);
+            }
+            worst = top_error(&best);
+        }
+    }
+    unpack_all(best, p, c)
+}
+
+/// The kept triples, best first.
+fn unpack_all(best: BinaryHeap<u128>, p: usize, c: u32) -> Vec<Scored> {
+    let (q, r) = ((p + 2) % 3, (p + 1) % 3);
+    let (first, second) = (q.min(r), q.max(r));
+    best.into_sorted_vec()
+        .into_iter()
+        .map(|key| {
             let mut triple = [0u32; 3];
             triple[p] = c;
-            triple[q] = qc;
-            triple[r] = rc;
-            let item = Scored { error: e, triple };
-            let pos = best
-                .binary_search_by(|b| {
-                    b.error
-                        .total_cmp(&item.error)
-                        .then(b.triple.cmp(&item.triple))
-                })
-                .unwrap_or_else(|x| x);
-            best.insert(pos, item);
-            if best.len() > keep {
-                best.pop();
+            triple[first] = (key >> 32) as u32;
+            triple[second] = key as u32;
+            Scored {
+                error: key_error((key >> 64) as u32),
+                triple,
             }
-            if best.len() == keep {
-                worst = best[keep - 1].error;
+        })
+        .collect()
+}
+
+/// [`sq_dist`] of two strips in one AVX register: the same eight lane
+/// accumulators and summation tree, no fused multiply-adds, so the same
+/// float.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[allow(unsafe_code)]
+#[inline]
+fn strip_dist_avx<const B: usize>(a: &[[f32; 8]; B], b: &[[f32; 8]; B]) -> f32 {
+    use std::arch::x86_64::*;
+    // SAFETY: each load reads the eight floats of an `[f32; 8]`.
+    let load = |w: &[f32; 8]| unsafe { _mm256_loadu_ps(w.as_ptr()) };
+    let mut acc = _mm256_setzero_ps();
+    for (x, y) in a.iter().zip(b) {
+        let d = _mm256_sub_ps(load(x), load(y));
+        acc = _mm256_add_ps(acc, _mm256_mul_ps(d, d));
+    }
+    // Lanes l and l + 4 first, then ((0 + 1) + (2 + 3)).
+    let s = _mm_add_ps(_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
+    let t = _mm_add_ps(s, _mm_movehdup_ps(s));
+    _mm_cvtss_f32(_mm_add_ss(t, _mm_movehl_ps(t, t))) + 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sorted-insertion form of [`best_pairs`]: the list the heap must
+    /// reproduce, ties included.
+    fn best_pairs_sorted(
+        p: usize,
+        c: u32,
+        qs: &[(f32, u32)],
+        rs: &[(f32, u32)],
+        strips: [&Strips; 3],
+        keep: usize,
+    ) -> Vec<Scored> {
+        let q = (p + 2) % 3;
+        let r = (p + 1) % 3;
+        let mut best: Vec<Scored> = Vec::new();
+        let mut worst = f32::INFINITY;
+        for &(e1, qc) in qs {
+            for &(e2, rc) in rs {
+                let e = e1 + e2 + sq_dist(strips[r].v(rc), strips[q].u(qc));
+                if best.len() == keep && e >= worst {
+                    continue;
+                }
+                let mut triple = [0u32; 3];
+                triple[p] = c;
+                triple[q] = qc;
+                triple[r] = rc;
+                let item = Scored { error: e, triple };
+                let pos = best
+                    .binary_search_by(|b| b.error.total_cmp(&e).then(b.triple.cmp(&triple)))
+                    .unwrap_or_else(|x| x);
+                best.insert(pos, item);
+                best.truncate(keep);
+                if best.len() == keep {
+                    worst = best[keep - 1].error;
+                }
+            }
+        }
+        best
+    }
+
+    /// Strips of `count` pixels with few distinct values, so equal errors
+    /// (and the tie rules) are common.
+    fn strips(count: usize, len: usize, seed: u32) -> Strips {
+        let mut state = seed;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 28) as f32 * 0.25
+        };
+        let mut u = Vec::new();
+        let mut v = Vec::new();
+        for _ in 0..count {
+            for i in 0..len {
+                u.push(if i < 15 { next() } else { 0.0 });
+                v.push(if i < 15 { next() } else { 0.0 });
+            }
+        }
+        Strips { len, raw: 15, u, v }
+    }
+
+    #[test]
+    fn heap_keeps_what_sorted_insertion_keeps() {
+        let all = [strips(40, 16, 1), strips(40, 16, 2), strips(40, 16, 3)];
+        let refs = [&all[0], &all[1], &all[2]];
+        for p in 0..3 {
+            for keep in [1, 4, 17, 100, 1000] {
+                for c in 0..6u32 {
+                    let list = |plane: usize, seed: u32| -> Vec<(f32, u32)> {
+                        let mut l: Vec<(f32, u32)> = (0..30u32)
+                            .map(|i| (((i * 7 + seed + c) % 5) as f32, (i * 11 + seed) % 40))
+                            .collect();
+                        l.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                        l.dedup_by_key(|x| x.1);
+                        let _ = plane;
+                        l
+                    };
+                    let (qs, rs) = (list(0, 3), list(1, 5));
+                    let expected = best_pairs_sorted(p, c, &qs, &rs, refs, keep);
+                    assert_eq!(best_pairs(p, c, &qs, &rs, refs, keep), expected);
+                    let portable = best_pairs_with::<2>(p, c, &qs, &rs, refs, keep, |a, b| {
+                        sq_dist(a.as_flattened(), b.as_flattened())
+                    });
+                    assert_eq!(portable, expected);
+                }
             }
         }
     }
-    best
+
+    #[cfg(target_arch = "x86_64")]
+    #[allow(unsafe_code)]
+    fn avx_distance_matches<const B: usize>() {
+        let s = strips(50, 8 * B, 9);
+        for i in 0..50u32 {
+            for j in 0..50u32 {
+                let (a, b) = (s.u(i), s.v(j));
+                // SAFETY: the CPU runs AVX instructions (asserted by the caller).
+                let fast = unsafe { strip_dist_avx::<B>(&blocks(a), &blocks(b)) };
+                assert_eq!(fast.to_bits(), sq_dist(a, b).to_bits());
+            }
+        }
+    }
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn avx_strip_distance_is_the_same_float() {
+        assert!(has_avx(), "the x86_64 machines this runs on have AVX");
+        avx_distance_matches::<2>();
+        avx_distance_matches::<3>();
+        avx_distance_matches::<4>();
+    }
+
+    #[test]
+    fn error_keys_order_as_total_cmp() {
+        let values = [
+            f32::NEG_INFINITY,
+            -3.5,
+            -1e-30,
+            -0.0,
+            0.0,
+            1e-30,
+            0.25,
+            7.0,
+            1e30,
+            f32::INFINITY,
+        ];
+        for &a in &values {
+            assert_eq!(key_error(error_key(a)).to_bits(), a.to_bits());
+            for &b in &values {
+                assert_eq!(
+                    error_key(a).cmp(&error_key(b)),
+                    a.total_cmp(&b),
+                    "{a} vs {b}"
+                );
+            }
+        }
+    }
 }
