@@ -33,11 +33,10 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
     let steps: [Step; 4] = std::array::from_fn(|i| {
         let mut d = [0i64; 3];
         d[[a, b][i / 2]] = [-1, 1][i % 2];
-        let moves = [0, 1, 2].map(|j| {
+        [0, 1, 2].map(|j| {
             let (u, v) = project(j, d);
             (u * h, v * h)
-        });
-        Step { moves }
+        })
     });
     let original: Vec<Option<Scored>> = lists.iter().map(|l| l.first().copied()).collect();
     let mut lists = lists;
@@ -70,7 +69,7 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
             .map(|(c, l)| {
                 let before = l.len();
                 let neighbours = steps.map(|st| {
-                    let (du, dv) = st.moves[p];
+                    let (du, dv) = st[p];
                     dims.shift(c as u32, du, dv)
                 });
                 l.retain(|s| coherent(p, s.triple, &neighbours, &coords, &steps, dims, h));
@@ -97,10 +96,7 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
 }
 
 /// A unit step of plane p, as (u, v) moves of `h` pixels in each plane.
-#[derive(Clone, Copy)]
-struct Step {
-    moves: [(i64, i64); 3],
-}
+type Step = [(i64, i64); 3];
 
 /// Whether both foreign coordinates of triple `t` are continued by a
 /// candidate of one of the pixel's `neighbours` (one per step).
@@ -115,7 +111,7 @@ fn coherent(
 ) -> bool {
     (0..3).filter(|&j| j != p).all(|j| {
         steps.iter().zip(neighbours).any(|(st, &neighbour)| {
-            let (ju, jv) = st.moves[j];
+            let (ju, jv) = st[j];
             let want = dims.shift(t[j], ju, jv);
             coords[neighbour as usize][j]
                 .binary_search(&dims.snap(want, h as u32))

@@ -140,6 +140,7 @@ pub fn search_plane(
 
 /// Keeps the `keep` lowest-error triples from all (q, r) pairs; both lists
 /// are sorted by their partial error so the pair loops stop early.
+#[allow(unsafe_code)]
 fn best_pairs(
     p: usize,
     c: u32,
@@ -149,30 +150,24 @@ fn best_pairs(
     keep: usize,
 ) -> Vec<Scored> {
     // Strips of N = 3 … 9 pixels are 2, 3 or 4 blocks of eight floats.
+    debug_assert!((16..=32).contains(&strips[0].len));
+    macro_rules! with_blocks {
+        ($b:literal) => {{
+            #[cfg(target_arch = "x86_64")]
+            if has_avx() {
+                // SAFETY: the CPU runs AVX instructions (checked above).
+                return unsafe { best_pairs_avx::<$b>(p, c, qs, rs, strips, keep) };
+            }
+            best_pairs_with::<$b>(p, c, qs, rs, strips, keep, |a, b| {
+                sq_dist(a.as_flattened(), b.as_flattened())
+            })
+        }};
+    }
     match strips[0].len / 8 {
-        ..=2 => best_pairs_blocks::<2>(p, c, qs, rs, strips, keep),
-        3 => best_pairs_blocks::<3>(p, c, qs, rs, strips, keep),
-        _ => best_pairs_blocks::<4>(p, c, qs, rs, strips, keep),
+        ..=2 => with_blocks!(2),
+        3 => with_blocks!(3),
+        _ => with_blocks!(4),
     }
-}
-
-#[allow(unsafe_code)]
-fn best_pairs_blocks<const B: usize>(
-    p: usize,
-    c: u32,
-    qs: &[(f32, u32)],
-    rs: &[(f32, u32)],
-    strips: [&Strips; 3],
-    keep: usize,
-) -> Vec<Scored> {
-    #[cfg(target_arch = "x86_64")]
-    if has_avx() {
-        // SAFETY: the CPU runs AVX instructions (checked above).
-        return unsafe { best_pairs_avx::<B>(p, c, qs, rs, strips, keep) };
-    }
-    best_pairs_with::<B>(p, c, qs, rs, strips, keep, |a, b| {
-        sq_dist(a.as_flattened(), b.as_flattened())
-    })
 }
 
 #[cfg(target_arch = "x86_64")]
