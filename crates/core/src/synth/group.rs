@@ -281,9 +281,10 @@ impl Engine {
                 .par_chunks_mut(layer)
                 .zip(zs.par_iter())
                 .for_each(|(dst, &z)| {
+                    let mut sites = init::Sites::default();
                     for p in need.layer(z) {
                         let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
-                        dst[i] = slab.initial_triple(&jitter, k, p);
+                        dst[i] = slab.initial_triple(&jitter, k, p, &mut sites);
                     }
                 });
             return g;

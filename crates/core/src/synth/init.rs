@@ -41,14 +41,22 @@ pub struct Slab<'a> {
 impl Slab<'_> {
     /// Version 0 of the initial level `k` at `p`: the slab, warped by the
     /// jitter.
-    pub fn initial_triple(&self, jitter: &JitterField, k: usize, p: [i64; 3]) -> [u32; 3] {
+    /// `sites` remembers the cell sites last looked at: voxels visited in
+    /// rows mostly share them.
+    pub fn initial_triple(
+        &self,
+        jitter: &JitterField,
+        k: usize,
+        p: [i64; 3],
+        sites: &mut Sites,
+    ) -> [u32; 3] {
         let d = jitter.displacement(p);
         let q = [0, 1, 2].map(|a| p[a] + d[a].round() as i64);
-        self.triple(k, q)
+        self.triple(k, q, sites)
     }
 
     /// The tiled slab's triple at `p` of level `k`.
-    pub fn triple(&self, k: usize, p: [i64; 3]) -> [u32; 3] {
+    fn triple(&self, k: usize, p: [i64; 3], sites: &mut Sites) -> [u32; 3] {
         let (c, seed, tiling) = (self.cands, self.seed, self.tiling);
         let n = self.thickness as i64;
         let r = n / 2;
@@ -63,7 +71,7 @@ impl Slab<'_> {
                 (Piece::Block(block), [centre[0], centre[1], p[2] as f64])
             }
             SlabTiling::Cells => {
-                let (cube, site) = nearest_site(seed, k, side, p);
+                let (cube, site) = sites.nearest(seed, k, side, p);
                 let site = site.map(|v| v as f64 / SITE_STEPS as f64 - 0.5);
                 (Piece::Cell(cube), site)
             }
@@ -113,39 +121,58 @@ enum Piece {
 /// sites' grid, so a voxel is almost never equally far from two sites.
 const SITE_STEPS: i64 = 256;
 
-/// The cell that holds `p`: its site's cube, and the site in
-/// [`SITE_STEPS`] of a voxel. Cubes of side `side` each own one site at a
-/// hashed position inside them, and a voxel belongs to the nearest site
-/// among its own cube's and the 26 around it (a jittered-grid Voronoi
-/// partition, in integers so every machine draws the same borders).
-/// Borders run at every angle, and they are the same in neighbouring
-/// layers, as the blocks' were: a seam scattered anew in every layer would
-/// spoil far more x and y slice neighbourhoods than one that continues
-/// across the layers.
-fn nearest_site(seed: u64, k: usize, side: i64, p: [i64; 3]) -> ([i64; 3], [i64; 3]) {
-    let span = side * SITE_STEPS;
-    let at = p.map(|v| v * SITE_STEPS + SITE_STEPS / 2);
-    let cube = at.map(|v| v.div_euclid(span));
-    let mut best = (i64::MAX, cube, at);
-    for dz in -1..=1 {
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let c = [cube[0] + dx, cube[1] + dy, cube[2] + dz];
-                let hs = hash_pos(seed, k as u32, TAG_CELL, c);
-                let hz = mix(hs);
-                let site = [
-                    c[0] * span + (hs % span as u64) as i64,
-                    c[1] * span + ((hs >> 32) % span as u64) as i64,
-                    c[2] * span + (hz % span as u64) as i64,
-                ];
-                let d2: i64 = (0..3).map(|a| (at[a] - site[a]).pow(2)).sum();
-                if d2 < best.0 {
-                    best = (d2, c, site);
+/// The sites of the cubes around one cube (see [`Sites::nearest`]).
+#[derive(Default)]
+pub struct Sites {
+    /// The level, cube side and cube they are for.
+    key: Option<(usize, i64, [i64; 3])>,
+    /// Each cube around it, z outermost, and its site.
+    around: [([i64; 3], [i64; 3]); 27],
+}
+
+impl Sites {
+    /// The cell that holds `p`: its site's cube, and the site in
+    /// [`SITE_STEPS`] of a voxel. Cubes of side `side` each own one site
+    /// at a hashed position inside them, and a voxel belongs to the
+    /// nearest site among its own cube's and the 26 around it (a
+    /// jittered-grid Voronoi partition, in integers so every machine draws
+    /// the same borders). Borders run at every angle, and they are the
+    /// same in neighbouring layers, as the blocks' were: a seam scattered
+    /// anew in every layer would spoil far more x and y slice
+    /// neighbourhoods than one that continues across the layers.
+    fn nearest(&mut self, seed: u64, k: usize, side: i64, p: [i64; 3]) -> ([i64; 3], [i64; 3]) {
+        let span = side * SITE_STEPS;
+        let at = p.map(|v| v * SITE_STEPS + SITE_STEPS / 2);
+        let cube = at.map(|v| v.div_euclid(span));
+        if self.key != Some((k, side, cube)) {
+            let mut n = 0;
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        let c = [cube[0] + dx, cube[1] + dy, cube[2] + dz];
+                        let hs = hash_pos(seed, k as u32, TAG_CELL, c);
+                        let hz = mix(hs);
+                        let site = [
+                            c[0] * span + (hs % span as u64) as i64,
+                            c[1] * span + ((hs >> 32) % span as u64) as i64,
+                            c[2] * span + (hz % span as u64) as i64,
+                        ];
+                        self.around[n] = (c, site);
+                        n += 1;
+                    }
                 }
             }
+            self.key = Some((k, side, cube));
         }
+        let mut best = (i64::MAX, cube, at);
+        for &(c, site) in &self.around {
+            let d2: i64 = (0..3).map(|a| (at[a] - site[a]).pow(2)).sum();
+            if d2 < best.0 {
+                best = (d2, c, site);
+            }
+        }
+        (best.1, best.2)
     }
-    (best.1, best.2)
 }
 
 /// The exemplar's period in voxels of level `k`.
@@ -313,7 +340,32 @@ fn exp_neg(x: f32) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use super::exp_neg;
+    use super::{Sites, exp_neg};
+
+    /// Sites remembered from the last voxel give the same cell as sites
+    /// looked up afresh, wherever the walk goes next (rows, jumps, other
+    /// levels and cube sides).
+    #[test]
+    fn remembered_sites_are_the_sites() {
+        let mut kept = Sites::default();
+        let walk = (-40..40i64)
+            .map(|x| (0, 8, [x, 3, -2]))
+            .chain((0..200i64).map(|i| {
+                let h = i.wrapping_mul(2_654_435_761);
+                (
+                    (i % 3) as usize,
+                    4 + i % 5,
+                    [h % 97 - 48, (h >> 8) % 61 - 30, (h >> 16) % 13 - 6],
+                )
+            }));
+        for (k, side, p) in walk {
+            assert_eq!(
+                kept.nearest(7, k, side, p),
+                Sites::default().nearest(7, k, side, p),
+                "level {k}, side {side}, voxel {p:?}"
+            );
+        }
+    }
 
     #[test]
     fn exp_neg_matches_exp() {

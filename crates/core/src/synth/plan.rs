@@ -228,6 +228,22 @@ impl Mask {
         self.flags[self.shape.index(p)].store(true, Ordering::Relaxed);
     }
 
+    /// The index step of the offset `d`.
+    fn offset_of(&self, d: [i64; 3]) -> isize {
+        let s = self.shape.strides();
+        (d[0] * s[0] + d[1] * s[1] + d[2] * s[2]) as isize
+    }
+
+    /// [`Mask::mark`] for each of `reads` (from [`Mask::offset_of`])
+    /// around `p`; every one must lie inside the box.
+    #[inline]
+    pub fn mark_around(&self, p: [i64; 3], reads: &[isize]) {
+        let base = self.shape.index(p) as isize;
+        for &d in reads {
+            self.flags[(base + d) as usize].store(true, Ordering::Relaxed);
+        }
+    }
+
     /// Recomputes the count after [`Mask::mark`] calls.
     pub fn recount(&mut self) {
         self.count = self
@@ -300,20 +316,23 @@ impl Mask {
 
     /// Members in x-fastest order.
     pub fn positions(&self) -> impl Iterator<Item = [i64; 3]> + '_ {
-        (0..self.flags.len())
-            .filter(|&i| self.has_index(i))
-            .map(|i| self.shape.position(i))
+        let b = self.shape.bounds;
+        (b.lo[2]..b.hi[2]).flat_map(move |z| self.layer(z))
     }
 
-    /// Members of one z layer, x fastest.
+    /// Members of one z layer, x fastest (row by row: positions follow
+    /// from the row, with no division per member).
     pub fn layer(&self, z: i64) -> impl Iterator<Item = [i64; 3]> + '_ {
         let b = self.shape.bounds;
-        let s = b.size();
-        let per = (s[0] * s[1]) as usize;
-        let start = (z - b.lo[2]) as usize * per;
-        (start..start + per)
-            .filter(|&i| self.has_index(i))
-            .map(|i| self.shape.position(i))
+        let sx = b.size()[0] as usize;
+        (b.lo[1]..b.hi[1]).flat_map(move |y| {
+            let start = self.shape.index([b.lo[0], y, z]);
+            self.flags[start..start + sx]
+                .iter()
+                .zip(b.lo[0]..)
+                .filter(|(f, _)| f.load(Ordering::Relaxed))
+                .map(move |(_, x)| [x, y, z])
+        })
     }
 }
 
@@ -375,6 +394,10 @@ pub fn backward(
     let mut subpasses = Vec::new();
     let total: i64 = steps.iter().map(|s| s.passes as i64 * classes).sum();
     let mut forward_end = total;
+    // What a correction reads, as index offsets in `need` (whose box
+    // never changes during the walk).
+    let mut reads = Vec::new();
+    shape([0; 3], radius, cube, |d| reads.push(need.offset_of(d)));
     for (si, step) in steps.iter().enumerate().rev() {
         let mut start = Mask::new(need.bounds());
         let step_subpasses = step.passes as i64 * classes;
@@ -394,15 +417,20 @@ pub fn backward(
                 need.unmark(q);
             }
             // The voxels of one subpass are independent: they mark their
-            // reads in parallel.
+            // reads in parallel. A voxel whose reads all lie inside its
+            // barrier cell (most of them) marks them by index offsets.
             corrected
                 .par_iter()
                 .with_min_len(1024)
                 .for_each(|&v| match cell {
-                    None => shape(v, radius, cube, |q| need.mark(q)),
+                    None => need.mark_around(v, &reads),
                     Some(m) => {
                         let lo = v.map(|c| (c - step.offset).div_euclid(m) * m + step.offset);
                         let cell_box = Box3::new(lo, [m; 3]);
+                        if (0..3).all(|a| v[a] - radius >= lo[a] && v[a] + radius < lo[a] + m) {
+                            need.mark_around(v, &reads);
+                            return;
+                        }
                         shape(v, radius, cube, |q| {
                             if cell_box.contains(q) {
                                 need.mark(q);
@@ -579,6 +607,54 @@ fn subpass_phase(class: i64, side: i64, radius: i64) -> [i64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A layer's members and all members come x fastest, as a scan of
+    /// every voxel in index order finds them.
+    #[test]
+    fn layers_and_positions_list_the_members_in_order() {
+        let b = Box3::new([-4, 2, -3], [9, 5, 4]);
+        let mut m = Mask::new(b);
+        for i in 0..b.volume() as i64 {
+            if i.wrapping_mul(2_654_435_761) % 7 < 3 {
+                m.insert(m.shape.position(i as usize));
+            }
+        }
+        let scan = |z: Option<i64>| -> Vec<[i64; 3]> {
+            (0..m.flags.len())
+                .map(|i| m.shape.position(i))
+                .filter(|p| m.contains(*p) && z.is_none_or(|z| p[2] == z))
+                .collect()
+        };
+        for z in b.lo[2]..b.hi[2] {
+            assert_eq!(m.layer(z).collect::<Vec<_>>(), scan(Some(z)), "layer {z}");
+        }
+        assert_eq!(m.positions().collect::<Vec<_>>(), scan(None));
+        assert_eq!(m.positions().count() as u64, m.count());
+    }
+
+    /// Marking by index offsets marks what marking each read does.
+    #[test]
+    fn marking_around_a_voxel_marks_its_reads() {
+        for (radius, cube) in [(1, false), (1, true), (2, false)] {
+            let b = Box3::new([-5, -6, -4], [11, 12, 9]);
+            let (mut by_offsets, mut one_by_one) = (Mask::new(b), Mask::new(b));
+            let mut reads = Vec::new();
+            shape([0; 3], radius, cube, |d| {
+                reads.push(by_offsets.offset_of(d))
+            });
+            for v in [[0, 0, 0], [-2, 3, 1], [3, -3, -1]] {
+                by_offsets.mark_around(v, &reads);
+                shape(v, radius, cube, |q| one_by_one.mark(q));
+            }
+            by_offsets.recount();
+            one_by_one.recount();
+            assert_eq!(
+                by_offsets.positions().collect::<Vec<_>>(),
+                one_by_one.positions().collect::<Vec<_>>()
+            );
+            assert!(by_offsets.count() > 0);
+        }
+    }
 
     #[test]
     fn shrinking_keeps_the_members_in_a_tight_box() {

@@ -40,12 +40,34 @@ use super::{
 };
 use crate::candidates::geometry::{AXES, Dims};
 use crate::candidates::sparse::{
-    DIAGONALS, SPARSE_DIMS, SparseTables, WIDE_RANGE, WideVector, appearance_stride,
-    best_distances, wide_distance,
+    BestCandidates, DIAGONALS, SPARSE_DIMS, SparseTables, WIDE_RANGE, WideVector,
+    appearance_stride, best_distances, wide_distance,
 };
 use crate::candidates::{Candidates, Level};
 use crate::params::SynthParams;
 use crate::stack::spacing;
+
+/// Slots of the set of proposed pixels (keys tagged by plane): more than
+/// [`MAX_PROPOSED`], so probing always ends.
+const SEEN_SLOTS: usize = 256;
+
+/// Adds `key` (non-zero) to the open-addressed set `seen`; whether it was
+/// new.
+#[inline(always)]
+fn first_time(seen: &mut [u32; SEEN_SLOTS], key: u32) -> bool {
+    let mut h = (key.wrapping_mul(0x9E37_79B1) >> 24) as usize;
+    loop {
+        let v = seen[h];
+        if v == key {
+            return false;
+        }
+        if v == 0 {
+            seen[h] = key;
+            return true;
+        }
+        h = (h + 1) % SEEN_SLOTS;
+    }
+}
 
 /// The neighbourhood of the world frame, for the unguided correction
 /// (which never reads it: its offsets are constants).
@@ -65,6 +87,7 @@ const MAX_SIMILAR: usize = 8;
 /// Most proposed pixels: 9 in-plane neighbours in each of 3 planes, each
 /// with its similarity set.
 const MAX_PROPOSED: usize = 3 * 9 * MAX_SIMILAR;
+const _: () = assert!(MAX_PROPOSED < SEEN_SLOTS);
 
 /// Everything the appearance-space correction of one level reads.
 pub struct AppearanceCorrector<'a> {
@@ -86,6 +109,13 @@ pub struct AppearanceCorrector<'a> {
     consistency: f32,
     /// The query as one linear map (see [`QueryMap`]).
     map: QueryMap,
+    /// Whether a pixel that several neighbours propose is scored once. At
+    /// the coarse levels, where neighbours that do not continue each other
+    /// still lie a pixel or two apart in an exemplar blurred over many,
+    /// their similarity sets overlap and half of the proposals or more are
+    /// repeats; at the fine levels too few are to pay for the test. The
+    /// choice never changes a result: a repeat scores the same.
+    distinct: bool,
     /// Whether the CPU has AVX2, which the same code compiles to in half
     /// the instructions (the results are the same: every float operation
     /// is done lane by lane in the same order, and none is fused).
@@ -216,6 +246,7 @@ impl<'a> AppearanceCorrector<'a> {
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
             consistency: params.consistency * scale * scale,
             map: QueryMap::new(level, tables, params.contrast),
+            distinct: spacing(k) >= 4,
             avx2: has_avx2(),
         }
     }
@@ -225,6 +256,14 @@ impl<'a> AppearanceCorrector<'a> {
     #[cfg(test)]
     pub fn portable(mut self) -> Self {
         self.avx2 = false;
+        self
+    }
+
+    /// The same corrector, scoring every proposed pixel however often it
+    /// is proposed (`distinct` off) or once (on).
+    #[cfg(test)]
+    pub fn with_distinct(mut self, on: bool) -> Self {
+        self.distinct = on;
         self
     }
 
@@ -393,34 +432,15 @@ impl<'a> AppearanceCorrector<'a> {
         // The proposed pixels and the coherent triples are known from the
         // triples alone: prefetch what scoring them reads, so the cache
         // misses overlap the query's arithmetic below. A pixel proposed
-        // twice is scored twice.
+        // twice is scored twice unless `distinct` says otherwise.
         // Their candidate lists, kept from the prefetch (the entries
         // past `proposed_n` are placeholders).
         let mut proposed = [self.tables.best(0, 0); MAX_PROPOSED];
-        let mut proposed_n = 0;
-        for (plane, &(a, b)) in AXES.iter().enumerate() {
-            let mut bases = [u32::MAX; 9];
-            let mut bases_n = 0;
-            for j in -1..=1i64 {
-                for i in -1..=1i64 {
-                    let base = moved[slot_of(plane, a, i, b, j)][plane];
-                    // Coherent neighbours usually point at the same pixel.
-                    if bases[..bases_n].contains(&base) {
-                        continue;
-                    }
-                    bases[bases_n] = base;
-                    bases_n += 1;
-                    for &s in self.level.similar(plane, base) {
-                        let best = self.tables.best(plane, s);
-                        prefetch(std::slice::from_ref(best));
-                        // The triples' line, for the candidates that win.
-                        prefetch(&best.triples[2..]);
-                        proposed[proposed_n] = best;
-                        proposed_n += 1;
-                    }
-                }
-            }
-        }
+        let proposed_n = if self.distinct {
+            self.propose::<FIELD, true>(moved, local, &mut proposed)
+        } else {
+            self.propose::<FIELD, false>(moved, local, &mut proposed)
+        };
         // The coherent triples: each direct neighbour's triple moved back.
         // One proposed twice is scored twice, which is cheaper than
         // finding out.
@@ -510,6 +530,56 @@ impl<'a> AppearanceCorrector<'a> {
     }
 }
 
+impl<'a> AppearanceCorrector<'a> {
+    /// The k-coherence proposals: each in-plane neighbour's pixel moved
+    /// back by its offset (`moved`, by near slot) proposes its similarity
+    /// set; their candidate lists go to `proposed`, whose length is
+    /// returned. With `DISTINCT` a pixel proposed again is left out.
+    #[inline(always)]
+    fn propose<const FIELD: bool, const DISTINCT: bool>(
+        &self,
+        moved: &[[u32; 3]; 27],
+        local: &Local,
+        proposed: &mut [&'a BestCandidates; MAX_PROPOSED],
+    ) -> usize {
+        let mut n = 0;
+        let mut seen = [0u32; SEEN_SLOTS];
+        for (plane, &(a, b)) in AXES.iter().enumerate() {
+            let mut bases = [u32::MAX; 9];
+            let mut bases_n = 0;
+            for j in -1..=1i64 {
+                for i in -1..=1i64 {
+                    let slot = if FIELD {
+                        local.slot(plane, i, j)
+                    } else {
+                        in_plane_slot(a, i, b, j)
+                    };
+                    let base = moved[slot][plane];
+                    // Coherent neighbours usually point at the same pixel.
+                    if bases[..bases_n].contains(&base) {
+                        continue;
+                    }
+                    bases[bases_n] = base;
+                    bases_n += 1;
+                    for &s in self.level.similar(plane, base) {
+                        // Pixels are fewer than 2^30: the key is unique.
+                        if DISTINCT && !first_time(&mut seen, (s << 2 | plane as u32) + 1) {
+                            continue;
+                        }
+                        let best = self.tables.best(plane, s);
+                        prefetch(std::slice::from_ref(best));
+                        // The triples' line, for the candidates that win.
+                        prefetch(&best.triples[2..]);
+                        proposed[n] = best;
+                        n += 1;
+                    }
+                }
+            }
+        }
+        n
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -518,7 +588,8 @@ mod tests {
 
     /// The AVX2 build of the correction and the portable one choose the
     /// same triple for every voxel, at every level and appearance width:
-    /// bytes must not depend on the CPU.
+    /// bytes must not depend on the CPU (nor on whether repeated proposals
+    /// are scored again).
     #[test]
     fn every_cpu_chooses_the_same_triples() {
         let rgb: Vec<u8> = (0..32 * 32 * 3u32)
@@ -551,16 +622,23 @@ mod tests {
                 let synth = SynthParams::default();
                 let fast = AppearanceCorrector::new(&cands, k, &synth);
                 let portable = AppearanceCorrector::new(&cands, k, &synth).portable();
+                // Repeated proposals score the same: leaving them out (or
+                // not) changes nothing.
+                let once = AppearanceCorrector::new(&cands, k, &synth).with_distinct(true);
+                let again = AppearanceCorrector::new(&cands, k, &synth).with_distinct(false);
                 let inside = [(i64::MIN, i64::MAX); 3];
                 for z in bounds.lo[2] + 1..bounds.hi[2] - 1 {
                     for y in bounds.lo[1] + 1..bounds.hi[1] - 1 {
                         for x in bounds.lo[0] + 1..bounds.hi[0] - 1 {
                             let p = [x, y, z];
+                            let t = fast.correct_with::<false>(&work, &work, inside, p);
                             assert_eq!(
-                                fast.correct_with::<false>(&work, &work, inside, p),
+                                t,
                                 portable.correct_with::<false>(&work, &work, inside, p),
                                 "level {k}, voxel {p:?}, {pca_dims} dimensions"
                             );
+                            assert_eq!(t, once.correct_with::<false>(&work, &work, inside, p));
+                            assert_eq!(t, again.correct_with::<false>(&work, &work, inside, p));
                         }
                     }
                 }
