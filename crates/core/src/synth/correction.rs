@@ -12,8 +12,6 @@
 //! disagreement of their three colours ([`SynthParams::consistency`]); the
 //! precomputed 3D candidates agree by construction (low crossbar error).
 
-mod appearance;
-
 use super::colour::colour;
 use super::grid::{Box3, Grid};
 use crate::candidates::Candidates;
@@ -131,7 +129,9 @@ impl<'a> Corrector<'a> {
 
 /// The direct neighbours a sparse correction reads: offsets in {-1, 0, 1}³
 /// with at least one zero coordinate (the union of the three in-plane 3×3
-/// windows), z outermost.
+/// windows), z outermost. The correction reads them written out
+/// ([`for_each_direct`]); the tests check that list against this one.
+#[cfg(test)]
 const DIRECT: [[i64; 3]; 19] = {
     let mut out = [[0i64; 3]; 19];
     let mut n = 0;
@@ -175,6 +175,9 @@ macro_rules! for_each_direct {
         $m!(0, 1, 1);
     };
 }
+
+// After `for_each_direct`, which it uses.
+mod appearance;
 
 /// How far along x [`gather_near`] prefetches, in voxels.
 const AHEAD: i64 = 16;
@@ -265,7 +268,7 @@ impl Local {
             for j in [-1.0, 0.0, 1.0] {
                 for i in [-1.0, 0.0, 1.0] {
                     let d = |w: usize| round(fa[w] * i + fb[w] * j).clamp(-1, 1);
-                    let k = (13 + d(0) + 3 * d(1) + 9 * d(2)) as usize;
+                    let k = (CENTRE as i64 + d(0) + 3 * d(1) + 9 * d(2)) as usize;
                     slot[plane][n] = k as u8;
                     seen[k] = true;
                     n += 1;
@@ -355,17 +358,20 @@ fn disagreement(plane_colours: &[&[[f32; 3]]; 3], weight: f32, t: [u32; 3]) -> u
     (d * weight) as u32
 }
 
+/// The [`near_slot`] of the voxel itself.
+const CENTRE: usize = 13;
+
 /// Slot of offset `d` (in {-1, 0, 1}³) in a [`Near`] table.
 #[inline(always)]
 fn near_slot(d: [i64; 3]) -> usize {
-    (13 + d[0] + 3 * d[1] + 9 * d[2]) as usize
+    (CENTRE as i64 + d[0] + 3 * d[1] + 9 * d[2]) as usize
 }
 
 /// Slot of the in-plane offset (i along axis `a`, j along axis `b`).
 #[inline(always)]
 fn in_plane_slot(a: usize, i: i64, b: usize, j: i64) -> usize {
     const STEP: [i64; 3] = [1, 3, 9];
-    (13 + i * STEP[a] + j * STEP[b]) as usize
+    (CENTRE as i64 + i * STEP[a] + j * STEP[b]) as usize
 }
 
 /// The direct neighbours' triples and colours, by [`near_slot`], in the

@@ -35,7 +35,7 @@
 //! The best by distance of the quantised 12-location vectors wins.
 
 use super::{
-    DIRECT, Local, Near, Work, disagreement, gather_local, gather_near, in_plane_slot, near_slot,
+    CENTRE, Local, Near, Work, disagreement, gather_local, gather_near, in_plane_slot, near_slot,
     prefetch,
 };
 use crate::candidates::geometry::{AXES, Dims};
@@ -442,22 +442,36 @@ impl<'a> AppearanceCorrector<'a> {
             self.propose::<FIELD, false>(moved, local, &mut proposed)
         };
         // The coherent triples: each direct neighbour's triple moved back.
-        // One proposed twice is scored twice, which is cheaper than
-        // finding out.
+        // Other than the voxel's own, one proposed twice is scored twice,
+        // which is cheaper than finding out.
         // In a local frame, the in-plane neighbours the frame's planes hold
         // (Zhang et al.'s reduced candidate set).
+        // A neighbour that continues the voxel moves back onto the voxel's
+        // own triple, which is listed once.
+        let own = near.triples[CENTRE];
         let mut coherent = [[u32::MAX; 3]; 27];
-        let coherent_n = if FIELD {
-            for (t, &k) in coherent.iter_mut().zip(local.used()) {
-                *t = moved[k as usize];
+        let mut coherent_n = 0;
+        if FIELD {
+            for &k in local.used() {
+                let t = moved[k as usize];
+                if k as usize == CENTRE || t != own {
+                    coherent[coherent_n] = t;
+                    coherent_n += 1;
+                }
             }
-            local.used().len()
         } else {
-            for (t, &d) in coherent.iter_mut().zip(&DIRECT) {
-                *t = moved[near_slot(d)];
+            // Written out, so each slot is a constant; without a branch,
+            // as whether a neighbour continues the voxel is hard to predict.
+            macro_rules! keep {
+                ($x:literal, $y:literal, $z:literal) => {{
+                    let d: [i64; 3] = [$x, $y, $z];
+                    let t = moved[near_slot(d)];
+                    coherent[coherent_n] = t;
+                    coherent_n += usize::from(d == [0; 3] || t != own);
+                }};
             }
-            DIRECT.len()
-        };
+            for_each_direct!(keep);
+        }
         let coherent = &coherent[..coherent_n];
         // Their shares, found once: fetched now, summed when scored.
         let mut shares = [self.tables.shares_of([0; 3]); 27];
