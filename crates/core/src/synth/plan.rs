@@ -76,32 +76,42 @@ impl Classes {
         }
     }
 
-    /// [`Classes::for_class`] column by column: columns of 16×16 voxels
-    /// along z, y-major. The voxels of one subpass are independent, so
-    /// their order is free; in this one each thread's share of a subpass
-    /// reads a compact part of the working grid.
-    fn for_class_in_columns(
-        self,
-        bounds: &Box3,
-        class: i64,
-        radius: i64,
-        mut f: impl FnMut([i64; 3]),
-    ) {
+    /// The members of `need` in subpass `class`, column by column: columns
+    /// of 16×16 voxels along z, y-major. The voxels of one subpass are
+    /// independent, so their order is free; in this one each thread's
+    /// share of a subpass reads a compact part of the working grid. The
+    /// columns are scanned in parallel.
+    fn members_in_columns(self, need: &Mask, class: i64, radius: i64) -> Vec<[i64; 3]> {
         const SIDE: i64 = 16;
+        let bounds = need.bounds();
         if bounds.is_empty() {
-            return;
+            return Vec::new();
         }
         let columns =
             |a: usize| bounds.lo[a].div_euclid(SIDE)..=(bounds.hi[a] - 1).div_euclid(SIDE);
+        let mut boxes = Vec::new();
         for cy in columns(1) {
             for cx in columns(0) {
                 let column = Box3 {
                     lo: [cx * SIDE, cy * SIDE, bounds.lo[2]],
                     hi: [(cx + 1) * SIDE, (cy + 1) * SIDE, bounds.hi[2]],
                 };
-                self.for_class(&bounds.intersect(&column), class, radius, &mut f);
+                boxes.push(bounds.intersect(&column));
             }
         }
+        let per_column: Vec<Vec<[i64; 3]>> = boxes
+            .par_iter()
+            .map(|b| {
+                let mut found = Vec::new();
+                self.for_class(b, class, radius, |v| {
+                    if need.contains(v) {
+                        found.push(v);
+                    }
+                });
+                found
+            })
+            .collect();
+        per_column.concat()
     }
 
     /// Calls `f` for each voxel of `bounds` in subpass `class` (for reads
@@ -404,12 +414,7 @@ pub fn backward(
         let first_of_step = forward_end - step_subpasses;
         for t in (0..step_subpasses).rev() {
             let class = t % classes;
-            let mut corrected = Vec::new();
-            order.for_class_in_columns(&need.bounds(), class, radius, |v| {
-                if need.contains(v) {
-                    corrected.push(v);
-                }
-            });
+            let mut corrected = order.members_in_columns(&need, class, radius);
             let forward = first_of_step + t;
             let pass = (forward / classes) as usize;
             // The count is refreshed when the step's walk ends.
