@@ -36,24 +36,7 @@ impl Pca {
         for m in &mut mean {
             *m /= n.max(1) as f64;
         }
-        // The upper triangle, row by row (each entry sums its products in
-        // sample order); rows as slices so the inner loop vectorises.
-        let mut upper = vec![0f64; input * input];
-        let mut centred = vec![0f64; input];
-        for s in samples.chunks_exact(input) {
-            for (c, (&v, &m)) in centred.iter_mut().zip(s.iter().zip(&mean)) {
-                *c = v as f64 - m;
-            }
-            for (i, row) in upper.chunks_exact_mut(input).enumerate() {
-                let ci = centred[i];
-                if ci == 0.0 {
-                    continue;
-                }
-                for (o, &cj) in row[i..].iter_mut().zip(&centred[i..]) {
-                    *o += ci * cj;
-                }
-            }
-        }
+        let upper = covariance_upper(samples, input, &mean);
         let cov = DMatrix::<f64>::from_fn(input, input, |i, j| {
             let (i, j) = (i.min(j), i.max(j));
             upper[i * input + j]
@@ -106,6 +89,110 @@ impl Pca {
                 )
             })
             .collect()
+    }
+}
+
+/// The upper triangle of the centred samples' scatter matrix (row-major,
+/// `input` × `input`; the lower triangle is left 0). Each entry sums its
+/// products in sample order, one product at a time (none fused), so the
+/// floats do not depend on the blocking, the threads or the CPU: rows are
+/// shared out among threads, and samples go four at a time through each
+/// row, which is read and written once per four.
+fn covariance_upper(samples: &[f32], input: usize, mean: &[f64]) -> Vec<f64> {
+    const BLOCK: usize = 4;
+    // Rows per task: the triangle's rows shorten, so later tasks take more.
+    const TASKS: usize = 16;
+    let n = samples.len() / input;
+    let mut centred = vec![0f64; n.div_ceil(BLOCK) * BLOCK * input];
+    centred
+        .par_chunks_mut(input)
+        .zip(samples.par_chunks_exact(input))
+        .for_each(|(c, s)| {
+            for (c, (&v, &m)) in c.iter_mut().zip(s.iter().zip(mean)) {
+                *c = v as f64 - m;
+            }
+        });
+    let mut upper = vec![0f64; input * input];
+    // Row boundaries with about equal areas of the triangle.
+    let mut bounds = vec![0usize];
+    let area = |i: usize| (input - i) * (input - i);
+    for t in 1..TASKS {
+        let target = area(0) * (TASKS - t) / TASKS;
+        let i = (0..input).find(|&i| area(i) <= target).unwrap_or(input);
+        if i > *bounds.last().expect("starts at 0") {
+            bounds.push(i);
+        }
+    }
+    bounds.push(input);
+    let mut rows: Vec<(usize, &mut [f64])> = Vec::new();
+    let mut rest = upper.as_mut_slice();
+    for w in bounds.windows(2) {
+        let (chunk, tail) = rest.split_at_mut((w[1] - w[0]) * input);
+        rows.push((w[0], chunk));
+        rest = tail;
+    }
+    let avx = has_avx();
+    rows.into_par_iter().for_each(|(first, chunk)| {
+        #[cfg(target_arch = "x86_64")]
+        if avx {
+            // SAFETY: `avx` is only set when the CPU has AVX.
+            #[allow(unsafe_code)]
+            unsafe {
+                scatter_rows_avx(&centred, n, input, first, chunk)
+            };
+            return;
+        }
+        let _ = avx;
+        scatter_rows(&centred, n, input, first, chunk);
+    });
+    upper
+}
+
+/// [`scatter_rows`] compiled for AVX (the same floats: separate multiplies
+/// and adds, lane by lane).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[allow(unsafe_code)]
+fn scatter_rows_avx(centred: &[f64], n: usize, input: usize, first: usize, chunk: &mut [f64]) {
+    scatter_rows(centred, n, input, first, chunk)
+}
+
+/// Adds every sample's products to rows `first..` of the upper triangle
+/// (`chunk`, whole rows), four samples at a time; `centred` is padded
+/// with zero samples to a multiple of four, whose products are left out.
+#[inline(always)]
+fn scatter_rows(centred: &[f64], n: usize, input: usize, first: usize, chunk: &mut [f64]) {
+    let mut block = centred.chunks_exact(4 * input);
+    let mut done = 0;
+    for four in block.by_ref() {
+        let live = (n - done).min(4);
+        done += 4;
+        let (s0, rest) = four.split_at(input);
+        let (s1, rest) = rest.split_at(input);
+        let (s2, s3) = rest.split_at(input);
+        for (r, row) in chunk.chunks_exact_mut(input).enumerate() {
+            let i = first + r;
+            let (a0, a1, a2, a3) = (s0[i], s1[i], s2[i], s3[i]);
+            let row = &mut row[i..];
+            let (s0, s1, s2, s3) = (&s0[i..], &s1[i..], &s2[i..], &s3[i..]);
+            if live == 4 {
+                for j in 0..row.len() {
+                    let mut o = row[j];
+                    o += a0 * s0[j];
+                    o += a1 * s1[j];
+                    o += a2 * s2[j];
+                    o += a3 * s3[j];
+                    row[j] = o;
+                }
+            } else {
+                let (a, s) = ([a0, a1, a2, a3], [s0, s1, s2, s3]);
+                for (&a, s) in a.iter().zip(s).take(live) {
+                    for (o, &v) in row.iter_mut().zip(s) {
+                        *o += a * v;
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -370,6 +457,44 @@ pub fn project_all(stack: &GaussianStack, k: usize, n: u32, pca: &Pca) -> Appear
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The blocked, threaded scatter matrix is the same floats as one sum
+    /// per entry in sample order, whatever the sample count (a partial
+    /// last block) and with zeros among the values.
+    #[test]
+    fn scatter_matrix_sums_in_sample_order() {
+        for (n, input) in [(1, 3), (7, 5), (64, 37), (103, 96)] {
+            let samples: Vec<f32> = (0..n * input)
+                .map(|i| {
+                    let h = (i as u32).wrapping_mul(2_654_435_761) >> 8;
+                    if h.is_multiple_of(5) {
+                        0.0
+                    } else {
+                        (h % 2001) as f32 / 7.0 - 140.0
+                    }
+                })
+                .collect();
+            let mean: Vec<f64> = (0..input)
+                .map(|j| (0..n).map(|s| samples[s * input + j] as f64).sum::<f64>() / n as f64)
+                .collect();
+            let got = covariance_upper(&samples, input, &mean);
+            for i in 0..input {
+                for j in 0..input {
+                    let mut want = 0f64;
+                    if j >= i {
+                        for s in samples.chunks_exact(input) {
+                            want += (s[i] as f64 - mean[i]) * (s[j] as f64 - mean[j]);
+                        }
+                    }
+                    assert_eq!(
+                        got[i * input + j].to_bits(),
+                        want.to_bits(),
+                        "{n}×{input}, ({i}, {j})"
+                    );
+                }
+            }
+        }
+    }
 
     #[test]
     fn pca_recovers_dominant_direction() {
