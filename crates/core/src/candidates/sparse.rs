@@ -14,7 +14,7 @@
 
 use super::PlaneCandidates;
 use super::geometry::Dims;
-use crate::appearance::{AppearanceLevel, Pca, dot};
+use crate::appearance::{AppearanceLevel, Pca, Projector};
 use rayon::prelude::*;
 
 /// Dimensions of a quantised sparse neighbourhood vector: one SSE register.
@@ -149,6 +149,20 @@ impl SparseTables {
         let offsets = pca.mean_offsets();
         let pixels = dims.len();
         let shares = [0, 1, 2].map(|p| {
+            // The plane's columns of the basis, with no mean: each output
+            // is the `dot` of the pixel's locations with its part of a
+            // row (the projector keeps `dot`'s arithmetic).
+            let part = Projector::new(&Pca {
+                input: 4 * d,
+                dims: pca.dims,
+                mean: vec![0.0; 4 * d],
+                basis: pca
+                    .basis
+                    .chunks_exact(input)
+                    .flat_map(|row| &row[4 * d * p..4 * d * (p + 1)])
+                    .copied()
+                    .collect(),
+            });
             (0..pixels as u32)
                 .into_par_iter()
                 .map_init(
@@ -156,11 +170,7 @@ impl SparseTables {
                     |buf, c| {
                         diagonals(&appearance[p], dims, h, c, buf);
                         let mut s = [0f32; SPARSE_DIMS];
-                        for (j, o) in s.iter_mut().enumerate().take(pca.dims) {
-                            let row =
-                                &pca.basis[j * input + 4 * d * p..j * input + 4 * d * (p + 1)];
-                            *o = dot(buf, row);
-                        }
+                        part.project(buf, &mut s[..pca.dims]);
                         s
                     },
                 )
