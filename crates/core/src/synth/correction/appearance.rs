@@ -112,9 +112,10 @@ pub struct AppearanceCorrector<'a> {
     /// Whether a pixel that several neighbours propose is scored once. At
     /// the coarse levels, where neighbours that do not continue each other
     /// still lie a pixel or two apart in an exemplar blurred over many,
-    /// their similarity sets overlap and half of the proposals or more are
-    /// repeats; at the fine levels too few are to pay for the test. The
-    /// choice never changes a result: a repeat scores the same.
+    /// their similarity sets overlap: a sixth to a half of the proposals
+    /// are repeats at spacing 4 and two thirds or more at spacing 8; at
+    /// the fine levels too few are to pay for the test (docs/quality.md).
+    /// The choice never changes a result: a repeat scores the same.
     distinct: bool,
     /// Whether the CPU has AVX2, which the same code compiles to in half
     /// the instructions (the results are the same: every float operation
