@@ -92,14 +92,18 @@ impl Pca {
     }
 }
 
+/// Samples that go through a row of the scatter matrix together.
+const BLOCK: usize = 4;
+
 /// The upper triangle of the centred samples' scatter matrix (row-major,
 /// `input` × `input`; the lower triangle is left 0). Each entry sums its
 /// products in sample order, one product at a time (none fused), so the
 /// floats do not depend on the blocking, the threads or the CPU: rows are
-/// shared out among threads, and samples go four at a time through each
-/// row, which is read and written once per four.
+/// shared out among threads, and samples go [`BLOCK`] at a time through
+/// each row, which is read and written once per block. Products with a
+/// zero factor are added too: a sum that starts at +0 never becomes −0,
+/// so adding ±0 leaves it as it is.
 fn covariance_upper(samples: &[f32], input: usize, mean: &[f64]) -> Vec<f64> {
-    const BLOCK: usize = 4;
     // Rows per task: the triangle's rows shorten, so later tasks take more.
     const TASKS: usize = 16;
     let n = samples.len() / input;
@@ -142,6 +146,7 @@ fn covariance_upper(samples: &[f32], input: usize, mean: &[f64]) -> Vec<f64> {
             };
             return;
         }
+        #[cfg(not(target_arch = "x86_64"))]
         let _ = avx;
         scatter_rows(&centred, n, input, first, chunk);
     });
@@ -158,15 +163,13 @@ fn scatter_rows_avx(centred: &[f64], n: usize, input: usize, first: usize, chunk
 }
 
 /// Adds every sample's products to rows `first..` of the upper triangle
-/// (`chunk`, whole rows), four samples at a time; `centred` is padded
-/// with zero samples to a multiple of four, whose products are left out.
+/// (`chunk`, whole rows), [`BLOCK`] samples at a time; `centred` is padded
+/// with zero samples to a whole block, whose products are left out.
 #[inline(always)]
 fn scatter_rows(centred: &[f64], n: usize, input: usize, first: usize, chunk: &mut [f64]) {
-    let mut block = centred.chunks_exact(4 * input);
-    let mut done = 0;
-    for four in block.by_ref() {
-        let live = (n - done).min(4);
-        done += 4;
+    const _: () = assert!(BLOCK == 4, "the loop below is written out for four");
+    for (b, four) in centred.chunks_exact(BLOCK * input).enumerate() {
+        let live = (n - b * BLOCK).min(BLOCK);
         let (s0, rest) = four.split_at(input);
         let (s1, rest) = rest.split_at(input);
         let (s2, s3) = rest.split_at(input);

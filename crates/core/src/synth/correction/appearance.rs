@@ -442,13 +442,12 @@ impl<'a> AppearanceCorrector<'a> {
         } else {
             self.propose::<FIELD, false>(moved, local, &mut proposed)
         };
-        // The coherent triples: each direct neighbour's triple moved back.
-        // Other than the voxel's own, one proposed twice is scored twice,
-        // which is cheaper than finding out.
-        // In a local frame, the in-plane neighbours the frame's planes hold
-        // (Zhang et al.'s reduced candidate set).
-        // A neighbour that continues the voxel moves back onto the voxel's
-        // own triple, which is listed once.
+        // The coherent triples: each direct neighbour's triple moved back
+        // (in a local frame, the in-plane neighbours the frame's planes
+        // hold: Zhang et al.'s reduced candidate set). A neighbour that
+        // continues the voxel moves back onto the voxel's own triple, which
+        // is listed once; other repeats are scored twice, which is cheaper
+        // than finding them.
         let own = near.triples[CENTRE];
         let mut coherent = [[u32::MAX; 3]; 27];
         let mut coherent_n = 0;
