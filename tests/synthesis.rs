@@ -809,3 +809,42 @@ fn plans_count_what_cold_synthesis_computes() {
         );
     }
 }
+
+#[test]
+fn textures_opened_at_once_do_not_deadlock() {
+    // A texture builds its level tables on the thread pool when it opens.
+    // A worker that builds one level's tables may, while it waits for its
+    // helpers, take up another opening of the same level: that must not
+    // wait for itself. Each round opens a fresh copy of the candidates
+    // from several threads at once.
+    let bytes = std::sync::Arc::new(small_candidates().to_bytes());
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let pool = std::sync::Arc::new(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(3)
+                .build()
+                .unwrap(),
+        );
+        for _ in 0..40 {
+            let c = std::sync::Arc::new(solidtex_core::Candidates::load(&bytes).unwrap());
+            let openers: Vec<_> = (0..4)
+                .map(|_| {
+                    let (c, pool) = (c.clone(), pool.clone());
+                    std::thread::spawn(move || {
+                        pool.install(|| {
+                            let cache = std::sync::Arc::new(solidtex_core::TileCache::new(1 << 20));
+                            Texture::new(c, SynthParams::default(), cache).unwrap();
+                        })
+                    })
+                })
+                .collect();
+            for o in openers {
+                o.join().unwrap();
+            }
+        }
+        tx.send(()).unwrap();
+    });
+    rx.recv_timeout(std::time::Duration::from_secs(120))
+        .expect("textures opened at once deadlocked");
+}

@@ -165,16 +165,24 @@ impl Level {
 
     /// The sparse appearance-space tables of this level (level `k` of an
     /// exemplar of size `dims`), built on first use.
+    ///
+    /// They are built outside the cell and then offered to it: building
+    /// runs on the thread pool, and a worker that waits for its helpers
+    /// may meanwhile take up another first use of the same level, which
+    /// would wait forever for a cell that it is itself filling. Callers
+    /// that race may each build the tables; the first one set is kept.
     pub fn sparse_tables(&self, dims: Dims, k: usize) -> &sparse::SparseTables {
-        self.sparse.get_or_init(|| {
-            sparse::SparseTables::new(
-                &self.appearance,
-                &self.stored.candidates,
-                dims,
-                spacing(k) as i64,
-                self.weights,
-            )
-        })
+        if let Some(t) = self.sparse.get() {
+            return t;
+        }
+        let built = sparse::SparseTables::new(
+            &self.appearance,
+            &self.stored.candidates,
+            dims,
+            spacing(k) as i64,
+            self.weights,
+        );
+        self.sparse.get_or_init(|| built)
     }
 }
 
