@@ -3,16 +3,12 @@
 
 mod common;
 
-use common::solidtex_json;
+use common::{leather_stx, solidtex_json};
 use serde_json::Value;
 
 fn plan(args: &[&str]) -> Value {
-    let leather = [
-        "plan",
-        "tests/fixtures/exemplars/animal_leather.png",
-        "--json",
-    ];
-    solidtex_json(&[&leather[..], args].concat())
+    let stx = leather_stx().to_str().expect("a UTF-8 temporary path");
+    solidtex_json(&[&["plan", stx, "--json"][..], args].concat())
 }
 
 fn total(scheme: &Value, key: &str) -> u64 {

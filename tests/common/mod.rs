@@ -139,6 +139,34 @@ pub fn fnv(bytes: &[u8]) -> u64 {
     h
 }
 
+/// `tests/fixtures/exemplars/animal_leather.png` precomputed by the
+/// binary once per test program, into cargo's temporary directory for
+/// tests: commands given the PNG would precompute it on every call.
+pub fn leather_stx() -> &'static std::path::Path {
+    static STX: OnceLock<PathBuf> = OnceLock::new();
+    STX.get_or_init(|| {
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR"));
+        // Written aside and renamed, so a program running at the same
+        // time never reads half a file (both write the same bytes).
+        let part = dir.join(format!("animal_leather.stx.{}", std::process::id()));
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
+            .arg("precompute")
+            .arg(exemplar_path("animal_leather.png"))
+            .arg("-o")
+            .arg(&part)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let path = dir.join("animal_leather.stx");
+        std::fs::rename(&part, &path).unwrap();
+        path
+    })
+}
+
 /// Runs the `solidtex` binary with `args`, expects success, and parses
 /// what it prints as JSON.
 pub fn solidtex_json<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> serde_json::Value {
