@@ -149,27 +149,22 @@ pub fn leather_stx() -> &'static std::path::Path {
         // Written aside and renamed, so a program running at the same
         // time never reads half a file (both write the same bytes).
         let part = dir.join(format!("animal_leather.stx.{}", std::process::id()));
-        let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
-            .arg("precompute")
-            .arg(exemplar_path("animal_leather.png"))
-            .arg("-o")
-            .arg(&part)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let exemplar = exemplar_path("animal_leather.png");
+        solidtex(&[
+            "precompute".as_ref(),
+            exemplar.as_os_str(),
+            "-o".as_ref(),
+            part.as_os_str(),
+        ]);
         let path = dir.join("animal_leather.stx");
         std::fs::rename(&part, &path).unwrap();
         path
     })
 }
 
-/// Runs the `solidtex` binary with `args`, expects success, and parses
-/// what it prints as JSON.
-pub fn solidtex_json<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> serde_json::Value {
+/// Runs the `solidtex` binary with `args`, expects success, and returns
+/// what it prints.
+pub fn solidtex<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> Vec<u8> {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"))
         .args(args)
         .output()
@@ -179,5 +174,10 @@ pub fn solidtex_json<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> serde_json::Value
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    serde_json::from_slice(&out.stdout).unwrap()
+    out.stdout
+}
+
+/// [`solidtex`], parsing what it prints as JSON.
+pub fn solidtex_json<S: AsRef<std::ffi::OsStr>>(args: &[S]) -> serde_json::Value {
+    serde_json::from_slice(&solidtex(args)).unwrap()
 }
