@@ -202,10 +202,16 @@ impl Server {
 
     /// Serves until `shutdown` resolves, then stops accepting and returns
     /// once in-flight requests are answered.
-    pub async fn run(
+    pub fn run(
         self,
         shutdown: impl Future<Output = ()> + Send + 'static,
-    ) -> anyhow::Result<()> {
+    ) -> impl Future<Output = anyhow::Result<()>> + Send + 'static {
+        // Boxed here, so the serving loop is compiled once, in this crate,
+        // and not again for each caller's kind of shutdown future.
+        self.run_boxed(Box::pin(shutdown))
+    }
+
+    async fn run_boxed(self, shutdown: listen::Shutdown) -> anyhow::Result<()> {
         let metrics = self.state.metrics.clone();
         let app = routes::router(self.state);
         listen::serve(self.listener, app, self.limits, metrics, shutdown).await;

@@ -174,6 +174,9 @@ impl Drop for Busy {
     }
 }
 
+/// What ends [`serve`]: any future, boxed.
+pub type Shutdown = std::pin::Pin<Box<dyn Future<Output = ()> + Send + 'static>>;
+
 /// Serves `app` on `listener` until `shutdown` resolves, then stops
 /// accepting, closes idle connections, and returns once the requests in
 /// flight have been answered.
@@ -182,7 +185,7 @@ pub async fn serve(
     app: Router,
     limits: Limits,
     metrics: Arc<Metrics>,
-    shutdown: impl Future<Output = ()> + Send + 'static,
+    mut shutdown: Shutdown,
 ) {
     let conns = Arc::new(Conns::default());
     let mut http = hyper::server::conn::http1::Builder::new();
@@ -195,7 +198,6 @@ pub async fn serve(
     // Every connection task holds a receiver; `closed` resolves once all
     // are gone.
     let (done_tx, done_rx) = tokio::sync::watch::channel(());
-    let mut shutdown = std::pin::pin!(shutdown);
     let mut next_id = 0u64;
     let lingering = Arc::new(tokio::sync::Semaphore::new(REFUSALS_LINGERING));
     loop {
