@@ -94,6 +94,9 @@ pub struct Score {
     /// is better). None for the oblique cut, whose plane turns the
     /// exemplar's directions.
     pub directions: Option<f64>,
+    /// Distance between the sizes of connected dark and light features,
+    /// 0 to 1 (lower is better): broken veins and cracks, merged spots.
+    pub components: f64,
 }
 
 fn slices(tex: &Texture, side: u32) -> anyhow::Result<Vec<(&'static str, Vec<u8>)>> {
@@ -186,6 +189,7 @@ pub fn evaluate(
             anisotropy,
             spectrum: st.spectrum,
             directions: (orientation != "oblique").then_some(st.orientation),
+            components: st.components,
         })
     };
     for (method, params) in methods {
@@ -232,7 +236,7 @@ pub fn print(scores: &[Score]) {
     println!("Every score is a distance: lower is better. `worse than slab` marks a corrected");
     println!("slice that scores worse than the uncorrected slab initialisation it started from.");
     println!(
-        "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10} {:>10} {:>9} {:>10}  note",
+        "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10} {:>10} {:>9} {:>10} {:>10}  note",
         "exemplar",
         "plane",
         "method",
@@ -241,7 +245,8 @@ pub fn print(scores: &[Score]) {
         "histogram",
         "anisotropy",
         "spectrum",
-        "directions"
+        "directions",
+        "components"
     );
     for s in scores {
         let aniso = s.anisotropy.map_or("-".to_string(), |a| format!("{a:.3}"));
@@ -253,7 +258,7 @@ pub fn print(scores: &[Score]) {
             format!("worse than slab: {}", losses.join(", "))
         };
         println!(
-            "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4} {:>10} {:>9.3} {:>10}  {note}",
+            "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4} {:>10} {:>9.3} {:>10} {:>10.3}  {note}",
             s.exemplar,
             s.orientation,
             s.method,
@@ -262,7 +267,8 @@ pub fn print(scores: &[Score]) {
             s.histogram,
             aniso,
             s.spectrum,
-            directions
+            directions,
+            s.components
         );
     }
 }
@@ -301,6 +307,9 @@ fn losses_to_slab(scores: &[Score], s: &Score) -> Vec<&'static str> {
     {
         out.push("directions");
     }
+    if s.components > slab.components {
+        out.push("components");
+    }
     out
 }
 
@@ -320,6 +329,7 @@ mod tests {
             anisotropy: None,
             spectrum: 0.5,
             directions: Some(0.1),
+            components: 0.3,
         };
         let scores = [
             row("slab-only", 2.0, 0.1),

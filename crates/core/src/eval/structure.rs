@@ -3,7 +3,9 @@
 //! directions (a gradient orientation histogram). A slice pieced together
 //! from exemplar patches with its structure broken (dashes where cracks
 //! were, clouds where veins were, blur) keeps its patch scores and loses
-//! energy at the exemplar's scales and directions.
+//! energy at the exemplar's scales and directions, and the sizes of its
+//! connected dark and light features (connected components): veins and
+//! cracks that fall apart into specks, or spots that merge into blobs.
 
 use super::RgbView;
 
@@ -12,6 +14,15 @@ const BANDS: usize = 4;
 
 /// Orientation bins over 180° of [`orientation_histogram`].
 const ORIENTATION_BINS: usize = 12;
+
+/// Octave bins of component sizes of [`component_histogram`]: 1 pixel,
+/// 2–3, 4–7, … (the last also holds everything larger).
+const SIZE_BINS: usize = 12;
+
+/// The dark and light features of [`component_histogram`]: pixels at or
+/// below the image's own 25th luminance percentile, or at or above its
+/// 75th.
+const FEATURE_TAILS: [(f64, bool); 2] = [(0.25, true), (0.75, false)];
 
 /// How far a slice's statistics are from its exemplar's (lower is better;
 /// both 0 for an image against itself).
@@ -26,6 +37,14 @@ pub struct Structure {
     /// histograms (weighted by squared gradient), 0 to 1: how differently
     /// the edges are turned.
     pub orientation: f64,
+    /// Total-variation distance between the sizes of connected features,
+    /// 0 to 1, the mean over dark and light features (each pixel of the
+    /// image's darkest and lightest quarter counts the size of its
+    /// 4-connected component, in octave bins). Broken veins and cracks
+    /// move weight to small sizes, merged spots to large ones. Compared
+    /// with crops of the tiled exemplar of the slice's size, so borders
+    /// cut both alike.
+    pub components: f64,
 }
 
 /// Scores `slice` against `exemplar`, which is read as tileable (it wraps
@@ -46,11 +65,97 @@ pub fn structure(slice: RgbView, exemplar: RgbView) -> Structure {
         .sum::<f64>()
         / BANDS as f64;
     let (hs, he) = (orientation_histogram(&s), orientation_histogram(&e));
-    let orientation = 0.5 * hs.iter().zip(&he).map(|(a, b)| (a - b).abs()).sum::<f64>();
+    let orientation = total_variation(&hs, &he);
+    let components = components_distance(&s, &e);
     Structure {
         spectrum,
         orientation,
+        components,
     }
+}
+
+/// Half the L1 distance of two histograms that each sum to 1.
+fn total_variation(a: &[f64], b: &[f64]) -> f64 {
+    0.5 * a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>()
+}
+
+/// [`Structure::components`] of slice `s` against exemplar `e`. The
+/// exemplar's histogram is the mean over four crops of it tiled, each of
+/// the slice's size, at offsets spread over its period: a feature larger
+/// than the slice is cut by the slice's border as by a crop's.
+fn components_distance(s: &Luma, e: &Luma) -> f64 {
+    if s.v.is_empty() || e.v.is_empty() {
+        return 0.0;
+    }
+    let crops: Vec<Luma> = [(0, 0), (1, 2), (2, 1), (2, 2)]
+        .iter()
+        .map(|&(a, b)| e.crop(a * e.w / 3, b * e.h / 3, s.w, s.h))
+        .collect();
+    FEATURE_TAILS
+        .iter()
+        .map(|&(q, dark)| {
+            let mut reference = [0.0; SIZE_BINS];
+            for c in &crops {
+                for (r, v) in reference.iter_mut().zip(component_histogram(c, q, dark)) {
+                    *r += v / crops.len() as f64;
+                }
+            }
+            total_variation(&component_histogram(s, q, dark), &reference)
+        })
+        .sum::<f64>()
+        / FEATURE_TAILS.len() as f64
+}
+
+/// For the pixels at or below the `q` quantile of `l`'s luminance (`dark`)
+/// or at or above it, the share whose 4-connected component (within the
+/// image, not wrapping) has each octave of size, normalised to sum 1.
+fn component_histogram(l: &Luma, q: f64, dark: bool) -> [f64; SIZE_BINS] {
+    let mut sorted = l.v.clone();
+    sorted.sort_by(f64::total_cmp);
+    let t = sorted[((sorted.len() - 1) as f64 * q) as usize];
+    let member: Vec<bool> =
+        l.v.iter()
+            .map(|&v| if dark { v <= t } else { v >= t })
+            .collect();
+    let (w, h) = (l.w as usize, l.h as usize);
+    let mut seen = vec![false; member.len()];
+    let mut bins = [0.0; SIZE_BINS];
+    let mut stack = Vec::new();
+    for start in 0..member.len() {
+        if !member[start] || seen[start] {
+            continue;
+        }
+        // Flood fill; the component's size is added once per member.
+        seen[start] = true;
+        stack.push(start);
+        let mut size = 0usize;
+        while let Some(i) = stack.pop() {
+            size += 1;
+            let (x, y) = (i % w, i / w);
+            let mut visit = |j: usize| {
+                if member[j] && !seen[j] {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            };
+            if x > 0 {
+                visit(i - 1);
+            }
+            if x + 1 < w {
+                visit(i + 1);
+            }
+            if y > 0 {
+                visit(i - w);
+            }
+            if y + 1 < h {
+                visit(i + w);
+            }
+        }
+        let bin = (size.ilog2() as usize).min(SIZE_BINS - 1);
+        bins[bin] += size as f64;
+    }
+    let total: f64 = bins.iter().sum();
+    bins.map(|b| b / total)
 }
 
 /// Luminance with its border rule.
@@ -83,6 +188,21 @@ impl Luma {
             (mirror(x, self.w), mirror(y, self.h))
         };
         (y * self.w + x) as usize
+    }
+
+    /// The `w` × `h` window from (`x0`, `y0`), read by the border rule,
+    /// as an image of its own that does not wrap.
+    fn crop(&self, x0: i64, y0: i64, w: i64, h: i64) -> Luma {
+        let v = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| self.v[self.index(x0 + x, y0 + y)])
+            .collect();
+        Luma {
+            w,
+            h,
+            v,
+            wrap: false,
+        }
     }
 
     /// `src` blurred by the binomial [1 4 6 4 1]/16 with taps `step` apart
@@ -207,10 +327,12 @@ mod tests {
         let e = blobs(64, 64, 0);
         let s = structure(view(&e, 64, 64), view(&e, 64, 64));
         assert!(s.spectrum < 0.05 && s.orientation < 0.02, "{s:?}");
+        assert!(s.components < 0.2, "{s:?}");
         // A larger crop of the same pattern, at another phase, not tiled.
         let crop = blobs(96, 80, 17);
         let s = structure(view(&crop, 96, 80), view(&e, 64, 64));
         assert!(s.spectrum < 0.15 && s.orientation < 0.1, "{s:?}");
+        assert!(s.components < 0.2, "{s:?}");
     }
 
     #[test]
@@ -238,6 +360,41 @@ mod tests {
         assert!(same.orientation < 0.05 && same.spectrum < 0.2, "{same:?}");
         let flat = [128u8; 16 * 16 * 3];
         let s = structure(view(&flat, 16, 16), view(&flat, 16, 16));
-        assert_eq!((s.spectrum, s.orientation), (0.0, 0.0));
+        assert_eq!((s.spectrum, s.orientation, s.components), (0.0, 0.0, 0.0));
+    }
+
+    /// Dark stripes 4 pixels wide every 12, cut into dashes `dash` pixels
+    /// long (0: unbroken).
+    fn dashes(w: u32, h: u32, dash: u32) -> Vec<u8> {
+        (0..w * h)
+            .flat_map(|i| {
+                let (x, y) = (i % w, i / w);
+                let gap = dash > 0 && x % (2 * dash) >= dash;
+                let l = if y % 12 < 4 && !gap { 30 } else { 200 } + ((x * 31 + y * 17) % 11) as u8;
+                [l, l, l]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn broken_and_merged_features_are_far_in_size() {
+        let e = dashes(48, 48, 0);
+        let ex = view(&e, 48, 48);
+        // Crops of the same stripes, at another phase: the same sizes.
+        let s = dashes(96, 80, 0);
+        let same = structure(view(&s, 96, 80), ex);
+        assert!(same.components < 0.05, "{same:?}");
+        // The stripes broken into dashes: the same dark share and
+        // directions along them, but small components.
+        let d = dashes(96, 80, 3);
+        let broken = structure(view(&d, 96, 80), ex);
+        assert!(broken.components > 0.4, "{broken:?}");
+        // Dashes as the exemplar, unbroken stripes as the slice: merged.
+        let dash_ex = dashes(48, 48, 3);
+        let merged = structure(view(&s, 96, 80), view(&dash_ex, 48, 48));
+        assert!(merged.components > 0.4, "{merged:?}");
+        let shuffled = shuffled_exemplar(ex, 96, 80, 5);
+        let noise = structure(view(&shuffled, 96, 80), ex);
+        assert!(noise.components > 0.5, "{noise:?}");
     }
 }
