@@ -10,17 +10,16 @@ static ALLOC: solidtex_server::peak_alloc::PeakAlloc = solidtex_server::peak_all
 /// jemalloc's manual under the prefix of the `tikv-jemalloc-sys` build);
 /// `_RJEM_MALLOC_CONF` overrides them.
 ///
-/// - `thp:always`: memory is advised for transparent huge pages. A
-///   correction reads its candidate tables (tens of MB per texture) at
-///   random, and with 4 KiB pages its loads miss the TLB. Where the system
-///   disables transparent huge pages the advice does nothing.
 /// - `background_thread:true,dirty_decay_ms:1000`: pages freed by a job or
 ///   a precompute go back to the system within about a second, from a
 ///   thread of jemalloc's own, instead of staying resident for ten seconds
 ///   or until the next allocation in their arena. The server's memory bound
 ///   (`server::memory`) counts on it. Measured numbers: docs/server.md.
+/// - Transparent huge pages are left to the system's default: advising
+///   them (`thp:always`) made no request faster and kept more memory
+///   resident (docs/server.md).
 #[unsafe(export_name = "_rjem_malloc_conf")]
-pub static JEMALLOC_CONF: &[u8; 54] = b"thp:always,background_thread:true,dirty_decay_ms:1000\0";
+pub static JEMALLOC_CONF: &[u8; 43] = b"background_thread:true,dirty_decay_ms:1000\0";
 
 use clap::Parser;
 

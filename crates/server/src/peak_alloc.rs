@@ -9,7 +9,7 @@
 //! The allocator underneath is jemalloc: glibc's per-thread arenas
 //! fragment as jobs come and go, and the server's peak resident memory
 //! under load is lower with jemalloc (docs/server.md). Its options
-//! (transparent huge pages) are set by the binary.
+//! (how soon freed pages go back to the system) are set by the binary.
 //!
 //! Unsafe code here, because `GlobalAlloc` is an unsafe trait; every method
 //! forwards to jemalloc unchanged.
