@@ -1,5 +1,8 @@
 //! The synthesis commands end to end on the bundled exemplar (its
-//! candidates ship with the binary, so nothing is precomputed here).
+//! candidates ship with the binary, so nothing is precomputed here but
+//! by `solidtex eval`, which analyses every exemplar it scores).
+
+mod common;
 
 use std::path::Path;
 use std::process::Command;
@@ -154,26 +157,13 @@ fn precompute_takes_a_feature_mask_and_keeps_it_in_the_file() {
 /// baseline for them.
 #[test]
 fn corrected_slices_are_closer_in_structure_than_the_slab_and_a_shuffle() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let fixtures = root.join("tests/fixtures/exemplars");
-    let exemplars = [
-        root.join("crates/core/assets/default.png"),
-        fixtures.join("animal_leopard.png"),
-        fixtures.join("animal_leather.png"),
-        fixtures.join("wood_wood5.png"),
-    ];
-    let out = Command::new(env!("CARGO_BIN_EXE_solidtex"))
-        .arg("eval")
-        .arg("--json")
-        .args(&exemplars)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let rows: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+    let marble = Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/core/assets/default.png");
+    let mut args = vec!["eval".into(), "--json".into(), marble.into_os_string()];
+    for name in ["animal_leopard.png", "animal_leather.png", "wood_wood5.png"] {
+        args.push(common::exemplar_path(name).into_os_string());
+    }
+    let rows = common::solidtex_json(&args);
+    let rows = rows.as_array().expect("a list of scores");
     let structure = |exemplar: &str, method: &str| {
         let rows: Vec<&serde_json::Value> = rows
             .iter()
