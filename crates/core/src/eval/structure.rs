@@ -15,17 +15,18 @@ const BANDS: usize = 4;
 /// Orientation bins over 180° of [`orientation_histogram`].
 const ORIENTATION_BINS: usize = 12;
 
-/// Octave bins of component sizes of [`component_histogram`]: 1 pixel,
+/// Octave bins of component sizes of [`component_histograms`]: 1 pixel,
 /// 2–3, 4–7, … (the last also holds everything larger).
 const SIZE_BINS: usize = 12;
 
-/// The dark and light features of [`component_histogram`]: pixels at or
+/// The dark and light features of [`component_histograms`]: pixels at or
 /// below the image's own 25th luminance percentile, or at or above its
 /// 75th.
 const FEATURE_TAILS: [(f64, bool); 2] = [(0.25, true), (0.75, false)];
 
 /// How far a slice's statistics are from its exemplar's (lower is better;
-/// both 0 for an image against itself).
+/// the spectrum and orientation are 0 for an image against itself, the
+/// components near 0, as they compare with crops of it).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Structure {
     /// Mean over four octave bands of |ln(slice ÷ exemplar)| of
@@ -87,36 +88,39 @@ fn components_distance(s: &Luma, e: &Luma) -> f64 {
     if s.v.is_empty() || e.v.is_empty() {
         return 0.0;
     }
-    let crops: Vec<Luma> = [(0, 0), (1, 2), (2, 1), (2, 2)]
-        .iter()
-        .map(|&(a, b)| e.crop(a * e.w / 3, b * e.h / 3, s.w, s.h))
-        .collect();
-    FEATURE_TAILS
-        .iter()
-        .map(|&(q, dark)| {
-            let mut reference = [0.0; SIZE_BINS];
-            for c in &crops {
-                for (r, v) in reference.iter_mut().zip(component_histogram(c, q, dark)) {
-                    *r += v / crops.len() as f64;
-                }
+    const CROPS: [(i64, i64); 4] = [(0, 0), (1, 2), (2, 1), (2, 2)];
+    let mut reference = [[0.0; SIZE_BINS]; FEATURE_TAILS.len()];
+    for &(a, b) in &CROPS {
+        let crop = e.crop(a * e.w / 3, b * e.h / 3, s.w, s.h);
+        for (r, h) in reference.iter_mut().zip(component_histograms(&crop)) {
+            for (r, v) in r.iter_mut().zip(h) {
+                *r += v / CROPS.len() as f64;
             }
-            total_variation(&component_histogram(s, q, dark), &reference)
-        })
+        }
+    }
+    component_histograms(s)
+        .iter()
+        .zip(&reference)
+        .map(|(h, r)| total_variation(h, r))
         .sum::<f64>()
         / FEATURE_TAILS.len() as f64
 }
 
-/// For the pixels at or below the `q` quantile of `l`'s luminance (`dark`)
-/// or at or above it, the share whose 4-connected component (within the
-/// image, not wrapping) has each octave of size, normalised to sum 1.
-fn component_histogram(l: &Luma, q: f64, dark: bool) -> [f64; SIZE_BINS] {
+/// For each of [`FEATURE_TAILS`], the share of its pixels whose
+/// 4-connected component (within the image, not wrapping) has each
+/// octave of size, normalised to sum 1.
+fn component_histograms(l: &Luma) -> [[f64; SIZE_BINS]; FEATURE_TAILS.len()] {
     let mut sorted = l.v.clone();
     sorted.sort_by(f64::total_cmp);
-    let t = sorted[((sorted.len() - 1) as f64 * q) as usize];
-    let member: Vec<bool> =
-        l.v.iter()
-            .map(|&v| if dark { v <= t } else { v >= t })
-            .collect();
+    FEATURE_TAILS.map(|(q, dark)| {
+        let t = sorted[((sorted.len() - 1) as f64 * q) as usize];
+        tail_histogram(l, |v| if dark { v <= t } else { v >= t })
+    })
+}
+
+/// [`component_histograms`] of the pixels whose luminance is `member`.
+fn tail_histogram(l: &Luma, member: impl Fn(f64) -> bool) -> [f64; SIZE_BINS] {
+    let member: Vec<bool> = l.v.iter().map(|&v| member(v)).collect();
     let (w, h) = (l.w as usize, l.h as usize);
     let mut seen = vec![false; member.len()];
     let mut bins = [0.0; SIZE_BINS];
