@@ -92,3 +92,33 @@ fn parity_levels_reach_the_planner() {
     assert!((2 * 256..2 * 256 + 2 * 18).contains(&parity), "{parity}");
     assert!(blocks > parity, "{blocks} {parity}");
 }
+
+/// A reader that stops reading (`solidtex plan … | head`) ends the command
+/// quietly and successfully: a write to the closed pipe is not a panic.
+#[test]
+fn a_closed_stdout_ends_the_command_quietly() {
+    let stx = leather_stx();
+    for json in [false, true] {
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"));
+        cmd.arg("plan").arg(stx).args(["--slice", "16"]);
+        if json {
+            cmd.arg("--json");
+        }
+        let mut child = cmd
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Closed before the command has planned anything, so its first
+        // write finds no reader.
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            out.status.success(),
+            "json {json}: {:?}\n{stderr}",
+            out.status
+        );
+        assert!(!stderr.contains("panicked"), "json {json}: {stderr}");
+    }
+}

@@ -772,32 +772,35 @@ fn human_seconds(s: f64) -> String {
 }
 
 /// Prints the results as aligned tables.
-pub fn print(r: &Results) {
-    println!("synthesis exemplar: {}", r.synthesis_exemplar);
-    println!(
+pub fn print(r: &Results) -> std::io::Result<()> {
+    outln!("synthesis exemplar: {}", r.synthesis_exemplar)?;
+    outln!(
         "{:<44} {:>10} {:>10}  detail",
-        "benchmark", "time", "peak heap"
-    );
+        "benchmark",
+        "time",
+        "peak heap"
+    )?;
     for row in &r.rows {
-        println!(
+        outln!(
             "{:<44} {:>10} {:>10}  {}",
             row.name,
             row.seconds.map_or("-".into(), human_seconds),
             row.peak_bytes.map_or("-".into(), human_bytes),
             row.detail
-        );
+        )?;
     }
-    println!("\nvoxels/corrections per level (finest first):");
+    outln!("\nvoxels/corrections per level (finest first):")?;
     for p in &r.plans {
-        println!(
+        outln!(
             "  {:<10} {:<40} {}",
             p.scheme,
             p.request,
             markdown::per_level(p)
-        );
+        )?;
     }
     if !r.load.is_empty() {
-        println!();
-        print!("{}", service::table(&r.load));
+        outln!()?;
+        out!("{}", service::table(&r.load))?;
     }
+    Ok(())
 }

@@ -86,9 +86,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         eprintln!("wrote {}", path.display());
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&results)?);
+        outln!("{}", serde_json::to_string_pretty(&results)?)?;
     } else {
-        bench::print(&results);
+        bench::print(&results)?;
     }
     Ok(())
 }

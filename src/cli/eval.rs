@@ -56,12 +56,12 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             &a.synth.params(Scheme::DualGrid),
         )?;
         if !a.json {
-            print(&scores);
+            print(&scores)?;
         }
         all.extend(scores);
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&all)?);
+        outln!("{}", serde_json::to_string_pretty(&all)?)?;
     }
     Ok(())
 }
@@ -232,10 +232,10 @@ pub fn evaluate(
 }
 
 /// Prints scores as a table.
-pub fn print(scores: &[Score]) {
-    println!("Every score is a distance: lower is better. `worse than slab` marks a corrected");
-    println!("slice that scores worse than the uncorrected slab initialisation it started from.");
-    println!(
+pub fn print(scores: &[Score]) -> std::io::Result<()> {
+    outln!("Every score is a distance: lower is better. `worse than slab` marks a corrected")?;
+    outln!("slice that scores worse than the uncorrected slab initialisation it started from.")?;
+    outln!(
         "{:<24} {:<8} {:<10} {:>12} {:>12} {:>10} {:>10} {:>9} {:>10} {:>10}  note",
         "exemplar",
         "plane",
@@ -247,7 +247,7 @@ pub fn print(scores: &[Score]) {
         "spectrum",
         "directions",
         "components"
-    );
+    )?;
     for s in scores {
         let aniso = s.anisotropy.map_or("-".to_string(), |a| format!("{a:.3}"));
         let directions = s.directions.map_or("-".to_string(), |a| format!("{a:.3}"));
@@ -257,7 +257,7 @@ pub fn print(scores: &[Score]) {
         } else {
             format!("worse than slab: {}", losses.join(", "))
         };
-        println!(
+        outln!(
             "{:<24} {:<8} {:<10} {:>12.5} {:>12.5} {:>10.4} {:>10} {:>9.3} {:>10} {:>10.3}  {note}",
             s.exemplar,
             s.orientation,
@@ -269,8 +269,9 @@ pub fn print(scores: &[Score]) {
             s.spectrum,
             directions,
             s.components
-        );
+        )?;
     }
+    Ok(())
 }
 
 /// The scores in which a corrected row (`dual-grid`, `standard`) is worse

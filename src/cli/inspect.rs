@@ -31,7 +31,7 @@ pub fn run(a: InspectArgs) -> anyhow::Result<()> {
         let heat: Vec<u8> = errs.iter().flat_map(|&e| heat(e / max)).collect();
         write_png(&name("crossbar_error"), dims.w, dims.h, heat)?;
     }
-    println!("wrote {} levels to {}", c.level_count(), a.out.display());
+    outln!("wrote {} levels to {}", c.level_count(), a.out.display())?;
     Ok(())
 }
 

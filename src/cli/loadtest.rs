@@ -76,9 +76,9 @@ pub fn run(a: LoadtestArgs) -> anyhow::Result<()> {
     };
     let report = crate::loadtest::run_blocking(&cfg)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?)?;
     } else {
-        print!("{}", report.table());
+        out!("{}", report.table())?;
     }
     if let Some(v) = &report.verify
         && v.mismatched > 0

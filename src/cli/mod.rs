@@ -51,8 +51,25 @@ enum Command {
     Loadtest(loadtest::LoadtestArgs),
 }
 
-/// Runs one subcommand.
+/// Runs one subcommand. A command whose reader stops reading its output
+/// (`| head`) ends there, successfully, as other command-line tools do.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match run_command(cli) {
+        Err(e) if closed_stdout(&e) => Ok(()),
+        result => result,
+    }
+}
+
+/// Whether `e` is a write to a pipe whose reader has gone.
+fn closed_stdout(e: &anyhow::Error) -> bool {
+    e.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+fn run_command(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Serve(a) => solidtex_server::serve_main(a),
         Command::Loadtest(a) => loadtest::run(a),

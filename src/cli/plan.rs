@@ -129,7 +129,7 @@ pub fn run(a: &PlanArgs) -> anyhow::Result<()> {
     if a.json {
         print_json(&rows, &region, &what, a)
     } else {
-        print_table(&rows, &what, voxels, a);
+        print_table(&rows, &what, voxels, a)?;
         Ok(())
     }
 }
@@ -208,20 +208,23 @@ fn print_json(rows: &[Counts], region: &Region, what: &str, a: &PlanArgs) -> any
         })
         .collect();
     let out = serde_json::json!({ "schemes": schemes, "other_neighbourhoods": other });
-    println!("{}", serde_json::to_string_pretty(&out)?);
+    outln!("{}", serde_json::to_string_pretty(&out)?)?;
     Ok(())
 }
 
-fn print_table(rows: &[Counts], what: &str, voxels: u64, a: &PlanArgs) {
-    println!(
+fn print_table(rows: &[Counts], what: &str, voxels: u64, a: &PlanArgs) -> std::io::Result<()> {
+    outln!(
         "{what} at lod {} (level 0 = finest; what the engine computes from a cold cache; \
          corrections read their direct neighbours)",
         a.src.lod,
-    );
-    println!(
+    )?;
+    outln!(
         "{:<10} {:>5} {:>14} {:>14}",
-        "scheme", "level", "voxels", "corrections"
-    );
+        "scheme",
+        "level",
+        "voxels",
+        "corrections"
+    )?;
     for r in rows {
         let name = format!("{:?}", r.scheme);
         let t = &r.tiles;
@@ -231,23 +234,23 @@ fn print_table(rows: &[Counts], what: &str, voxels: u64, a: &PlanArgs) {
             .zip(&t.corrections_per_level)
             .enumerate()
         {
-            println!("{name:<10} {k:>5} {v:>14} {c:>14}");
+            outln!("{name:<10} {k:>5} {v:>14} {c:>14}")?;
         }
         let v: u64 = t.voxels_per_level.iter().sum();
         let c: u64 = t.corrections_per_level.iter().sum();
-        println!("{name:<10} {:>5} {v:>14} {c:>14}", "all");
+        outln!("{name:<10} {:>5} {v:>14} {c:>14}", "all")?;
     }
     let total = |i: usize| rows[i].tiles.voxels_per_level.iter().sum::<u64>();
     let corrections = |i: usize| rows[i].tiles.corrections_per_level.iter().sum::<u64>();
-    println!(
+    outln!(
         "dual grid computes {:.1} % fewer voxels and {:.1} % fewer corrections",
         fewer(total(0), total(1)),
         fewer(corrections(0), corrections(1))
-    );
+    )?;
     if let (Some(standard), Some(dual)) = (&rows[0].exact, &rows[1].exact) {
-        println!(
+        outln!(
             "cross-check, the planner's exact dependency sets (history-window masks), voxels/corrections per level:"
-        );
+        )?;
         for r in rows {
             let per: Vec<String> = r
                 .exact
@@ -255,20 +258,20 @@ fn print_table(rows: &[Counts], what: &str, voxels: u64, a: &PlanArgs) {
                 .flatten()
                 .map(|(v, c)| format!("{v}/{c}"))
                 .collect();
-            println!("  {:<10} {}", format!("{:?}", r.scheme), per.join(" "));
+            outln!("  {:<10} {}", format!("{:?}", r.scheme), per.join(" "))?;
         }
-        println!(
+        outln!(
             "dual grid needs {:.1} % fewer voxels (exact)",
             fewer(totals(standard).0, totals(dual).0)
-        );
+        )?;
     } else {
-        println!(
+        outln!(
             "exact dependency sets not counted: {voxels} voxels, more than {PLAN_MAX_VOXELS} (the counts above are the engine's, tile by tile)"
-        );
+        )?;
     }
     for (i, n) in a.neighbourhoods.iter().enumerate() {
         let (s, d) = (totals(&rows[0].other_n[i].1), totals(&rows[1].other_n[i].1));
-        println!(
+        outln!(
             "N = {n} (exact sets, geometry only): standard {}/{}, dual grid {}/{} voxels/corrections: {:.1} % fewer voxels, {:.1} % fewer corrections",
             s.0,
             s.1,
@@ -276,16 +279,17 @@ fn print_table(rows: &[Counts], what: &str, voxels: u64, a: &PlanArgs) {
             d.1,
             fewer(s.0, d.0),
             fewer(s.1, d.1)
-        );
+        )?;
     }
-    println!("single-voxel exact dependency chain (history-window masks):");
+    outln!("single-voxel exact dependency chain (history-window masks):")?;
     for r in rows {
         let (v, c) = totals(&r.chain);
         let per: Vec<String> = r.chain.iter().map(|(v, c)| format!("{v}/{c}")).collect();
-        println!(
+        outln!(
             "  {:<10} {v} voxels, {c} corrections (per level voxels/corrections: {})",
             format!("{:?}", r.scheme),
             per.join(" ")
-        );
+        )?;
     }
+    Ok(())
 }

@@ -78,13 +78,13 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
     let peak = solidtex_server::peak_alloc::peak_above(baseline);
     let bytes = c.to_bytes();
     write_atomically(&a.output, &bytes)?;
-    print_report(&c, &a.output, total, bytes.len(), a.verbose);
+    print_report(&c, &a.output, total, bytes.len(), a.verbose)?;
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
-    println!(
+    outln!(
         "peak heap while computing {:.0} MiB (estimated {:.0} MiB)",
         mib(peak),
         mib(estimate)
-    );
+    )?;
     Ok(())
 }
 
@@ -96,10 +96,16 @@ fn masked(e: Exemplar, mask: Option<&Path>) -> anyhow::Result<Exemplar> {
         .with_context(|| format!("feature mask {}", path.display()))
 }
 
-fn print_report(c: &Candidates, path: &Path, total: f64, file_bytes: usize, verbose: bool) {
+fn print_report(
+    c: &Candidates,
+    path: &Path,
+    total: f64,
+    file_bytes: usize,
+    verbose: bool,
+) -> std::io::Result<()> {
     let (compact, total_mem) = c.memory_bytes();
     let mib = |b: usize| b as f64 / (1 << 20) as f64;
-    println!(
+    outln!(
         "wrote {}: candidates of a {}×{} exemplar over {} levels in {total:.1} s; \
          {:.1} MiB on disk, {:.0} MiB in memory when loaded",
         path.display(),
@@ -108,20 +114,23 @@ fn print_report(c: &Candidates, path: &Path, total: f64, file_bytes: usize, verb
         c.level_count(),
         mib(file_bytes),
         mib(total_mem),
-    );
-    println!("{}", describe_layout(c.params().orientation, c.layout()));
+    )?;
+    outln!("{}", describe_layout(c.params().orientation, c.layout()))?;
     if !verbose {
-        return;
+        return Ok(());
     }
     let r = c.report();
     for (name, s) in &r.stage_seconds {
-        println!("  {name:<10} {s:.3} s");
+        outln!("  {name:<10} {s:.3} s")?;
     }
     for (k, l) in r.levels.iter().enumerate() {
-        println!(
+        outln!(
             "  level {k}: crossbar error best {:.0} vs random {:.0}; fallbacks {}; filter iterations {}",
-            l.mean_best_error, l.mean_random_error, l.fallbacks, l.iterations
-        );
+            l.mean_best_error,
+            l.mean_random_error,
+            l.fallbacks,
+            l.iterations
+        )?;
         let hist: Vec<String> = l
             .histogram
             .iter()
@@ -129,9 +138,9 @@ fn print_report(c: &Candidates, path: &Path, total: f64, file_bytes: usize, verb
             .filter(|(_, n)| **n > 0)
             .map(|(i, n)| format!("{i}:{n}"))
             .collect();
-        println!("    candidates per pixel {}", hist.join(" "));
+        outln!("    candidates per pixel {}", hist.join(" "))?;
     }
-    println!("  candidates compact {compact} bytes; in memory {total_mem} bytes");
+    outln!("  candidates compact {compact} bytes; in memory {total_mem} bytes")
 }
 
 /// One line on how the exemplar is laid on the planes.
