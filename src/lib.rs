@@ -13,7 +13,7 @@
 macro_rules! out {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        write!(std::io::stdout().lock(), $($arg)*)
+        $crate::stdout_written(write!(std::io::stdout().lock(), $($arg)*))
     }};
 }
 
@@ -21,9 +21,33 @@ macro_rules! out {
 macro_rules! outln {
     ($($arg:tt)*) => {{
         use std::io::Write as _;
-        writeln!(std::io::stdout().lock(), $($arg)*)
+        $crate::stdout_written(writeln!(std::io::stdout().lock(), $($arg)*))
     }};
 }
+
+/// The result of a write to stdout, its broken pipe marked as
+/// [`StdoutClosed`]: only that one ends a command quietly, not a broken
+/// pipe of a socket or a child process.
+fn stdout_written(result: std::io::Result<()>) -> std::io::Result<()> {
+    result.map_err(|e| match e.kind() {
+        std::io::ErrorKind::BrokenPipe => {
+            std::io::Error::new(std::io::ErrorKind::BrokenPipe, StdoutClosed)
+        }
+        _ => e,
+    })
+}
+
+/// Stdout's reader has gone.
+#[derive(Debug)]
+struct StdoutClosed;
+
+impl std::fmt::Display for StdoutClosed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("standard output closed by its reader")
+    }
+}
+
+impl std::error::Error for StdoutClosed {}
 
 mod bench;
 mod cli;

@@ -60,12 +60,14 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
-/// Whether `e` is a write to a pipe whose reader has gone.
+/// Whether `e` is a write to stdout whose reader has gone (marked by
+/// `out!` and `outln!`; a broken pipe elsewhere stays an error).
 fn closed_stdout(e: &anyhow::Error) -> bool {
     e.chain().any(|cause| {
         cause
             .downcast_ref::<std::io::Error>()
-            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            .and_then(|io| io.get_ref())
+            .is_some_and(|inner| inner.is::<crate::StdoutClosed>())
     })
 }
 
@@ -89,6 +91,22 @@ fn run_command(cli: Cli) -> anyhow::Result<()> {
 mod tests {
     use super::*;
     use clap::CommandFactory;
+
+    /// Only stdout's broken pipe ends a command quietly: one from a socket
+    /// (a load test's server going away) is still an error.
+    #[test]
+    fn only_a_closed_stdout_is_quiet() {
+        let pipe = || std::io::Error::from(std::io::ErrorKind::BrokenPipe);
+        let stdout = crate::stdout_written(Err(pipe())).unwrap_err();
+        assert!(closed_stdout(
+            &anyhow::Error::new(stdout).context("printing")
+        ));
+        assert!(!closed_stdout(
+            &anyhow::Error::new(pipe()).context("sending")
+        ));
+        let other = crate::stdout_written(Err(std::io::ErrorKind::Other.into())).unwrap_err();
+        assert!(!closed_stdout(&anyhow::Error::new(other)));
+    }
 
     /// Every option and argument of every command says what it is.
     #[test]
