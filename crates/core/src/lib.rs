@@ -24,6 +24,7 @@ pub mod hash;
 mod orientation;
 mod params;
 pub mod png;
+pub mod reference;
 mod request;
 mod stack;
 mod synth;

@@ -276,6 +276,7 @@ impl Engine {
                 thickness: self.params.slab_thickness,
                 tiling: self.params.slab_tiling,
                 field: self.field.as_deref(),
+                block: self.block.as_deref(),
             };
             g.data
                 .par_chunks_mut(layer)

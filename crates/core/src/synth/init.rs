@@ -36,6 +36,8 @@ pub struct Slab<'a> {
     pub tiling: SlabTiling,
     /// The texture's field, if any.
     pub field: Option<&'a FrameField>,
+    /// A periodic block of triples to tile instead of the slab.
+    pub block: Option<&'a crate::reference::TripleBlock>,
 }
 
 impl Slab<'_> {
@@ -52,7 +54,32 @@ impl Slab<'_> {
     ) -> [u32; 3] {
         let d = jitter.displacement(p);
         let q = [0, 1, 2].map(|a| p[a] + d[a].round() as i64);
+        if let Some(block) = self.block {
+            return self.block_triple(block, k, q, sites);
+        }
         self.triple(k, q, sites)
+    }
+
+    /// The tiled block's triple at `p` of level `k`: cells of the jittered
+    /// grid as large as half the block, each reading the block at its own
+    /// hashed offset.
+    fn block_triple(
+        &self,
+        block: &crate::reference::TripleBlock,
+        k: usize,
+        p: [i64; 3],
+        sites: &mut Sites,
+    ) -> [u32; 3] {
+        let side = block.side as i64;
+        let cells = std::env::var("SOLIDTEX_REFCELL")
+            .ok()
+            .and_then(|v| v.parse::<i64>().ok())
+            .unwrap_or(side / 2)
+            .max(2);
+        let (cube, _) = sites.nearest(self.seed, k, cells, p);
+        let o = hash_pos(self.seed, k as u32, TAG_SLAB, cube);
+        let off = [o, o >> 21, o >> 42].map(|v| (v % side as u64) as i64);
+        block.at([0, 1, 2].map(|a| p[a] + off[a]))
     }
 
     /// The tiled slab's triple at `p` of level `k`.

@@ -133,6 +133,9 @@ pub(crate) struct Engine {
     finest_steps: Vec<Step>,
     /// How far each level's chain reaches, finest first.
     reach: Vec<plan::Reach>,
+    /// The initialisation level's block of triples, when the texture is
+    /// initialised from the reference instead of the slab.
+    block: Option<Arc<crate::reference::TripleBlock>>,
 }
 
 /// Correction steps for `passes` passes under the texture's scheme.
@@ -177,8 +180,13 @@ impl Engine {
         (0..cands.level_count())
             .into_par_iter()
             .for_each(|k| _ = cands.level(k).sparse_tables(cands.dims(), k));
+        let init_level = std::env::var("SOLIDTEX_INITLEVEL")
+            .ok()
+            .and_then(|v| v.parse::<usize>().ok())
+            .unwrap_or(cands.level_count() - 1)
+            .min(cands.level_count() - 1);
         let mut engine = Engine {
-            init_level: cands.level_count() - 1,
+            init_level,
             radius: correction::REACH,
             cell: params.grid as i64,
             cands,
@@ -189,7 +197,20 @@ impl Engine {
             steps,
             finest_steps,
             reach: Vec::new(),
+            block: None,
         };
+        if let Ok(spec) = std::env::var("SOLIDTEX_REFINIT") {
+            let rp: crate::reference::ReferenceParams =
+                serde_json::from_str(&spec).expect("SOLIDTEX_REFINIT json");
+            let c = &engine.cands;
+            let block = crate::reference::triple_block(
+                c.analysed(),
+                c.layout().arrangement.weights,
+                &rp,
+                engine.init_level,
+            )?;
+            engine.block = Some(Arc::new(block));
+        }
         engine.reach = (0..=engine.init_level)
             .map(|k| {
                 known_reach(
@@ -440,6 +461,7 @@ impl Engine {
             steps: self.steps.clone(),
             finest_steps: self.finest_steps.clone(),
             reach: self.reach.clone(),
+            block: self.block.clone(),
         }
     }
 
