@@ -9,6 +9,7 @@
 //! so that no error leaves the server in another shape.
 
 use crate::jobs::JobError;
+use crate::panics::panic_message;
 use crate::registry::RegistryError;
 use crate::spec::SpecError;
 use axum::body::Body;
@@ -375,17 +376,6 @@ pub fn panic_response(err: Box<dyn std::any::Any + Send + 'static>) -> Response 
     ApiError::internal(format!("internal error: {what}")).into_response()
 }
 
-/// The message of a panic payload.
-pub fn panic_message(err: &(dyn std::any::Any + Send)) -> String {
-    if let Some(s) = err.downcast_ref::<&str>() {
-        (*s).to_string()
-    } else if let Some(s) = err.downcast_ref::<String>() {
-        s.clone()
-    } else {
-        "panic".to_string()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -507,13 +497,5 @@ mod tests {
         let v: serde_json::Value = serde_json::from_str(&error_body("a", "b \"c\"")).unwrap();
         assert_eq!(v["error"]["code"], "a");
         assert_eq!(v["error"]["message"], "b \"c\"");
-    }
-
-    #[test]
-    fn panic_messages() {
-        let p: Box<dyn std::any::Any + Send> = Box::new("boom");
-        assert_eq!(panic_message(p.as_ref()), "boom");
-        let p: Box<dyn std::any::Any + Send> = Box::new(String::from("bang"));
-        assert_eq!(panic_message(p.as_ref()), "bang");
     }
 }

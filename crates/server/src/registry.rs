@@ -9,8 +9,8 @@
 //! Uploading content that is already known returns the existing texture;
 //! uploading a failed one tries again.
 
-use super::error::panic_message;
 use super::metrics::{Metrics, OutcomeLabels};
+use super::panics::panic_message;
 use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
 use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
 use crate::peak_alloc::{self, Meter};
