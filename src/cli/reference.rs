@@ -43,10 +43,10 @@ pub struct ReferenceArgs {
     /// Strength of the position-histogram weight (0 disables).
     #[arg(long, default_value_t = ReferenceParams::default().position_histogram)]
     position_histogram: f32,
-    /// Write the weighted mean instead of copying the nearest exemplar
-    /// colour.
+    /// Keep the weighted means of the last iteration instead of ending
+    /// with an iteration that copies exemplar colours.
     #[arg(long)]
-    blend: bool,
+    no_copy: bool,
     /// Orientation of the exemplar on the three planes: auto, none or an
     /// arrangement's JSON (as `solidtex precompute`).
     #[arg(long, default_value = "auto")]
@@ -76,7 +76,7 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
         robust: a.robust,
         colour_histogram: a.colour_histogram,
         position_histogram: a.position_histogram,
-        discrete: !a.blend,
+        copy: !a.no_copy,
     };
     std::fs::create_dir_all(&a.output)?;
     let t0 = Instant::now();

@@ -26,12 +26,12 @@
 
 mod palette;
 
-use crate::appearance::{Pca, Projector};
+use crate::analysis::appearance::{Pca, Projector};
 use crate::candidates::geometry::AXES;
 use crate::error::{Error, Result};
-use crate::exemplar::ExemplarSet;
+use crate::analysis::exemplar::ExemplarSet;
 use crate::hash::hash_pos;
-use crate::stack::{GaussianStack, spacing};
+use crate::analysis::stack::{GaussianStack, spacing};
 use kiddo::SquaredEuclidean;
 use palette::Palette;
 use rayon::prelude::*;
@@ -67,9 +67,11 @@ pub struct ReferenceParams {
     pub colour_histogram: f32,
     /// Strength of the position-histogram weight (0 disables it).
     pub position_histogram: f32,
-    /// Copy the exemplar colour nearest the weighted mean (Chen & Wang's
-    /// discrete solver) instead of writing the mean.
-    pub discrete: bool,
+    /// End with one more iteration that copies, for every voxel, the
+    /// exemplar colour nearest the weighted mean (Chen & Wang's discrete
+    /// solver) instead of writing the mean, which a blend of several
+    /// slightly different predictions softens.
+    pub copy: bool,
 }
 
 impl Default for ReferenceParams {
@@ -77,15 +79,15 @@ impl Default for ReferenceParams {
         ReferenceParams {
             size: 64,
             seed: 1,
-            levels: 3,
+            levels: 4,
             neighbourhood: 7,
             grid: 2,
-            iterations: 4,
-            finest_iterations: 3,
+            iterations: 6,
+            finest_iterations: 4,
             robust: 0.8,
-            colour_histogram: 1.0,
-            position_histogram: 1.0,
-            discrete: true,
+            colour_histogram: 3.0,
+            position_histogram: 4.0,
+            copy: true,
         }
     }
 }
@@ -180,7 +182,7 @@ struct PlaneLevel {
 impl PlaneLevel {
     fn new(stack: &GaussianStack, k: usize, n: u32, palette: &Palette) -> PlaneLevel {
         let (w, h) = (stack.width(), stack.height());
-        let all = crate::appearance::all_neighbourhoods(stack, k, n);
+        let all = crate::analysis::appearance::all_neighbourhoods(stack, k, n);
         let input = (n * n * 3) as usize;
         let pca = Pca::fit(&all, input, DIMS);
         let projector = Projector::new(&pca);
@@ -252,8 +254,6 @@ struct State {
     pos: [Vec<u32>; 3],
     pick: Vec<u8>,
     colours: Vec<[f32; 3]>,
-    /// Set when a debugging stop ended the optimisation at this level.
-    stopped: Option<usize>,
 }
 
 impl State {
@@ -283,21 +283,7 @@ pub fn synthesize(
     params: &ReferenceParams,
     report: impl FnMut(IterationReport),
 ) -> Result<Block> {
-    let s = optimise_block(exemplars, weights, params, 0, report)?;
-    if let Some(stop) = s.stopped {
-        let f = 1usize << stop;
-        let side = s.side * f;
-        let mut rgb = Vec::new();
-        for i in 0..side * side * side {
-            let p = [i % side, (i / side) % side, i / (side * side)].map(|c| c / f);
-            let c = s.colours[s.index(p)];
-            rgb.extend(c.map(|v| v.round().clamp(0.0, 255.0) as u8));
-        }
-        return Ok(Block {
-            size: side as u32,
-            rgb,
-        });
-    }
+    let (s, _) = optimise_block(exemplars, weights, params, 0, report)?;
     let rgb = s
         .colours
         .iter()
@@ -333,22 +319,16 @@ impl TripleBlock {
 }
 
 /// The reference optimised down to stack level `finest` (its voxels 2^finest
-/// wide, `params.size` of them per side), returned as triples.
-pub fn triple_block(
+/// wide, `params.size` of them per side), returned as the triples of every
+/// level it passed through, coarsest first: each level's block is the
+/// coarse version its finer one was upsampled from and refined.
+pub fn triple_blocks(
     exemplars: &ExemplarSet,
     weights: [f32; 3],
     params: &ReferenceParams,
     finest: usize,
-) -> Result<TripleBlock> {
-    let s = optimise_block(exemplars, weights, params, finest, |_| {})?;
-    let triples = (0..s.pick.len())
-        .map(|i| [s.pos[0][i], s.pos[1][i], s.pos[2][i]])
-        .collect();
-    Ok(TripleBlock {
-        side: s.side as u32,
-        level: finest as u32,
-        triples,
-    })
+) -> Result<Vec<TripleBlock>> {
+    Ok(optimise_block(exemplars, weights, params, finest, |_| {})?.1)
 }
 
 /// The optimisation itself, coarse to fine, its finest level at stack
@@ -359,8 +339,9 @@ fn optimise_block(
     params: &ReferenceParams,
     finest: usize,
     mut report: impl FnMut(IterationReport),
-) -> Result<State> {
+) -> Result<(State, Vec<TripleBlock>)> {
     params.validate()?;
+    let mut blocks = Vec::with_capacity(params.levels as usize);
     let levels = params.levels as usize;
     let n = params.neighbourhood;
     let same = exemplars.is_single();
@@ -393,6 +374,8 @@ fn optimise_block(
         } else {
             params.iterations
         };
+        // The finest level copies exemplar colours (the discrete solver).
+        let copying = j == 0 && params.copy;
         for it in 0..iterations {
             // The first search of the coarsest level starts from noise,
             // where coherence has nothing to follow.
@@ -409,7 +392,7 @@ fn optimise_block(
                 })
                 .sum::<f64>();
             let factors = Factors::new(&s, &matches, &palette, &target, params, plane);
-            let changed = optimise(&mut s, &matches, weights, &factors, params, k, plane);
+            let changed = optimise(&mut s, &matches, weights, &factors, params, k, copying, plane);
             report(IterationReport {
                 level: k,
                 iteration: it,
@@ -417,13 +400,16 @@ fn optimise_block(
                 changed,
             });
         }
-        if std::env::var("REF_STOP").ok().and_then(|v| v.parse::<usize>().ok()) == Some(k) {
-            s.stopped = Some(k);
-            return Ok(s);
-        }
+        blocks.push(TripleBlock {
+            side: s.side as u32,
+            level: k as u32,
+            triples: (0..s.pick.len())
+                .map(|i| [s.pos[0][i], s.pos[1][i], s.pos[2][i]])
+                .collect(),
+        });
         state = Some(s);
     }
-    Ok(state.expect("at least one level"))
+    Ok((state.expect("at least one level"), blocks))
 }
 
 /// Random pixels at the coarsest level, hashed per voxel and plane; each
@@ -448,7 +434,6 @@ fn initial<'a>(side: usize, seed: u64, k: usize, plane: impl Fn(usize) -> &'a Pl
         pos,
         pick,
         colours,
-        stopped: None,
     }
 }
 
@@ -488,7 +473,6 @@ fn upsample<'a>(parent: &State, k: usize, plane: impl Fn(usize) -> &'a PlaneLeve
         pos,
         pick,
         colours,
-        stopped: None,
     }
 }
 
@@ -496,9 +480,6 @@ fn upsample<'a>(parent: &State, k: usize, plane: impl Fn(usize) -> &'a PlaneLeve
 /// so that grid positions do not print a lattice into the result.
 fn grid_offset(params: &ReferenceParams, k: usize, it: u32, p: usize) -> [usize; 2] {
     let g = params.grid as u64;
-    if std::env::var("REF_FIXGRID").is_ok() {
-        return [0, 0];
-    }
     let h = hash_pos(params.seed, k as u32, TAG_GRID, [it as i64, p as i64, 0]);
     [(h % g) as usize, ((h >> 16) % g) as usize]
 }
@@ -572,7 +553,7 @@ fn search(
                         let mut best = u32::MAX;
                         let mut best_d = f32::INFINITY;
                         let mut try_pixel = |q: u32| {
-                            let d = crate::appearance::sq_dist(&v, &pl.vectors[q as usize]);
+                            let d = crate::analysis::appearance::sq_dist(&v, &pl.vectors[q as usize]);
                             if d < best_d || (d == best_d && q < best) {
                                 best_d = d;
                                 best = q;
@@ -712,6 +693,11 @@ fn box3(v: &[f32], w: usize, h: usize) -> Vec<f32> {
     out
 }
 
+/// How fast a prediction's claim to be the voxel's pixel in its plane
+/// falls with its colour's distance from the voxel's: 1 / (2σ²), σ = 12
+/// grey levels.
+const AGREE: f32 = 1.0 / (2.0 * 12.0 * 12.0);
+
 /// One prediction for a voxel: the plane, its exemplar pixel, its colour
 /// and its weight.
 #[derive(Clone, Copy)]
@@ -731,6 +717,7 @@ fn optimise<'a>(
     factors: &Factors,
     params: &ReferenceParams,
     k: usize,
+    copy: bool,
     plane: impl Fn(usize) -> &'a PlaneLevel + Sync,
 ) -> usize {
     let side = s.side;
@@ -790,46 +777,36 @@ fn optimise<'a>(
                 }
             }
             let mean = mean.map(|m| m / total);
-            // The colour the voxel takes: the weighted mean, or (discrete)
-            // the prediction with the most weight near it, a mode of the
-            // predictions rather than their mean, so that a feature one
-            // plane predicts coherently is copied whole or not at all.
-            let mut colour = mean;
-            let mut pick = old.pick[i];
-            if params.discrete {
-                let mode = std::env::var("REF_MODE").ok().and_then(|v| v.parse::<f32>().ok());
-                let mut best = f32::NEG_INFINITY;
-                for c in contrib.iter() {
-                    let score = match mode {
-                        Some(sigma) => {
-                            let inv = -0.5 / (sigma * sigma);
-                            contrib
-                                .iter()
-                                .map(|o| {
-                                    let d = (0..3).map(|ch| (c.colour[ch] - o.colour[ch]).powi(2)).sum::<f32>();
-                                    o.weight * (d * inv).exp()
-                                })
-                                .sum::<f32>()
-                        }
-                        None => -(0..3).map(|ch| (c.colour[ch] - mean[ch]).powi(2)).sum::<f32>(),
-                    };
-                    if score > best {
-                        best = score;
-                        pick = c.plane;
-                        colour = c.colour;
-                    }
+            // Per plane, where the voxel continues that plane's exemplar:
+            // the prediction with the most weight among those that agree
+            // with the mean. Weight favours the best-matched
+            // neighbourhoods, which cover several voxels alike, so
+            // neighbouring voxels keep continuing the same patch.
+            let mut pos = [0, 1, 2].map(|p| old.pos[p][i]);
+            let mut best = [f32::NEG_INFINITY; 3];
+            let mut near = [[0f32; 3]; 3];
+            for c in contrib.iter() {
+                let d = (0..3).map(|ch| (c.colour[ch] - mean[ch]).powi(2)).sum::<f32>();
+                let score = c.weight * (-d * AGREE).exp();
+                let p = c.plane as usize;
+                if score > best[p] {
+                    best[p] = score;
+                    pos[p] = c.pixel;
+                    near[p] = c.colour;
                 }
             }
-            // Per plane, the prediction nearest the voxel's colour is where
-            // the voxel continues that plane's exemplar.
-            let mut pos = [0, 1, 2].map(|p| old.pos[p][i]);
-            let mut near = [f32::INFINITY; 3];
-            for c in contrib.iter() {
-                let d = (0..3).map(|ch| (c.colour[ch] - colour[ch]).powi(2)).sum::<f32>();
-                let p = c.plane as usize;
-                if d < near[p] {
-                    near[p] = d;
-                    pos[p] = c.pixel;
+            // The colour is the mean, or (copying) the exemplar colour of
+            // the plane whose pixel claims the voxel most. The voxel's
+            // plane for the colour histogram stays as it was drawn.
+            let pick = old.pick[i];
+            let mut colour = mean;
+            if copy {
+                let mut top = f32::NEG_INFINITY;
+                for (p, &b) in best.iter().enumerate() {
+                    if b > top {
+                        top = b;
+                        colour = near[p];
+                    }
                 }
             }
             (pos, pick, colour)
@@ -850,7 +827,7 @@ fn optimise<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::exemplar::Exemplar;
+    use crate::analysis::exemplar::Exemplar;
 
     fn stripes() -> ExemplarSet {
         let w = 32;
