@@ -417,12 +417,13 @@ impl Engine {
 
     /// Counts what the cut `plane` would compute from a cold cache.
     pub(crate) fn plan_cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> SynthStats {
+        self.plan_points(&cut_points(plane, filter).0, lod)
+    }
+
+    /// Counts what the voxels `points` would compute from a cold cache.
+    pub(crate) fn plan_points(&self, points: &[[i64; 3]], lod: u32) -> SynthStats {
         let acc = Acc::new(self.init_level + 1, true);
-        let mut wanted = Wanted::new();
-        for p in cut_points(plane, filter).0 {
-            *wanted.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
-        }
-        self.dry().tiles(lod as usize, wanted, &acc);
+        self.dry().tiles(lod as usize, wanted_points(points), &acc);
         acc.stats()
     }
 
@@ -474,6 +475,41 @@ impl Engine {
         estimate::estimate(piece, &self.reach[lod as usize..], MAX_GROUP_TILES, limit)
     }
 
+    /// An upper bound of what [`Engine::plan_points`] counts: the sum of
+    /// each voxel's own bound (the chain of a set of voxels lies in the
+    /// union of their chains).
+    pub(crate) fn estimate_points(
+        &self,
+        points: &[[i64; 3]],
+        lod: u32,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
+        let reach = &self.reach[lod as usize..];
+        let mut out = estimate::WorkEstimate {
+            per_level: vec![0; reach.len()],
+            total: 0,
+            complete: true,
+        };
+        for p in points {
+            let left = limit.saturating_sub(out.total);
+            let one = estimate::estimate(
+                estimate::Piece::region(*p, [1; 3]),
+                reach,
+                MAX_GROUP_TILES,
+                left,
+            );
+            for (sum, n) in out.per_level.iter_mut().zip(&one.per_level) {
+                *sum = sum.saturating_add(*n);
+            }
+            out.total = out.total.saturating_add(one.total);
+            if !one.complete || out.total > limit {
+                out.complete = false;
+                break;
+            }
+        }
+        out
+    }
+
     /// Exact voxel-level dependency chain of a few voxels (see
     /// [`plan::exact_chain`]).
     /// `radius` is the neighbourhood's half side (the analysis's own unless
@@ -522,11 +558,7 @@ impl Engine {
     /// Final triples at arbitrary voxels of level `k`, fetched tile by tile
     /// so scattered points never pull in their bounding box.
     fn triples_at(&self, k: usize, points: &[[i64; 3]], acc: &Acc) -> Vec<[u32; 3]> {
-        let mut wanted = Wanted::new();
-        for p in points {
-            *wanted.entry(Self::tile_of(*p)).or_default() |= Self::bit_of(*p);
-        }
-        let tiles = self.tiles(k, wanted, acc);
+        let tiles = self.tiles(k, wanted_points(points), acc);
         points
             .iter()
             .map(|p| tiles[&Self::tile_of(*p)].get(*p))
@@ -537,13 +569,13 @@ impl Engine {
         &self,
         points: &[[i64; 3]],
         lod: u32,
-    ) -> Result<(Vec<[u8; 3]>, SynthStats)> {
+    ) -> Result<(Vec<u8>, SynthStats)> {
         let acc = self.new_acc();
         let k = lod as usize;
         let triples = self.triples_at(k, points, &acc);
         let out = triples
             .par_iter()
-            .map(|t| triple_rgb8(&self.cands, k, *t))
+            .flat_map_iter(|t| triple_rgb8(&self.cands, k, *t))
             .collect();
         Ok((out, acc.stats()))
     }
@@ -557,20 +589,6 @@ impl Engine {
         let acc = self.new_acc();
         let k = lod as usize;
         let (w, h) = (plane.width as usize, plane.height as usize);
-        let at = |i: usize, j: usize| {
-            [0, 1, 2].map(|a| plane.origin[a] + i as f64 * plane.u[a] + j as f64 * plane.v[a])
-        };
-        let limit = crate::request::COORD_LIMIT as f64;
-        for (i, j) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)] {
-            if at(i, j).iter().any(|v| v.abs() > limit) {
-                return Err(crate::Error::InvalidRange {
-                    name: "cut coordinate",
-                    value: at(i, j).iter().fold(0f64, |m, v| m.max(v.abs())),
-                    min: -limit,
-                    max: limit,
-                });
-            }
-        }
         let (pts, weights) = cut_points(plane, filter);
         let rgb = match filter {
             Filter::Nearest => {
@@ -662,6 +680,15 @@ fn tile_masks(need: &plan::Mask, scale: i64) -> Wanted {
     out
 }
 
+/// The tiles of `points`, each with the mask of the points in it.
+fn wanted_points(points: &[[i64; 3]]) -> Wanted {
+    let mut wanted = Wanted::new();
+    for &p in points {
+        *wanted.entry(Engine::tile_of(p)).or_default() |= Engine::bit_of(p);
+    }
+    wanted
+}
+
 #[inline]
 fn position(b: &Box3, i: usize) -> [i64; 3] {
     let s = b.size();
@@ -677,9 +704,7 @@ fn position(b: &Box3, i: usize) -> [i64; 3] {
 /// the eight corners of each pixel with their weights (nearest: no weights).
 fn cut_points(plane: &CutPlane, filter: Filter) -> (Vec<[i64; 3]>, Vec<f32>) {
     let (w, h) = (plane.width as usize, plane.height as usize);
-    let at = |i: usize, j: usize| {
-        [0, 1, 2].map(|a| plane.origin[a] + i as f64 * plane.u[a] + j as f64 * plane.v[a])
-    };
+    let at = |i: usize, j: usize| plane.at(i as u32, j as u32);
     match filter {
         Filter::Nearest => {
             let pts = (0..w * h)
