@@ -564,7 +564,8 @@ fn field_or_text<'de, D: serde::Deserializer<'de>>(
     use serde::de::Error as _;
     match serde_json::Value::deserialize(d)? {
         serde_json::Value::Null => Ok(None),
-        serde_json::Value::String(s) => s.parse().map(Some).map_err(D::Error::custom),
+        // Its numbers are checked with the other parameters'.
+        serde_json::Value::String(s) => Field::from_text(&s).map(Some).map_err(D::Error::custom),
         v => serde_json::from_value(v)
             .map(Some)
             .map_err(D::Error::custom),
