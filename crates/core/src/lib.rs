@@ -23,6 +23,7 @@ mod field;
 pub mod hash;
 mod orientation;
 mod params;
+pub mod period;
 pub mod png;
 mod request;
 mod stack;
