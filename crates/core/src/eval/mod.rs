@@ -156,7 +156,7 @@ pub fn tiling_seam(image: RgbView) -> TilingSeam {
     let (w, h) = (image.width as usize, image.height as usize);
     let lum = |x: usize, y: usize| {
         let p = image.pixel(x, y);
-        crate::exemplar::luminance([p[0], p[1], p[2]])
+        crate::analysis::exemplar::luminance([p[0], p[1], p[2]])
     };
     let column_step =
         |a: usize, b: usize| (0..h).map(|y| (lum(a, y) - lum(b, y)).abs()).sum::<f64>() / h as f64;
@@ -194,7 +194,7 @@ pub fn grain_map(image: RgbView, window: u32) -> Vec<WindowGrain> {
             let (x0, y0) = (wx * n, wy * n);
             let grain = crate::Grain::of(n, n, false, |x, y| {
                 let p = image.pixel(x0 + x, y0 + y);
-                crate::exemplar::luminance([p[0], p[1], p[2]])
+                crate::analysis::exemplar::luminance([p[0], p[1], p[2]])
             });
             out.push(WindowGrain {
                 centre: [x0 as f64 + n as f64 / 2.0, y0 as f64 + n as f64 / 2.0],
