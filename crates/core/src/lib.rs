@@ -20,6 +20,7 @@ pub mod eval;
 mod field;
 pub mod hash;
 mod params;
+pub mod period;
 pub mod png;
 mod request;
 mod synth;

@@ -32,6 +32,8 @@ pub mod grid;
 mod group;
 pub mod init;
 mod inspect;
+#[cfg(test)]
+mod periodic_tests;
 pub mod plan;
 mod stats;
 
@@ -39,6 +41,7 @@ use crate::candidates::Candidates;
 use crate::error::Result;
 use crate::field::FrameField;
 use crate::params::{Scheme, SynthParams};
+use crate::period::{Intervals, Period};
 use crate::request::{CutPlane, Filter, Region};
 use cache::{Claim, Tile, TileCache, TileKey};
 use colour::{colour, rgb8, triple_rgb8};
@@ -126,7 +129,12 @@ pub(crate) struct Engine {
     key: u64,
     init_level: usize,
     radius: i64,
-    cell: i64,
+    /// The solid's period, if it has one.
+    period: Option<Period>,
+    /// Whether a tile and its copies a period away share one cache key
+    /// (always, but in the tests that synthesize copies apart to check
+    /// that they come out the same).
+    share_copies: bool,
     steps: Vec<Step>,
     /// Steps of the finest levels (see [`SynthParams::finest_passes`] and
     /// [`SynthParams::fine_levels`]).
@@ -162,10 +170,14 @@ impl Engine {
         params: SynthParams,
         cache: Arc<TileCache>,
     ) -> Result<Self> {
+        if let Some(p) = params.period {
+            crate::period::check(p, cands.level_count(), &params)?;
+        }
+        let period = Period::of(&params);
         let field = params
             .field
             .as_ref()
-            .map(|f| f.compile().map(Arc::new))
+            .map(|f| f.compile().map(|f| Arc::new(f.repeating(period.as_ref()))))
             .transpose()?;
         let mut bytes = cands.digest().to_le_bytes().to_vec();
         bytes.extend_from_slice(&serde_json::to_vec(&params).expect("params serialise"));
@@ -180,7 +192,8 @@ impl Engine {
         let mut engine = Engine {
             init_level: cands.level_count() - 1,
             radius: correction::REACH,
-            cell: params.grid as i64,
+            period,
+            share_copies: true,
             cands,
             params,
             field,
@@ -190,13 +203,20 @@ impl Engine {
             finest_steps,
             reach: Vec::new(),
         };
+        // The walk that finds a level's reach assumes uniform cells; the
+        // per-period cells of a periodic solid are bounded by the reach
+        // without walls.
+        let uniform_cell = match (engine.params.scheme, engine.period) {
+            (Scheme::DualGrid, None) => Some(engine.params.grid as i64),
+            _ => None,
+        };
         engine.reach = (0..=engine.init_level)
             .map(|k| {
                 known_reach(
                     engine.steps_at(k),
                     engine.radius,
                     plan::Classes::at(&engine.params, k),
-                    engine.barrier_cell(),
+                    uniform_cell,
                 )
             })
             .collect();
@@ -208,12 +228,20 @@ impl Engine {
         self.field.as_deref()
     }
 
-    /// The dual grid's cell side, or `None` under the standard scheme.
-    fn barrier_cell(&self) -> Option<i64> {
-        match self.params.scheme {
-            Scheme::DualGrid => Some(self.cell),
-            Scheme::Standard => None,
-        }
+    /// The dual grid's cells at level `k`, or `None` under the standard
+    /// scheme.
+    fn barrier_cells(&self, k: usize) -> Option<[Intervals; 3]> {
+        crate::period::barrier_cells(&self.params, self.period.as_ref(), k)
+    }
+
+    /// The period whose copies of a tile share its key.
+    fn shared_period(&self) -> Option<Period> {
+        self.period.filter(|_| self.share_copies)
+    }
+
+    /// The period at level `k` of a periodic solid.
+    pub(crate) fn period_at(&self, k: usize) -> Option<[i64; 3]> {
+        self.period.map(|p| p.at(k))
     }
 
     /// How far a correction reads, in voxels of its level.
@@ -298,9 +326,37 @@ impl Engine {
     }
 
     /// Final tiles of level `k` holding at least the wanted voxels, from
-    /// the cache or computed; a tile another request is computing is
-    /// waited for (outside rayon).
+    /// the cache or computed. In a periodic solid a tile is its copy in the
+    /// period at the origin: the wanted voxels of all copies are gathered
+    /// there, synthesized once, and each copy gets the tile moved to its
+    /// place.
     fn tiles(&self, k: usize, wanted: Wanted, acc: &Acc) -> HashMap<[i64; 3], Tile> {
+        let Some(period) = self.shared_period() else {
+            return self.tiles_at_home(k, wanted, acc);
+        };
+        let mut home = Wanted::new();
+        for (&c, &mask) in &wanted {
+            *home.entry(period.wrap_tile(k, c)).or_default() |= mask;
+        }
+        let found = self.tiles_at_home(k, home, acc);
+        wanted
+            .keys()
+            .map(|&c| {
+                let t = &found[&period.wrap_tile(k, c)];
+                let origin = Self::tile_box(c).lo;
+                let t = if t.origin() == origin {
+                    t.clone()
+                } else {
+                    Arc::new(t.moved_to(origin))
+                };
+                (c, t)
+            })
+            .collect()
+    }
+
+    /// [`Engine::tiles`] for tiles that are their own keys; a tile another
+    /// request is computing is waited for (outside rayon).
+    fn tiles_at_home(&self, k: usize, wanted: Wanted, acc: &Acc) -> HashMap<[i64; 3], Tile> {
         let mut out = HashMap::default();
         let mut mine = Vec::new();
         let mut theirs = Vec::new();
@@ -308,15 +364,7 @@ impl Engine {
         let mut unclaimed = Vec::new();
         let keys: Vec<(TileKey, u64)> = wanted
             .iter()
-            .map(|(&c, &want)| {
-                let key = TileKey {
-                    texture: self.key,
-                    level: k as u8,
-                    version: 0,
-                    cell: c,
-                };
-                (key, want)
-            })
+            .map(|(&c, &want)| (self.version_key(k, 0, c), want))
             .collect();
         for ((key, want), claim) in keys.iter().zip(self.cache.claim_all(&keys)) {
             let (c, want) = (key.cell, *want);
@@ -392,13 +440,14 @@ impl Engine {
     }
 
     /// Key of the version after `done` correction passes of level `k` (0:
-    /// the final version) in tile `cell`.
+    /// the final version) in tile `cell` (in a periodic solid, shared by
+    /// its copies).
     fn version_key(&self, k: usize, done: usize, cell: [i64; 3]) -> TileKey {
         TileKey {
             texture: self.key,
             level: k as u8,
             version: done as u8,
-            cell,
+            cell: self.shared_period().map_or(cell, |p| p.wrap_tile(k, cell)),
         }
     }
 
@@ -437,7 +486,8 @@ impl Engine {
             key: self.key,
             init_level: self.init_level,
             radius: self.radius,
-            cell: self.cell,
+            period: self.period,
+            share_copies: self.share_copies,
             steps: self.steps.clone(),
             finest_steps: self.finest_steps.clone(),
             reach: self.reach.clone(),
@@ -520,27 +570,15 @@ impl Engine {
         lod: u32,
         radius: i64,
     ) -> Vec<plan::LevelPlan> {
-        let levels: Vec<(Vec<Step>, plan::Classes)> = (0..=self.init_level)
+        let levels: Vec<plan::LevelSteps> = (0..=self.init_level)
             .skip(lod as usize)
-            .map(|k| {
-                (
-                    self.steps_at(k).to_vec(),
-                    plan::Classes::at(&self.params, k),
-                )
+            .map(|k| plan::LevelSteps {
+                steps: self.steps_at(k).to_vec(),
+                order: plan::Classes::at(&self.params, k),
+                cells: self.barrier_cells(k),
             })
             .collect();
-        let cell = match self.params.scheme {
-            Scheme::DualGrid => Some(self.cell),
-            Scheme::Standard => None,
-        };
-        plan::exact_chain(
-            voxels,
-            levels.len(),
-            &levels,
-            radius,
-            self.field.is_some(),
-            cell,
-        )
+        plan::exact_chain(voxels, levels.len(), &levels, radius, self.field.is_some())
     }
 
     pub(crate) fn region_rgb(&self, r: &Region, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
