@@ -117,9 +117,6 @@ pub struct AppearanceCorrector<'a> {
     /// the fine levels too few are to pay for the test (docs/quality.md).
     /// The choice never changes a result: a repeat scores the same.
     distinct: bool,
-    /// Share of its distance a voxel's own triple is let off: it keeps its
-    /// triple unless a candidate is clearly better.
-    stay: f32,
     /// Whether the CPU has AVX2, which the same code compiles to in half
     /// the instructions (the results are the same: every float operation
     /// is done lane by lane in the same order, and none is fused).
@@ -251,10 +248,6 @@ impl<'a> AppearanceCorrector<'a> {
             consistency: params.consistency * scale * scale,
             map: QueryMap::new(level, tables, params.contrast),
             distinct: spacing(k) >= 4,
-            stay: std::env::var("SOLIDTEX_STAY")
-                .ok()
-                .and_then(|v| v.parse::<f32>().ok())
-                .unwrap_or(0.0),
             avx2: has_avx2(),
         }
     }
@@ -537,10 +530,7 @@ impl<'a> AppearanceCorrector<'a> {
         // Coherent triples last: with the proposals' best known, few are
         // close enough to need their penalty worked out.
         for (&t, &s) in coherent.iter().zip(&shares) {
-            let mut dist = wide_distance(&self.tables.sum_shares(s), &query);
-            if t == own && self.stay > 0.0 {
-                dist = (dist as f32 * (1.0 - self.stay)) as u32;
-            }
+            let dist = wide_distance(&self.tables.sum_shares(s), &query);
             if dist <= best.0 {
                 // Saturating: a large `consistency` can push the penalty to u32::MAX.
                 let dist =
