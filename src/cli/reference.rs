@@ -19,9 +19,10 @@ pub struct ReferenceArgs {
     /// Random seed.
     #[arg(long, default_value_t = ReferenceParams::default().seed)]
     seed: u64,
-    /// Pyramid levels.
-    #[arg(long, default_value_t = ReferenceParams::default().levels)]
-    levels: u32,
+    /// Pyramid levels (by default as many as leave 8 voxels per side at
+    /// the coarsest).
+    #[arg(long)]
+    levels: Option<u32>,
     /// Neighbourhood side N (odd).
     #[arg(long, default_value_t = ReferenceParams::default().neighbourhood)]
     neighbourhood: u32,
@@ -68,7 +69,7 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
     let params = ReferenceParams {
         size: a.size,
         seed: a.seed,
-        levels: a.levels,
+        levels: a.levels.unwrap_or_else(|| default_levels(a.size)),
         neighbourhood: a.neighbourhood,
         grid: a.grid,
         iterations: a.iterations,
@@ -124,4 +125,26 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
         write_png(&a.output.join(format!("slice_{name}.png")), s, s, img)?;
     }
     Ok(())
+}
+
+/// Levels that leave a block of 8 voxels per side at the coarsest (at
+/// least 1, at most 5), where the exemplar is blurred enough for the
+/// layout of its largest features.
+fn default_levels(size: u32) -> u32 {
+    let mut levels = 1;
+    while levels < 5 && (size >> levels) >= 8 && size % (1 << levels) == 0 {
+        levels += 1;
+    }
+    levels
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn default_levels_leave_eight_voxels_at_the_coarsest() {
+        assert_eq!(super::default_levels(64), 4);
+        assert_eq!(super::default_levels(128), 5);
+        assert_eq!(super::default_levels(32), 3);
+        assert_eq!(super::default_levels(24), 2);
+    }
 }

@@ -159,6 +159,9 @@ pub struct IterationReport {
     pub changed: usize,
 }
 
+/// Dimensions of the vectors the similar sets are found by.
+const SHORT_DIMS: usize = 8;
+
 /// Similar pixels kept per exemplar pixel for the k-coherence search.
 const SIMILAR: usize = 4;
 
@@ -199,11 +202,19 @@ impl PlaneLevel {
         let tree = Tree::new_from_slice(&vectors);
         let step = spacing(k) as i64;
         let (wi, hi) = (w as i64, h as i64);
+        // Similar pixels by their strongest components alone: a tree over
+        // fewer dimensions answers many times faster, and a similar set
+        // only proposes candidates, which the search then scores in full.
+        let short: Vec<[f32; SHORT_DIMS]> = vectors
+            .iter()
+            .map(|v| std::array::from_fn(|d| v[d]))
+            .collect();
+        let short_tree = kiddo::ImmutableKdTree::<f32, SHORT_DIMS>::new_from_slice(&short);
         let want = std::num::NonZero::new((SIMILAR * 8).min(vectors.len())).expect("pixels");
         let similar = (0..vectors.len())
             .into_par_iter()
             .flat_map_iter(|c| {
-                let mut nn = tree.nearest_n::<SquaredEuclidean>(&vectors[c], want);
+                let mut nn = short_tree.nearest_n::<SquaredEuclidean>(&short[c], want);
                 nn.sort_by(|a, b| a.distance.total_cmp(&b.distance).then(a.item.cmp(&b.item)));
                 let (cx, cy) = (c as i64 % wi, c as i64 / wi);
                 let mut out = Vec::with_capacity(SIMILAR);
@@ -322,14 +333,51 @@ impl TripleBlock {
 /// wide, `params.size` of them per side), returned as the triples of every
 /// level it passed through, coarsest first: each level's block is the
 /// coarse version its finer one was upsampled from and refined.
+/// `progress(fraction)` is called after every iteration (and may unwind to
+/// cancel).
 pub fn triple_blocks(
     exemplars: &ExemplarSet,
     weights: [f32; 3],
     params: &ReferenceParams,
     finest: usize,
+    progress: &(dyn Fn(f32) + Sync),
 ) -> Result<Vec<TripleBlock>> {
-    Ok(optimise_block(exemplars, weights, params, finest, |_| {})?.1)
+    // Work per level grows eightfold towards the finest.
+    let levels = params.levels as i32;
+    let work = |j: i32, its: u32| its as f64 * 8f64.powi(levels - 1 - j);
+    let total: f64 = (0..levels)
+        .map(|j| work(j, if j == 0 { params.finest_iterations } else { params.iterations }))
+        .sum();
+    let mut done = 0.0;
+    let report = |r: IterationReport| {
+        done += work(r.level as i32 - finest as i32, 1);
+        progress((done / total.max(1.0)) as f32);
+    };
+    Ok(optimise_block(exemplars, weights, params, finest, report)?.1)
 }
+
+/// The reference that the lazy synthesis starts from, for exemplars of
+/// `width` × `height` pixels, kept from stack level `finest` to `coarsest`:
+/// its pyramid reaches two levels above `finest` at least, and its block
+/// spans twice the exemplar when only the coarsest level is kept (so that
+/// cells read at hashed offsets rarely repeat a feature side by side), one
+/// exemplar when every level is, within [`MAX_SEED_VOXELS`].
+pub fn seeding_params(width: u32, height: u32, finest: u32, coarsest: u32) -> ReferenceParams {
+    let levels = (coarsest.max(finest + 2) - finest) + 1;
+    let unit = 1u32 << (levels - 1);
+    let span = width.max(height) * if finest == coarsest { 2 } else { 1 };
+    let cap = if finest == coarsest { 64 } else { 128 };
+    let side = (span >> finest).div_ceil(unit) * unit;
+    ReferenceParams {
+        size: side.clamp((4 * unit).max(16), cap),
+        levels,
+        ..ReferenceParams::default()
+    }
+}
+
+/// Most voxels a block that the lazy synthesis starts from holds per
+/// side.
+pub const MAX_SEED_VOXELS: u32 = 128;
 
 /// The optimisation itself, coarse to fine, its finest level at stack
 /// level `finest`.
@@ -839,6 +887,87 @@ mod tests {
             })
             .collect();
         ExemplarSet::single(Exemplar::from_rgb(w as u32, w as u32, &rgb).unwrap())
+    }
+
+    /// Mean luminance step between x-neighbours across the block's wrap
+    /// (x = side − 1 to x = 0) and between all others.
+    fn steps(b: &Block) -> (f64, f64) {
+        let n = b.size as usize;
+        let lum = |x: usize, y: usize, z: usize| {
+            let i = ((z * n + y) * n + x) * 3;
+            b.rgb[i..i + 3].iter().map(|&v| v as f64).sum::<f64>() / 3.0
+        };
+        let (mut across, mut inside) = (0.0, 0.0);
+        for z in 0..n {
+            for y in 0..n {
+                across += (lum(n - 1, y, z) - lum(0, y, z)).abs();
+                for x in 0..n - 1 {
+                    inside += (lum(x + 1, y, z) - lum(x, y, z)).abs();
+                }
+            }
+        }
+        (across / (n * n) as f64, inside / (n * n * (n - 1)) as f64)
+    }
+
+    #[test]
+    fn a_block_tiles_without_a_seam() {
+        let params = ReferenceParams {
+            size: 32,
+            levels: 3,
+            iterations: 3,
+            finest_iterations: 2,
+            ..Default::default()
+        };
+        let b = synthesize(&stripes(), [1.0; 3], &params, |_| {}).unwrap();
+        let (across, inside) = steps(&b);
+        assert!(inside > 1.0, "a flat block says nothing: {inside}");
+        assert!(across < 1.5 * inside, "seam: {across} across the wrap, {inside} inside");
+        // The check can fail: two halves of different blocks side by side.
+        let other = synthesize(&stripes(), [1.0; 3], &ReferenceParams { seed: 9, ..params }, |_| {})
+            .unwrap();
+        let n = 32usize;
+        let mut spliced = b.clone();
+        for z in 0..n {
+            for y in 0..n {
+                let row = ((z * n + y) * n) * 3;
+                spliced.rgb[row..row + n / 2 * 3].copy_from_slice(&other.rgb[row..row + n / 2 * 3]);
+            }
+        }
+        let (across, inside) = steps(&spliced);
+        assert!(across > 1.5 * inside, "a splice shows no seam: {across} vs {inside}");
+    }
+
+    #[test]
+    fn blocks_for_the_lazy_synthesis_hold_exemplar_pixels_at_every_level() {
+        let set = stripes();
+        let params = seeding_params(32, 32, 0, 1);
+        assert_eq!(params.levels, 3);
+        let blocks = triple_blocks(&set, [1.0; 3], &params, 0, &|_| {}).unwrap();
+        assert_eq!(blocks.iter().map(|b| b.level).collect::<Vec<_>>(), [2, 1, 0]);
+        for b in &blocks {
+            assert_eq!(b.triples.len(), (b.side as usize).pow(3));
+            assert!(b.triples.iter().flatten().all(|&c| c < 32 * 32));
+        }
+        assert_eq!(blocks[2].side, 2 * blocks[1].side);
+        // The block reads wrap: p and p + side are the same voxel.
+        let b = &blocks[2];
+        let s = b.side as i64;
+        assert_eq!(b.at([1, 2, 3]), b.at([1 + s, 2 - s, 3 + 2 * s]));
+    }
+
+    #[test]
+    fn seeding_blocks_span_the_exemplar_within_their_bounds() {
+        // The coarsest level alone: twice the exemplar.
+        let p = seeding_params(128, 128, 3, 3);
+        assert_eq!((p.size, p.levels), (32, 3));
+        // Every level: one exemplar, capped.
+        let p = seeding_params(128, 128, 0, 3);
+        assert_eq!((p.size, p.levels), (128, 4));
+        assert_eq!(seeding_params(512, 512, 0, 3).size, MAX_SEED_VOXELS);
+        assert_eq!(seeding_params(16, 16, 3, 3).size, 16);
+        for (w, f, c) in [(100, 3, 3), (62, 0, 3), (512, 3, 3), (40, 1, 2)] {
+            assert!(seeding_params(w, w, f, c).validate().is_ok(), "{w} {f} {c}");
+        }
     }
 
     #[test]

@@ -240,6 +240,17 @@ impl Engine {
     }
 
     /// The period at level `k` of a periodic solid.
+    /// The levels a request at level of detail `lod` reaches: from `lod`
+    /// up to the first level that starts from a block of the reference, or
+    /// to the coarsest.
+    pub(crate) fn chain(&self, lod: u32) -> std::ops::RangeInclusive<usize> {
+        let lod = lod as usize;
+        let start = (lod..self.init_level)
+            .find(|&k| self.cands.block(k).is_some())
+            .unwrap_or(self.init_level);
+        lod..=start
+    }
+
     pub(crate) fn period_at(&self, k: usize) -> Option<[i64; 3]> {
         self.period.map(|p| p.at(k))
     }
@@ -503,7 +514,7 @@ impl Engine {
         limit: u64,
     ) -> estimate::WorkEstimate {
         let piece = estimate::Piece::region(r.origin, r.size);
-        estimate::estimate(piece, &self.reach[lod as usize..], MAX_GROUP_TILES, limit)
+        estimate::estimate(piece, &self.reach[self.chain(lod)], MAX_GROUP_TILES, limit)
     }
 
     /// An upper bound of what [`Engine::plan_cut`] counts.
@@ -522,7 +533,7 @@ impl Engine {
             plane.height,
             filter == Filter::Trilinear,
         );
-        estimate::estimate(piece, &self.reach[lod as usize..], MAX_GROUP_TILES, limit)
+        estimate::estimate(piece, &self.reach[self.chain(lod)], MAX_GROUP_TILES, limit)
     }
 
     /// An upper bound of what [`Engine::plan_points`] counts: the sum of
@@ -534,7 +545,7 @@ impl Engine {
         lod: u32,
         limit: u64,
     ) -> estimate::WorkEstimate {
-        let reach = &self.reach[lod as usize..];
+        let reach = &self.reach[self.chain(lod)];
         let mut out = estimate::WorkEstimate {
             per_level: vec![0; reach.len()],
             total: 0,
@@ -570,8 +581,8 @@ impl Engine {
         lod: u32,
         radius: i64,
     ) -> Vec<plan::LevelPlan> {
-        let levels: Vec<plan::LevelSteps> = (0..=self.init_level)
-            .skip(lod as usize)
+        let levels: Vec<plan::LevelSteps> = self
+            .chain(lod)
             .map(|k| plan::LevelSteps {
                 steps: self.steps_at(k).to_vec(),
                 order: plan::Classes::at(&self.params, k),
