@@ -89,11 +89,12 @@ fn checked_id(id: &str) -> Result<(), ApiError> {
 }
 
 /// The texture `id`, in any status; the span records its id.
-fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
+async fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
     checked_id(id)?;
     tracing::Span::current().record("texture", id);
     s.registry
-        .get(id)
+        .find(id)
+        .await?
         .ok_or_else(|| ApiError::unknown_texture(id))
 }
 
@@ -102,7 +103,7 @@ pub async fn show(
     State(s): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
-    let e = known(&s, &id)?;
+    let e = known(&s, &id).await?;
     Ok(Json(view(&e, s.brick_size)))
 }
 
@@ -448,7 +449,7 @@ pub async fn variant(
     Path(id): Path<String>,
     req: Request,
 ) -> Result<Response, ApiError> {
-    let source = known(&s, &id)?;
+    let source = known(&s, &id).await?;
     let essence = req
         .headers()
         .get(header::CONTENT_TYPE)
@@ -497,7 +498,7 @@ pub async fn exemplar(
     Path(id): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let e = known(&s, &id)?;
+    let e = known(&s, &id).await?;
     let tag = etag(&e, "exemplar.png");
     if not_modified(&headers, &tag) {
         return Ok(not_modified_response(&tag));
