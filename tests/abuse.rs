@@ -7,11 +7,15 @@ mod server_support;
 
 #[path = "abuse/connections.rs"]
 mod connections;
+#[path = "abuse/consistency.rs"]
+mod consistency;
 #[path = "abuse/data_dir.rs"]
 mod data_dir;
 #[path = "abuse/errors.rs"]
 mod errors;
 #[path = "abuse/hosts.rs"]
 mod hosts;
+#[path = "abuse/labels.rs"]
+mod labels;
 #[path = "abuse/raw.rs"]
 mod raw;

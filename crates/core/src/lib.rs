@@ -12,28 +12,24 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
-mod appearance;
+mod analysis;
 pub mod bundled;
 mod candidates;
 mod error;
 pub mod eval;
-mod exemplar;
-mod feature;
 mod field;
 pub mod hash;
-mod orientation;
 mod params;
 pub mod png;
 mod request;
-mod stack;
 mod synth;
 mod texture;
 
+pub use analysis::exemplar::{Exemplar, ExemplarSet};
+pub use analysis::orientation::{Grain, Layout};
 pub use candidates::{Candidates, PrecomputeReport, Stage};
 pub use error::{CorruptKind, Error, Result};
-pub use exemplar::{Exemplar, ExemplarSet};
 pub use field::{Along, Curve, Field, Sketch};
-pub use orientation::{Grain, Layout};
 pub use params::{
     AnalysisParams, Arrangement, Correction, Orientation, Scheme, SlabTiling, Slices, SynthParams,
 };

@@ -2,8 +2,8 @@
 //! its valid range. Analysis parameters shape the precomputed candidates;
 //! synthesis parameters shape the voxels produced from them.
 
+use crate::analysis::exemplar::ExemplarSet;
 use crate::error::{Error, Result};
-use crate::exemplar::ExemplarSet;
 use crate::field::Field;
 use serde::{Deserialize, Serialize};
 
@@ -34,7 +34,7 @@ pub struct AnalysisParams {
     /// plane counts in the matching (see [`Orientation`]).
     pub orientation: Orientation,
     /// Weight of the feature-distance channel in the appearance vectors,
-    /// relative to the luminance (see [`crate::feature`]); 0 leaves the
+    /// relative to the luminance (see [`crate::analysis::feature`]); 0 leaves the
     /// vectors to colour alone. Not written when 0, so textures without
     /// the channel keep their ids.
     #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
@@ -113,7 +113,7 @@ impl AnalysisParams {
 pub enum Orientation {
     /// Measure the exemplar's orientation when the candidates are
     /// precomputed and, when it is strongly oriented along one of its axes,
-    /// choose the arrangement [`crate::orientation`] describes; otherwise
+    /// choose the arrangement [`crate::analysis::orientation`] describes; otherwise
     /// as [`Orientation::None`].
     #[default]
     Auto,
@@ -564,7 +564,8 @@ fn field_or_text<'de, D: serde::Deserializer<'de>>(
     use serde::de::Error as _;
     match serde_json::Value::deserialize(d)? {
         serde_json::Value::Null => Ok(None),
-        serde_json::Value::String(s) => s.parse().map(Some).map_err(D::Error::custom),
+        // Its numbers are checked with the other parameters'.
+        serde_json::Value::String(s) => Field::from_text(&s).map(Some).map_err(D::Error::custom),
         v => serde_json::from_value(v)
             .map(Some)
             .map_err(D::Error::custom),

@@ -121,15 +121,16 @@ pub struct ServeArgs {
 
     /// Bytes the textures may take on disk (exemplars and candidates; a
     /// 128² exemplar takes about 6 MB, a 512² one about 100 MB). An upload
-    /// that would go over gets 507 `storage_full`.
-    #[arg(long, env = "SOLIDTEX_MAX_STORED_BYTES", default_value_t = 4 << 30, value_parser = clap::value_parser!(u64).range(1..))]
+    /// that would go over gets 507 `storage_full` (suffixes K, M, G
+    /// accepted).
+    #[arg(long, env = "SOLIDTEX_MAX_STORED_BYTES", default_value = "4G", value_parser = parse_positive_bytes)]
     pub max_stored_bytes: u64,
 
     /// Bytes of precomputed candidates kept in memory (a 128² texture
     /// takes about 60 MB). Beyond it the least recently used textures are
     /// evicted, and loaded again from disk (in about a second) when next
-    /// asked for.
-    #[arg(long, env = "SOLIDTEX_MAX_RESIDENT_BYTES", default_value_t = 2 << 30, value_parser = clap::value_parser!(u64).range(1..))]
+    /// asked for (suffixes K, M, G accepted).
+    #[arg(long, env = "SOLIDTEX_MAX_RESIDENT_BYTES", default_value = "2G", value_parser = parse_positive_bytes)]
     pub max_resident_bytes: u64,
 
     /// Memory the precomputes running at once may take, by their
@@ -351,6 +352,14 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         .ok_or_else(|| format!("`{s}` is too large"))
 }
 
+/// Parses a byte count as [`parse_bytes`] does, refusing zero.
+pub fn parse_positive_bytes(s: &str) -> Result<u64, String> {
+    match parse_bytes(s)? {
+        0 => Err(format!("`{s}` must be at least one byte")),
+        n => Ok(n),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -371,6 +380,40 @@ mod tests {
         assert!(parse_bytes("lots").is_err());
         assert!(parse_bytes("3Q").is_err());
         assert!(parse_bytes("99999999999T").is_err());
+        assert_eq!(parse_positive_bytes("60M"), Ok(60 << 20));
+        assert!(parse_positive_bytes("0").is_err());
+    }
+
+    #[test]
+    fn every_byte_flag_takes_a_suffix() {
+        let c = Cli::try_parse_from(["x"]).unwrap().serve;
+        assert_eq!(
+            (c.max_stored_bytes, c.max_resident_bytes),
+            (4 << 30, 2 << 30)
+        );
+        let flags = [
+            "--cache-bytes",
+            "--max-upload-bytes",
+            "--max-stored-bytes",
+            "--max-resident-bytes",
+            "--max-precompute-bytes",
+        ];
+        for flag in flags {
+            let c = Cli::try_parse_from(["x", flag, "60M"])
+                .unwrap_or_else(|e| panic!("{flag} 60M: {e}"))
+                .serve;
+            let got = match flag {
+                "--cache-bytes" => c.cache_bytes,
+                "--max-upload-bytes" => c.max_upload_bytes,
+                "--max-stored-bytes" => c.max_stored_bytes,
+                "--max-resident-bytes" => c.max_resident_bytes,
+                _ => c.max_precompute_bytes,
+            };
+            assert_eq!(got, 60 << 20, "{flag}");
+        }
+        for flag in ["--max-stored-bytes", "--max-resident-bytes"] {
+            assert!(Cli::try_parse_from(["x", flag, "0"]).is_err(), "{flag}");
+        }
     }
 
     #[test]

@@ -9,6 +9,7 @@
 //! so that no error leaves the server in another shape.
 
 use crate::jobs::JobError;
+use crate::panics::panic_message;
 use crate::registry::RegistryError;
 use crate::spec::SpecError;
 use axum::body::Body;
@@ -230,8 +231,50 @@ impl From<JobError> for ApiError {
     }
 }
 
+/// Most characters of a request's own text (a key, a value, a path) that
+/// an error message repeats.
+pub const MAX_ECHO_CHARS: usize = 80;
+
+/// Most characters of an error message.
+pub const MAX_MESSAGE_CHARS: usize = 2048;
+
+/// `text` as an error message repeats it: at most [`MAX_ECHO_CHARS`]
+/// characters, the rest elided with its length said.
+pub fn echo(text: &str) -> std::borrow::Cow<'_, str> {
+    match text.char_indices().nth(MAX_ECHO_CHARS) {
+        None => text.into(),
+        Some((end, _)) => format!("{}… ({} bytes)", &text[..end], text.len()).into(),
+    }
+}
+
+/// An error message with every `quoted` part (what messages repeat of the
+/// request, by convention) elided past [`MAX_ECHO_CHARS`], and the whole
+/// cut at [`MAX_MESSAGE_CHARS`]: a client sending a 500 KB key gets its
+/// error, not its key back.
+fn bounded(message: &str) -> std::borrow::Cow<'_, str> {
+    if message.len() <= MAX_ECHO_CHARS {
+        return message.into();
+    }
+    let mut out = String::with_capacity(message.len().min(MAX_MESSAGE_CHARS + 64));
+    for (i, part) in message.split('`').enumerate() {
+        if i > 0 {
+            out.push('`');
+        }
+        out.push_str(if i % 2 == 1 { echo(part) } else { part.into() }.as_ref());
+    }
+    if let Some((end, _)) = out.char_indices().nth(MAX_MESSAGE_CHARS) {
+        out.truncate(end);
+        out.push('…');
+    }
+    out.into()
+}
+
 /// The JSON body of an error.
 pub fn error_body(code: &str, message: &str) -> String {
+    bounded_body(code, &bounded(message))
+}
+
+fn bounded_body(code: &str, message: &str) -> String {
     json!({ "error": { "code": code, "message": message } }).to_string()
 }
 
@@ -239,14 +282,15 @@ impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         // Shedding load (503) is the server working as configured, not a
         // failure; `log_response` reports it at INFO.
+        let message = bounded(&self.message);
         if self.status == StatusCode::SERVICE_UNAVAILABLE {
-            tracing::debug!(code = self.code, message = %self.message, "request shed");
+            tracing::debug!(code = self.code, %message, "request shed");
         } else if self.status.is_server_error() {
-            tracing::error!(code = self.code, message = %self.message, "request failed");
+            tracing::error!(code = self.code, %message, "request failed");
         } else {
-            tracing::debug!(code = self.code, message = %self.message, "request rejected");
+            tracing::debug!(code = self.code, %message, "request rejected");
         }
-        let mut res = Response::new(Body::from(error_body(self.code, &self.message)));
+        let mut res = Response::new(Body::from(bounded_body(self.code, &message)));
         *res.status_mut() = self.status;
         res.headers_mut().insert(
             header::CONTENT_TYPE,
@@ -330,17 +374,6 @@ pub fn panic_response(err: Box<dyn std::any::Any + Send + 'static>) -> Response 
     let what = panic_message(err.as_ref());
     tracing::error!(panic = %what, "handler panicked");
     ApiError::internal(format!("internal error: {what}")).into_response()
-}
-
-/// The message of a panic payload.
-pub fn panic_message(err: &(dyn std::any::Any + Send)) -> String {
-    if let Some(s) = err.downcast_ref::<&str>() {
-        (*s).to_string()
-    } else if let Some(s) = err.downcast_ref::<String>() {
-        s.clone()
-    } else {
-        "panic".to_string()
-    }
 }
 
 #[cfg(test)]
@@ -437,17 +470,32 @@ mod tests {
     }
 
     #[test]
+    fn echoed_input_is_capped() {
+        let key = "k".repeat(500 << 10);
+        let body = error_body(
+            "invalid_params",
+            &format!("unknown parameter `{key}` (known: seed, scheme)"),
+        );
+        assert!(body.len() < 400, "{} bytes", body.len());
+        let v: serde_json::Value = serde_json::from_str(&body).unwrap();
+        let m = v["error"]["message"].as_str().unwrap();
+        assert!(m.ends_with("` (known: seed, scheme)"), "{m}");
+        assert!(m.contains(&format!("… ({} bytes)`", key.len())), "{m}");
+        // Short quotes and messages are left as they are; a long message
+        // is cut whatever it quotes.
+        assert_eq!(bounded("a `b` c"), "a `b` c");
+        assert_eq!(
+            echo("é".repeat(MAX_ECHO_CHARS).as_str()).chars().count(),
+            MAX_ECHO_CHARS
+        );
+        let long = "x ".repeat(MAX_MESSAGE_CHARS);
+        assert_eq!(bounded(&long).chars().count(), MAX_MESSAGE_CHARS + 1);
+    }
+
+    #[test]
     fn body_shape() {
         let v: serde_json::Value = serde_json::from_str(&error_body("a", "b \"c\"")).unwrap();
         assert_eq!(v["error"]["code"], "a");
         assert_eq!(v["error"]["message"], "b \"c\"");
-    }
-
-    #[test]
-    fn panic_messages() {
-        let p: Box<dyn std::any::Any + Send> = Box::new("boom");
-        assert_eq!(panic_message(p.as_ref()), "boom");
-        let p: Box<dyn std::any::Any + Send> = Box::new(String::from("bang"));
-        assert_eq!(panic_message(p.as_ref()), "bang");
     }
 }

@@ -20,8 +20,8 @@
 //! actually stopped; its synthesis is cancelled (see
 //! [`solidtex_core::synth::cancel`]) and stops within a correction subpass.
 
-use super::error::panic_message;
 use super::metrics::Metrics;
+use super::panics::panic_message;
 use solidtex_core::{CancelFlag, Cancelled, run_cancellable};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};

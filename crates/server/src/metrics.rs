@@ -21,7 +21,7 @@ use std::sync::Arc;
 pub struct RequestLabels {
     /// Route template, e.g. `/v1/textures/{id}/cut.png`.
     pub route: String,
-    /// HTTP method.
+    /// HTTP method: a standard one's name, else `other`.
     pub method: String,
     /// Response status code.
     pub status: String,
@@ -328,12 +328,15 @@ impl Metrics {
         }
     }
 
-    /// Counts one finished request.
+    /// Counts one finished request. Every label comes from a small set
+    /// the server fixes: `route` is a route template (or `unmatched`), and
+    /// a method the server does not know is counted as `other`, so that no
+    /// client can add labels (each one is kept for the life of the process).
     pub fn observe_request(&self, route: &str, method: &str, status: u16, seconds: f64) {
         self.requests
             .get_or_create(&RequestLabels {
                 route: route.to_string(),
-                method: method.to_string(),
+                method: method_label(method).to_string(),
                 status: status.to_string(),
             })
             .inc();
@@ -394,6 +397,20 @@ impl Metrics {
         }
         out
     }
+}
+
+/// Methods counted under their own name; any other is `other`.
+const KNOWN_METHODS: [&str; 9] = [
+    "GET", "HEAD", "POST", "PUT", "DELETE", "OPTIONS", "PATCH", "CONNECT", "TRACE",
+];
+
+/// The label of a request's method: its name when it is a standard one,
+/// else `other`.
+pub fn method_label(method: &str) -> &'static str {
+    KNOWN_METHODS
+        .into_iter()
+        .find(|m| *m == method)
+        .unwrap_or("other")
 }
 
 /// Reads the tile cache's counters at scrape time.
@@ -495,5 +512,32 @@ impl Collector for ProcessCollector {
             g.encode(m)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clients_cannot_add_method_labels() {
+        let m = Metrics::new(Arc::new(TileCache::new(1 << 20)));
+        m.observe_request("/healthz", "GET", 200, 0.001);
+        for i in 0..100 {
+            m.observe_request(
+                "unmatched",
+                &format!("X{i}{}", "M".repeat(1000)),
+                405,
+                0.001,
+            );
+        }
+        m.observe_request("unmatched", "get", 405, 0.001);
+        let text = m.encode();
+        assert!(text.contains(r#"route="/healthz",method="GET",status="200"} 1"#));
+        assert!(
+            text.contains(r#"route="unmatched",method="other",status="405"} 101"#),
+            "{text}"
+        );
+        assert!(text.len() < 16 << 10, "{} bytes", text.len());
     }
 }

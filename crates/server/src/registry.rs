@@ -9,8 +9,8 @@
 //! Uploading content that is already known returns the existing texture;
 //! uploading a failed one tries again.
 
-use super::error::panic_message;
 use super::metrics::{Metrics, OutcomeLabels};
+use super::panics::panic_message;
 use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
 use super::store::{Found, META_VERSION, Storage, StoredMeta, StoredStatus};
 use crate::peak_alloc::{self, Meter};
@@ -636,7 +636,14 @@ impl Registry {
         };
         let entry = {
             let mut map = self.map.write();
-            if let Some(e) = map.get(&id).filter(|e| e.content_hash == hash) {
+            // The same content under another id (the bundled texture, whose
+            // id is not its hash) is that texture, not a copy of it.
+            let same = map.get(&id).filter(|e| e.content_hash == hash).or_else(|| {
+                map.values().find(|e| {
+                    !fixed_id && e.content_hash == hash && !matches!(e.status(), Status::Failed(_))
+                })
+            });
+            if let Some(e) = same {
                 match e.status() {
                     Status::Ready(_) | Status::Stored => {
                         return Ok(Submitted::Known(e.clone()));

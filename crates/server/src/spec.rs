@@ -251,21 +251,82 @@ impl<'de> Deserialize<'de> for Members {
     }
 }
 
-/// Parses the JSON text of a `params` object. A key given twice is refused
-/// (a JSON parser would keep the last one silently).
-pub fn params_object(text: &str) -> Result<Map<String, Value>, SpecError> {
-    let Members(members) = serde_json::from_str(text)
-        .map_err(|e| invalid_params(format!("`params` must be a JSON object: {e}")))?;
-    let mut m = Map::new();
-    for (k, v) in members {
-        if m.contains_key(&k) {
-            return Err(invalid_params(format!(
-                "parameter `{k}` given more than once in `params`"
-            )));
-        }
-        m.insert(k, v);
+/// A JSON value whose objects, at any depth, were checked for keys given
+/// twice (a JSON parser would keep the last one silently, so a field
+/// object's `{"kind": "slant", "kind": "zigzag"}` would pass in a body
+/// while the same text in a query is refused).
+struct Strict(Value);
+
+impl<'de> Deserialize<'de> for Strict {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Strict, D::Error> {
+        d.deserialize_any(StrictVisitor).map(Strict)
     }
-    Ok(m)
+}
+
+struct StrictVisitor;
+
+impl<'de> serde::de::Visitor<'de> for StrictVisitor {
+    type Value = Value;
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("a JSON value")
+    }
+    fn visit_bool<E>(self, v: bool) -> Result<Value, E> {
+        Ok(Value::Bool(v))
+    }
+    fn visit_i64<E>(self, v: i64) -> Result<Value, E> {
+        Ok(Value::from(v))
+    }
+    fn visit_u64<E>(self, v: u64) -> Result<Value, E> {
+        Ok(Value::from(v))
+    }
+    fn visit_f64<E>(self, v: f64) -> Result<Value, E> {
+        Ok(Value::from(v))
+    }
+    fn visit_str<E>(self, v: &str) -> Result<Value, E> {
+        Ok(Value::String(v.to_string()))
+    }
+    fn visit_string<E>(self, v: String) -> Result<Value, E> {
+        Ok(Value::String(v))
+    }
+    fn visit_unit<E>(self) -> Result<Value, E> {
+        Ok(Value::Null)
+    }
+    fn visit_none<E>(self) -> Result<Value, E> {
+        Ok(Value::Null)
+    }
+    fn visit_some<D: serde::Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
+        Strict::deserialize(d).map(|s| s.0)
+    }
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Value, A::Error> {
+        let mut out = Vec::new();
+        while let Some(Strict(v)) = seq.next_element()? {
+            out.push(v);
+        }
+        Ok(Value::Array(out))
+    }
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut m: A) -> Result<Value, A::Error> {
+        let mut out = Map::new();
+        while let Some(k) = m.next_key::<String>()? {
+            if out.contains_key(&k) {
+                return Err(serde::de::Error::custom(format!(
+                    "key `{k}` given more than once"
+                )));
+            }
+            let Strict(v) = m.next_value()?;
+            out.insert(k, v);
+        }
+        Ok(Value::Object(out))
+    }
+}
+
+/// Parses the JSON text of a `params` object. A key given twice, at the
+/// top or inside a value (a field object), is refused.
+pub fn params_object(text: &str) -> Result<Map<String, Value>, SpecError> {
+    match serde_json::from_str(text) {
+        Ok(Strict(Value::Object(m))) => Ok(m),
+        Ok(_) => Err(invalid_params("`params` must be a JSON object".to_string())),
+        Err(e) => Err(invalid_params(format!("`params`: {e}"))),
+    }
 }
 
 fn invalid_params(message: String) -> SpecError {
@@ -932,7 +993,14 @@ mod tests {
     #[test]
     fn params_objects_refuse_repeated_keys() {
         assert_eq!(params_object(r#"{"seed": 1}"#).unwrap()["seed"], 1);
-        for bad in [r#"{"seed": 1, "seed": 1}"#, "[1]", "7", "{"] {
+        for bad in [
+            r#"{"seed": 1, "seed": 1}"#,
+            r#"{"field": {"kind": "slant", "angle": 30, "angle": 40}}"#,
+            r#"{"field": {"kind": "sketch", "curves": [{"points": [], "points": []}]}}"#,
+            "[1]",
+            "7",
+            "{",
+        ] {
             assert_eq!(
                 code(params_object(bad).unwrap_err()),
                 "invalid_params",

@@ -12,10 +12,10 @@
 //! corrupt file is an error, never a panic or a wrong result.
 
 use super::{Candidates, PlaneCandidates, PrecomputeReport, StoredLevel};
-use crate::appearance::Pca;
+use crate::analysis::appearance::Pca;
+use crate::analysis::exemplar::{Exemplar, ExemplarSet};
+use crate::analysis::orientation::{Grain, Layout};
 use crate::error::{CorruptKind, Error, Result};
-use crate::exemplar::{Exemplar, ExemplarSet};
-use crate::orientation::{Grain, Layout};
 use crate::params::{AnalysisParams, Arrangement, Orientation};
 
 const MAGIC: &[u8; 8] = b"SOLIDTEX";

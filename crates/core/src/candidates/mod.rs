@@ -9,15 +9,15 @@ pub mod coherence;
 mod format;
 pub mod geometry;
 pub mod search;
-pub mod sparse;
 
-use crate::appearance::{self, AppearanceLevel, Pca};
+use crate::analysis::appearance::{self, AppearanceLevel, Pca};
+use crate::analysis::exemplar::ExemplarSet;
+use crate::analysis::feature;
+use crate::analysis::orientation::Layout;
+use crate::analysis::stack::{GaussianStack, spacing};
 use crate::error::{Error, Result};
-use crate::exemplar::ExemplarSet;
-use crate::feature;
-use crate::orientation::Layout;
 use crate::params::AnalysisParams;
-use crate::stack::{GaussianStack, spacing};
+use crate::synth::correction::tables::SparseTables;
 use geometry::Dims;
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
@@ -148,7 +148,7 @@ pub struct Level {
     weights: [f32; 3],
     /// Sparse appearance-space neighbourhoods, built when a correction
     /// first needs them.
-    sparse: std::sync::OnceLock<sparse::SparseTables>,
+    sparse: std::sync::OnceLock<SparseTables>,
 }
 
 impl Level {
@@ -171,11 +171,11 @@ impl Level {
     /// may meanwhile take up another first use of the same level, which
     /// would wait forever for a cell that it is itself filling. Callers
     /// that race may each build the tables; the first one set is kept.
-    pub fn sparse_tables(&self, dims: Dims, k: usize) -> &sparse::SparseTables {
+    pub fn sparse_tables(&self, dims: Dims, k: usize) -> &SparseTables {
         if let Some(t) = self.sparse.get() {
             return t;
         }
-        let built = sparse::SparseTables::new(
+        let built = SparseTables::new(
             &self.appearance,
             &self.stored.candidates,
             dims,
@@ -778,7 +778,8 @@ fn mean_random_error(stacks: &[GaussianStack; 3], k: usize, n: u32, dims: Dims) 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::exemplar::Exemplar;
+    use crate::analysis::exemplar::Exemplar;
+    use crate::synth::correction::tables;
 
     fn pattern(w: u32, seed: u32) -> Exemplar {
         let rgb: Vec<u8> = (0..w * w * 3)
@@ -822,18 +823,18 @@ mod tests {
             let t = tables.best(1, px).triples[0];
             let mut q = Vec::with_capacity(12 * d);
             for (p, &c) in t.iter().enumerate() {
-                for &(i, j) in &sparse::DIAGONALS {
+                for &(i, j) in &tables::DIAGONALS {
                     let at = dims.shift(c, i, j) as usize;
                     q.extend_from_slice(level.appearance[p].vector(at));
                 }
             }
             let got = tables.project(&q);
-            worst = worst.max(sparse::wide_distance(&got, &tables.triple_vector(t)));
+            worst = worst.max(tables::wide_distance(&got, &tables.triple_vector(t)));
         }
         // Shares are rounded one by one (three and the bias), so a triple's
         // vector is within 2 units per dimension of the direct projection;
         // an unweighted query side would be thousands away.
-        assert!(worst <= 4 * sparse::SPARSE_DIMS as u32, "{worst}");
+        assert!(worst <= 4 * tables::SPARSE_DIMS as u32, "{worst}");
         let other = even.level(0).sparse_tables(dims, 0);
         assert_ne!(other.best(1, 0).vectors, tables.best(1, 0).vectors);
         assert_eq!(other.best(1, 0).triples, tables.best(1, 0).triples);

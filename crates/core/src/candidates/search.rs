@@ -6,8 +6,8 @@
 //! three pairwise strip differences).
 
 use super::geometry::Dims;
-use crate::appearance::{Pca, has_avx, sq_dist};
-use crate::stack::{GaussianStack, spacing};
+use crate::analysis::appearance::{Pca, has_avx, sq_dist};
+use crate::analysis::stack::{GaussianStack, spacing};
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 use std::collections::BinaryHeap;

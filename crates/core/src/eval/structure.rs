@@ -175,7 +175,7 @@ impl Luma {
         let n = image.pixel_count();
         let v = image.rgb[..n * 3]
             .chunks_exact(3)
-            .map(|c| crate::exemplar::luminance([c[0], c[1], c[2]]))
+            .map(|c| crate::analysis::exemplar::luminance([c[0], c[1], c[2]]))
             .collect();
         Luma {
             w: image.width as i64,

@@ -79,11 +79,22 @@ pub enum Field {
 
 impl std::str::FromStr for Field {
     type Err = Error;
+    /// A field as text ([`Field::from_text`]), validated.
+    fn from_str(s: &str) -> Result<Field> {
+        let field = Field::from_text(s)?;
+        field.validate()?;
+        Ok(field)
+    }
+}
+
+impl Field {
     /// A field as JSON (`{"kind":"slant","angle":30}`, the only form for a
     /// sketch), or a preset in short: `slant:ANGLE`, `circular[:CX,CY]`,
     /// `emissive[:CX,CY]`, `zigzag:ANGLE,PERIOD`, `slant3d:DX,DY,DZ` (the
-    /// centres on the z axis through (CX, CY)). The field is validated.
-    fn from_str(s: &str) -> Result<Field> {
+    /// centres on the z axis through (CX, CY)). Only its form is checked:
+    /// its numbers are checked by [`Field::validate`], as an object's are,
+    /// so that both forms of one field are refused alike.
+    pub fn from_text(s: &str) -> Result<Field> {
         let s = s.trim();
         let field = if s.starts_with('{') {
             serde_json::from_str(s).map_err(|e| Error::InvalidRequest(format!("field: {e}")))?
@@ -160,7 +171,6 @@ impl std::str::FromStr for Field {
                 }
             }
         };
-        field.validate()?;
         Ok(field)
     }
 }

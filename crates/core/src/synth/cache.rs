@@ -43,7 +43,7 @@ pub struct TileData {
 const COORD_BITS: u32 = 21;
 const COORD_MASK: u64 = (1 << COORD_BITS) - 1;
 const _: () = assert!(
-    (crate::exemplar::MAX_SIDE as u64).pow(2) <= COORD_MASK + 1,
+    (crate::analysis::exemplar::MAX_SIDE as u64).pow(2) <= COORD_MASK + 1,
     "a pixel index must fit a packed coordinate"
 );
 

@@ -2,12 +2,12 @@
 //! slab tiled over space and warped by the jitter field; at finer levels,
 //! the parent's triples upsampled.
 
+use crate::analysis::stack::spacing;
 use crate::candidates::Candidates;
 use crate::candidates::geometry::offset_triple;
 use crate::field::{FrameField, round, world};
 use crate::hash::{hash_pos, mix, unit as unit_f};
 use crate::params::SlabTiling;
-use crate::stack::spacing;
 
 const TAG_SLAB: u32 = 1;
 const TAG_JITTER: u32 = 2;

@@ -16,7 +16,7 @@ mod voxels;
 
 pub use volumes::{WINDOW_LOG2, window};
 
-use super::error::{ApiError, json_errors, panic_response};
+use super::error::{ApiError, echo, json_errors, panic_response};
 use super::host::AllowedHosts;
 use super::jobs::Jobs;
 use super::metrics::Metrics;
@@ -255,7 +255,11 @@ async fn no_route(req: Request) -> ApiError {
     ApiError::new(
         StatusCode::NOT_FOUND,
         "no_route",
-        format!("no route for {} {}", req.method(), req.uri().path()),
+        format!(
+            "no route for {} {}",
+            echo(req.method().as_str()),
+            echo(req.uri().path())
+        ),
     )
 }
 

@@ -138,7 +138,7 @@ pub fn grain_map(image: RgbView, window: u32) -> Vec<WindowGrain> {
             let (x0, y0) = (wx * n, wy * n);
             let grain = crate::Grain::of(n, n, false, |x, y| {
                 let p = image.pixel(x0 + x, y0 + y);
-                crate::exemplar::luminance([p[0], p[1], p[2]])
+                crate::analysis::exemplar::luminance([p[0], p[1], p[2]])
             });
             out.push(WindowGrain {
                 centre: [x0 as f64 + n as f64 / 2.0, y0 as f64 + n as f64 / 2.0],

@@ -12,9 +12,9 @@
 //! projection per plane, so that any triple (a coherent one too) is scored
 //! from three shares without a projection.
 
-use super::PlaneCandidates;
-use super::geometry::Dims;
-use crate::appearance::{AppearanceLevel, Pca, Projector};
+use crate::analysis::appearance::{AppearanceLevel, Pca, Projector};
+use crate::candidates::PlaneCandidates;
+use crate::candidates::geometry::Dims;
 use rayon::prelude::*;
 
 /// Dimensions of a quantised sparse neighbourhood vector: one SSE register.
@@ -559,7 +559,7 @@ mod tests {
 
     #[test]
     fn a_candidates_vector_is_its_triples_vector_and_fits_a_byte() {
-        use crate::exemplar::{Exemplar, ExemplarSet};
+        use crate::analysis::exemplar::{Exemplar, ExemplarSet};
         let rgb: Vec<u8> = (0..24 * 24 * 3u32)
             .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
             .collect();

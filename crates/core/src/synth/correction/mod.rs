@@ -1,8 +1,9 @@
 //! Correction (Dong et al. "Correction", Zhang et al. §4.3): a voxel's
 //! triple is replaced by the candidate whose neighbourhoods in its three
 //! planes best match the voxel's. The neighbourhoods are sparse
-//! appearance-space ones (see [`appearance`]): a correction reads only
-//! its direct neighbours, so the dependency radius is 1.
+//! appearance-space ones (see [`matching`] for the query and the match,
+//! [`tables`] for the candidates' side): a correction reads only its
+//! direct neighbours, so the dependency radius is 1.
 //!
 //! A coherent triple continues its neighbour's exemplar patches in all
 //! three planes, but nothing makes its three exemplar colours agree: along
@@ -18,7 +19,7 @@ use crate::candidates::Candidates;
 use crate::candidates::geometry::{AXES, Dims, offset_triple};
 use crate::field::{Frame, FrameField, round};
 use crate::params::SynthParams;
-use appearance::AppearanceCorrector;
+use matching::AppearanceCorrector;
 use rayon::prelude::*;
 
 /// Triples and colours of a working box; colours are kept in step with
@@ -177,7 +178,8 @@ macro_rules! for_each_direct {
 }
 
 // After `for_each_direct`, which it uses.
-mod appearance;
+mod matching;
+pub mod tables;
 
 /// How far along x [`gather_near`] prefetches, in voxels.
 const AHEAD: i64 = 16;

@@ -4,7 +4,7 @@
 //! neighbourhoods against exemplar pixels then costs a handful of
 //! multiply-adds instead of 3·N² per comparison.
 
-use crate::stack::{GaussianStack, spacing};
+use crate::analysis::stack::{GaussianStack, spacing};
 use nalgebra::{DMatrix, SymmetricEigen};
 use rayon::prelude::*;
 

@@ -28,8 +28,8 @@
 //! planes, and turning by any other angle would break the exemplar's
 //! wrap-around.
 
+use crate::analysis::exemplar::{Exemplar, ExemplarSet, luminance};
 use crate::error::{Error, Result};
-use crate::exemplar::{Exemplar, ExemplarSet, luminance};
 use crate::params::{Arrangement, Orientation};
 
 /// Coherence from which an exemplar counts as strongly oriented: between

@@ -27,25 +27,25 @@
 //! Candidates come by k-coherence (Lin §3.2): every in-plane neighbour's
 //! exemplar pixel, moved back by its offset, proposes its similarity set;
 //! each proposed pixel is completed to triples by its best
-//! [`BEST_CANDIDATES`](crate::candidates::sparse::BEST_CANDIDATES)
+//! [`BEST_CANDIDATES`](crate::synth::correction::tables::BEST_CANDIDATES)
 //! precomputed 3D candidates. The coherent triples
 //! (each direct neighbour's triple moved back) compete on equal terms,
 //! with a penalty when their three exemplar colours disagree; a bonus for
 //! them left upsampled blocks standing (docs/quality.md).
 //! The best by distance of the quantised 12-location vectors wins.
 
+use super::tables::{
+    BestCandidates, DIAGONALS, SPARSE_DIMS, SparseTables, WIDE_RANGE, WideVector,
+    appearance_stride, best_distances, wide_distance,
+};
 use super::{
     CENTRE, Local, Near, Work, disagreement, gather_local, gather_near, in_plane_slot, near_slot,
     prefetch,
 };
+use crate::analysis::stack::spacing;
 use crate::candidates::geometry::{AXES, Dims};
-use crate::candidates::sparse::{
-    BestCandidates, DIAGONALS, SPARSE_DIMS, SparseTables, WIDE_RANGE, WideVector,
-    appearance_stride, best_distances, wide_distance,
-};
 use crate::candidates::{Candidates, Level};
 use crate::params::SynthParams;
-use crate::stack::spacing;
 
 /// Slots of the set of proposed pixels (keys tagged by plane): more than
 /// [`MAX_PROPOSED`], so probing always ends.
@@ -597,7 +597,7 @@ impl<'a> AppearanceCorrector<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::exemplar::{Exemplar, ExemplarSet};
+    use crate::analysis::exemplar::{Exemplar, ExemplarSet};
     use crate::synth::grid::{Box3, Grid};
 
     /// The AVX2 build of the correction and the portable one choose the

@@ -13,7 +13,7 @@
 //! clamped to a radius that grows with the exemplar and scaled so its
 //! spread is `weight` times the luminance's.
 
-use crate::exemplar::Exemplar;
+use crate::analysis::exemplar::Exemplar;
 
 /// Signed distance to the feature's edges, one value per pixel (row-major,
 /// wrapping at the borders), positive inside the feature, scaled by

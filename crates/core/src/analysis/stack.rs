@@ -3,7 +3,7 @@
 //! of downsampled, so level k is sampled at spacing h_k = 2^k with any
 //! sub-pixel phase. Boundaries wrap (exemplars are treated as tileable).
 
-use crate::exemplar::Exemplar;
+use crate::analysis::exemplar::Exemplar;
 use std::sync::Arc;
 
 /// Spacing of level `k` (0 = finest).
@@ -24,7 +24,7 @@ pub struct GaussianStack {
     /// the correction loads a colour as one 16-byte vector.
     padded: Arc<Vec<Vec<[f32; 4]>>>,
     /// The feature-distance channel, blurred like the colours, when the
-    /// analysis adds one (see [`crate::feature`]).
+    /// analysis adds one (see [`crate::analysis::feature`]).
     feature: Option<Arc<Vec<Vec<f32>>>>,
 }
 
