@@ -11,6 +11,8 @@ mod connections;
 mod consistency;
 #[path = "abuse/data_dir.rs"]
 mod data_dir;
+#[path = "abuse/deletion.rs"]
+mod deletion;
 #[path = "abuse/errors.rs"]
 mod errors;
 #[path = "abuse/hosts.rs"]

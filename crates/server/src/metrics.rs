@@ -44,7 +44,8 @@ pub struct LevelLabels {
 /// Labels of precompute outcomes.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct OutcomeLabels {
-    /// `ok` or `failed`.
+    /// `ok`, `reused` (candidates shared with another texture), `failed`
+    /// or `cancelled` (its texture deleted while it ran).
     pub outcome: String,
 }
 

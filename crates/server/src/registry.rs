@@ -16,6 +16,7 @@ use super::store::{Found, META_VERSION, Storage, StoredMeta, StoredStatus};
 use crate::peak_alloc::{self, Meter};
 use parking_lot::{Mutex, RwLock};
 use solidtex_core::Layout;
+use solidtex_core::{CancelFlag, Cancelled, run_cancellable};
 use solidtex_core::{Candidates, Stage, Texture, TileCache};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -111,6 +112,8 @@ pub(crate) struct Entry {
     /// Heap bytes its precompute peaked at, when measured.
     precompute_peak: Mutex<Option<u64>>,
     deleted: AtomicBool,
+    /// Set when it is deleted or replaced: stops its precompute.
+    cancel: CancelFlag,
     /// Woken whenever the status changes.
     settled: tokio::sync::Notify,
     /// When it was last asked for (the registry's use counter).
@@ -169,6 +172,7 @@ impl Entry {
             precompute_estimate,
             precompute_peak: Mutex::new(None),
             deleted: AtomicBool::new(false),
+            cancel: CancelFlag::new(),
             settled: tokio::sync::Notify::new(),
             last_used: AtomicU64::new(0),
             on_disk: AtomicBool::new(false),
@@ -182,6 +186,14 @@ impl Entry {
     fn named(mut self, name: Option<String>) -> Entry {
         self.name = name;
         self
+    }
+
+    /// Marks it deleted (or replaced) and stops its precompute, if one
+    /// runs, at its next check: its memory and slot are freed within a
+    /// fraction of a second.
+    fn discard(&self) {
+        self.deleted.store(true, Ordering::SeqCst);
+        self.cancel.cancel();
     }
 
     /// The xy exemplar (the only one of a single-exemplar texture).
@@ -694,7 +706,7 @@ impl Registry {
             }
             self.reserve_precompute();
             if let Some(old) = map.get(&id) {
-                old.deleted.store(true, Ordering::SeqCst);
+                old.discard();
             }
             let e = Arc::new(Entry::new(id.clone(), hash, now(), spec).named(name));
             map.insert(id.clone(), e.clone());
@@ -762,7 +774,7 @@ impl Registry {
             if map.get(&id).is_some_and(|e| Arc::ptr_eq(e, &entry)) {
                 map.remove(&id);
             }
-            entry.deleted.store(true, Ordering::SeqCst);
+            entry.discard();
             Ok::<_, std::io::Error>(true)
         })
         .await
@@ -796,6 +808,13 @@ impl Registry {
         let this = self.clone();
         tokio::spawn(async move {
             let permit = this.slots.clone().acquire_owned().await;
+            // Deleted while it waited: it leaves the queue without waiting
+            // for memory too.
+            if entry.deleted.load(Ordering::SeqCst) {
+                this.release_precompute();
+                this.update_gauges();
+                return;
+            }
             // Whatever its estimate, a precompute takes at most the whole
             // bound (a texture found at start may predate a lower one).
             let units = entry
@@ -895,7 +914,7 @@ impl Registry {
             if let Some(c) = shared {
                 let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
                     .map_err(|e| e.to_string())?;
-                return Ok((c, t));
+                return Ok(Some((c, t)));
             }
             let set = entry.planes.to_set().map_err(|e| e.to_string())?;
             let progress = |stage: Stage, f: f32| {
@@ -906,15 +925,21 @@ impl Registry {
                 Some(c) => c,
                 None => {
                     computed = true;
-                    self.pool
-                        .install(|| Candidates::compute(&set, &entry.params.analysis, &progress))
-                        .map_err(|e| e.to_string())?
+                    let run = || {
+                        run_cancellable(&entry.cancel, || {
+                            Candidates::compute(&set, &entry.params.analysis, &progress)
+                        })
+                    };
+                    match self.pool.install(run) {
+                        Ok(c) => c.map_err(|e| e.to_string())?,
+                        Err(Cancelled) => return Ok(None),
+                    }
                 }
             };
             let c = Arc::new(c);
             let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
                 .map_err(|e| e.to_string())?;
-            Ok::<_, String>((c, t))
+            Ok::<_, String>(Some((c, t)))
         }))
         .unwrap_or_else(|p| {
             Err(format!(
@@ -922,6 +947,18 @@ impl Registry {
                 panic_message(p.as_ref())
             ))
         });
+        let result = match result {
+            Ok(Some(done)) => Ok(done),
+            Ok(None) => {
+                self.count_precompute("cancelled");
+                tracing::info!(
+                    seconds = t0.elapsed().as_secs_f64(),
+                    "precompute stopped: its texture was deleted"
+                );
+                return;
+            }
+            Err(why) => Err(why),
+        };
         let seconds = t0.elapsed().as_secs_f64();
         *entry.precompute_seconds.lock() = Some(seconds);
         if !reused {

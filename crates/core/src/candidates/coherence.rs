@@ -8,6 +8,7 @@
 
 use super::geometry::{AXES, Dims, project};
 use super::search::Scored;
+use crate::synth::cancel::CancelFlag;
 use rayon::prelude::*;
 
 /// Dong et al. report about two iterations; removal cascades slowly after
@@ -25,8 +26,16 @@ pub struct Filtered {
 }
 
 /// Filters `lists` (candidates of every pixel of plane `p`, sorted by
-/// error) until every pixel has at most `max` or nothing changes.
-pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize) -> Filtered {
+/// error) until every pixel has at most `max` or nothing changes. Unwinds
+/// out (between iterations) once `cancel` is set.
+pub fn filter(
+    p: usize,
+    lists: Vec<Vec<Scored>>,
+    dims: Dims,
+    h: i64,
+    max: usize,
+    cancel: Option<&CancelFlag>,
+) -> Filtered {
     // The four unit steps in plane p: each one's move in p (to the
     // neighbouring pixel) and in every plane (for the coordinate there).
     let (a, b) = AXES[p];
@@ -42,6 +51,9 @@ pub fn filter(p: usize, lists: Vec<Vec<Scored>>, dims: Dims, h: i64, max: usize)
     let mut lists = lists;
     let mut iterations = 0;
     while iterations < MAX_ITERATIONS && lists.iter().any(|l| l.len() > max) {
+        if let Some(f) = cancel {
+            f.unwind_if_set();
+        }
         iterations += 1;
         // Per pixel and foreign plane, the sorted coordinates its
         // candidates use (plane p's own coordinate is the pixel itself).

@@ -17,6 +17,7 @@ use crate::analysis::orientation::Layout;
 use crate::analysis::stack::{GaussianStack, spacing};
 use crate::error::{Error, Result};
 use crate::params::AnalysisParams;
+use crate::synth::cancel::CancelFlag;
 use crate::synth::correction::tables::SparseTables;
 use geometry::Dims;
 use kiddo::SquaredEuclidean;
@@ -276,6 +277,9 @@ impl Candidates {
         };
 
         progress(Stage::Analysis, 0.0);
+        // Watched between pixels of the search and between stages: a
+        // server stops the precompute of a texture deleted meanwhile.
+        let cancel = crate::synth::cancel::current();
         let stacks = build_stacks(exemplars, levels_n, params.feature_weight);
         let stages = Stages {
             stacks: &stacks,
@@ -283,6 +287,7 @@ impl Candidates {
             params,
             single,
             progress,
+            cancel: cancel.as_ref(),
         };
         let appearance_pca = stages.fit_appearance();
         lap(&mut report, "analysis");
@@ -470,9 +475,24 @@ struct Stages<'a> {
     params: &'a AnalysisParams,
     single: bool,
     progress: &'a (dyn Fn(Stage, f32) + Sync),
+    cancel: Option<&'a CancelFlag>,
 }
 
 impl Stages<'_> {
+    /// Unwinds out of the precompute if it was cancelled; else reports
+    /// `stage` done to `fraction`.
+    fn advance(&self, stage: Stage, fraction: f32) {
+        self.checkpoint();
+        (self.progress)(stage, fraction);
+    }
+
+    /// Unwinds out of the precompute if it was cancelled.
+    fn checkpoint(&self) {
+        if let Some(c) = self.cancel {
+            c.unwind_if_set();
+        }
+    }
+
     /// Appearance PCA of every level's N×N neighbourhoods, per plane (fitted on
     /// a sample of pixels).
     fn fit_appearance(&self) -> Vec<[Pca; 3]> {
@@ -480,6 +500,7 @@ impl Stages<'_> {
         let mut appearance_pca: Vec<[Pca; 3]> = Vec::new();
         for k in 0..levels_n {
             let fit = |p: usize| {
+                self.checkpoint();
                 let all = appearance::all_neighbourhoods(&self.stacks[p], k, n);
                 let stride = (self.dims.len() / 8192).max(1);
                 let len = (n * n) as usize * self.stacks[p].channels();
@@ -498,7 +519,7 @@ impl Stages<'_> {
                 [first, fit(1), fit(2)]
             };
             appearance_pca.push(pcas);
-            (self.progress)(Stage::Analysis, (k + 1) as f32 / levels_n as f32);
+            self.advance(Stage::Analysis, (k + 1) as f32 / levels_n as f32);
         }
         appearance_pca
     }
@@ -528,11 +549,12 @@ impl Stages<'_> {
                         self.dims,
                         self.params.strips as usize,
                         self.params.triples as usize,
+                        self.cancel,
                     )
                 })
                 .collect();
             raw_lists.push(per_plane);
-            (self.progress)(Stage::Search, (k + 1) as f32 / levels_n as f32);
+            self.advance(Stage::Search, (k + 1) as f32 / levels_n as f32);
         }
         raw_lists
     }
@@ -554,8 +576,14 @@ impl Stages<'_> {
             };
             let mut planes: Vec<PlaneCandidates> = Vec::new();
             for (p, lists) in per_plane.into_iter().enumerate() {
-                let f =
-                    coherence::filter(p, lists, self.dims, h, self.params.max_candidates as usize);
+                let f = coherence::filter(
+                    p,
+                    lists,
+                    self.dims,
+                    h,
+                    self.params.max_candidates as usize,
+                    self.cancel,
+                );
                 let copies = if self.single { 3 } else { 1 };
                 for l in &f.lists {
                     level_report.histogram[l.len()] += copies;
@@ -574,7 +602,7 @@ impl Stages<'_> {
             level_report.mean_random_error = mean_random_error(self.stacks, k, n, self.dims);
             report.levels.push(level_report);
             filtered_levels.push(planes);
-            (self.progress)(Stage::Coherence, (k + 1) as f32 / levels_n as f32);
+            self.advance(Stage::Coherence, (k + 1) as f32 / levels_n as f32);
         }
         filtered_levels
     }
@@ -597,6 +625,7 @@ impl Stages<'_> {
             } else {
                 self.params.similar_coarse
             } as usize;
+            self.checkpoint();
             let similar_0 = similar_sets(&appearance[0], self.dims, k2, spacing(k) as i64);
             let similar = if self.single {
                 [similar_0.clone(), similar_0.clone(), similar_0]
@@ -614,7 +643,7 @@ impl Stages<'_> {
                 k2,
             });
             vectors.push(appearance);
-            (self.progress)(Stage::Finish, (k + 1) as f32 / levels_n as f32);
+            self.advance(Stage::Finish, (k + 1) as f32 / levels_n as f32);
         }
         (stored, vectors)
     }
@@ -794,6 +823,37 @@ mod tests {
             ..AnalysisParams::default()
         };
         Candidates::compute(set, &params, &|_, _| {}).unwrap()
+    }
+
+    #[test]
+    fn a_cancelled_precompute_unwinds_out_of_any_stage() {
+        use crate::synth::cancel::{Cancelled, run_cancellable};
+        let set = ExemplarSet::single(pattern(32, 2));
+        let params = AnalysisParams {
+            levels: 2,
+            ..AnalysisParams::default()
+        };
+        // Cancelled as each stage reports, in turn: the search's workers
+        // and the stages' own loops see it. Nothing else is reported after.
+        for stop_at in [Stage::Analysis, Stage::Search, Stage::Coherence] {
+            let flag = CancelFlag::new();
+            let after = std::sync::atomic::AtomicU32::new(0);
+            let progress = |stage: Stage, _: f32| {
+                if flag.is_cancelled() {
+                    after.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+                if stage == stop_at {
+                    flag.cancel();
+                }
+            };
+            let r = run_cancellable(&flag, || Candidates::compute(&set, &params, &progress));
+            assert_eq!(r.err(), Some(Cancelled), "{stop_at:?}");
+            assert_eq!(after.into_inner(), 0, "{stop_at:?}");
+        }
+        // A flag never set changes nothing.
+        let flag = CancelFlag::new();
+        let r = run_cancellable(&flag, || Candidates::compute(&set, &params, &|_, _| {}));
+        assert!(r.unwrap().is_ok());
     }
 
     /// A query is projected unweighted and the tables hold weighted

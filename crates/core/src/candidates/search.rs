@@ -8,6 +8,7 @@
 use super::geometry::Dims;
 use crate::analysis::appearance::{Pca, has_avx, sq_dist};
 use crate::analysis::stack::{GaussianStack, spacing};
+use crate::synth::cancel::CancelFlag;
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 use std::collections::BinaryHeap;
@@ -89,13 +90,14 @@ fn tree(pca: &Pca, strips: &[f32], len: usize) -> StripTree {
 /// Finds, for every pixel of plane `p`, its `keep` best triples by crossbar
 /// error among the S² formed from the S nearest strips in the other two
 /// planes. Results are sorted by (error, triple) so they are independent of
-/// thread count.
+/// thread count. Unwinds out (between pixels) once `cancel` is set.
 pub fn search_plane(
     p: usize,
     strips: [&Strips; 3],
     dims: Dims,
     s: usize,
     keep: usize,
+    cancel: Option<&CancelFlag>,
 ) -> Vec<Vec<Scored>> {
     let len = strips[0].len;
     // Plane q = p−1 meets p along p's u axis (q's v-strip), plane r = p+1
@@ -119,6 +121,9 @@ pub fn search_plane(
     (0..dims.len() as u32)
         .into_par_iter()
         .map(|c| {
+            if let Some(f) = cancel {
+                f.unwind_if_set();
+            }
             let pu = strips[p].u(c);
             let pv = strips[p].v(c);
             let mut qs: Vec<(f32, u32)> = q_tree

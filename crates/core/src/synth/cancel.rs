@@ -1,7 +1,9 @@
 //! Cooperative cancellation of a synthesis whose answer nobody will read
-//! (a client that hung up). The caller runs the engine inside
-//! [`run_cancellable`]; the engine looks at the flag between correction
-//! subpasses and, once it is set, unwinds out of the request. Unwinding is
+//! (a client that hung up), or of a precompute whose texture was deleted.
+//! The caller runs the engine inside [`run_cancellable`]; the engine looks
+//! at the flag between correction subpasses (a precompute: between pixels
+//! of its search and between its stages) and, once it is set, unwinds out
+//! of the request. Unwinding is
 //! safe for the shared cache: tiles finished before the flag was seen are
 //! complete and stay published, and the tickets of tiles in flight are
 //! released, so requests waiting for them compute them themselves. Nothing
@@ -49,6 +51,13 @@ impl CancelFlag {
     /// Whether [`CancelFlag::cancel`] was called, or the budget ran out.
     pub fn is_cancelled(&self) -> bool {
         self.0.cancelled.load(Ordering::Relaxed)
+    }
+
+    /// Unwinds out of the work under this flag (see [`check`]) if it is set.
+    pub(crate) fn unwind_if_set(&self) {
+        if self.is_cancelled() {
+            resume_unwind(Box::new(Cancelled));
+        }
     }
 
     /// Whether the syntheses were stopped because they went over budget.
@@ -111,8 +120,8 @@ pub(crate) fn current() -> Option<CancelFlag> {
 /// Unwinds out of the synthesis if `flag` is set (no panic message: this
 /// is not an error of the engine).
 pub(crate) fn check(flag: &Option<CancelFlag>) {
-    if flag.as_ref().is_some_and(CancelFlag::is_cancelled) {
-        resume_unwind(Box::new(Cancelled));
+    if let Some(f) = flag {
+        f.unwind_if_set();
     }
 }
 
