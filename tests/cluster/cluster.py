@@ -148,11 +148,15 @@ class Cluster:
         self.start("bare", self.common(self.bare_port) + [
             "--data-dir", os.path.join(self.work, "bare")])
 
-    def balancer(self):
+    def balancer(self, balance=None, names=None):
         servers = os.path.join(self.work, "servers.cfg")
         with open(servers, "w") as f:
             f.write("backend solidtex\n")
+            if balance:
+                f.write(f"    balance {balance}\n")
             for name, port in self.replicas.items():
+                if names and name not in names:
+                    continue
                 f.write(f"    server {name} 127.0.0.1:{port}\n")
             f.write(
                 "\nfrontend stats\n"
@@ -241,6 +245,85 @@ def compare(cluster, paths, names):
     with cf.ThreadPoolExecutor(4) as pool:
         sizes = list(pool.map(one, paths))
     return len(paths) * len(names), sum(sizes)
+
+
+def metric(base, name):
+    _, body, _ = get(base + "/metrics")
+    total = 0.0
+    for line in body.decode().splitlines():
+        if line.startswith(name) and not line.startswith("#"):
+            total += float(line.rsplit(" ", 1)[1])
+    return total
+
+
+def loadtest(url, tid, seconds):
+    out = subprocess.run(
+        [SOLIDTEX, "loadtest", "--url", url, "--texture", tid, "--concurrency", "6",
+         "--duration", f"{seconds}s", "--size", "32", "--json"],
+        capture_output=True, check=True)
+    return json.loads(out.stdout)["total"]
+
+
+def restart(cluster, names):
+    for n in names:
+        p = cluster.procs.get(n)
+        if p and p.poll() is None:
+            p.terminate()
+            p.wait()
+        cluster.replica(n)
+    for n in names:
+        cluster.wait_ready(cluster.url(n))
+
+
+def bench():
+    """Cache hit ratio per replica, consistent hashing against round-robin,
+    and one replica behind the balancer against the bare server."""
+    work = tempfile.mkdtemp(prefix="solidtex-cluster-bench-")
+    cluster = Cluster(work)
+    seconds = int(os.environ.get("BENCH_SECONDS", "30"))
+    report = {"seconds": seconds}
+    try:
+        cluster.store()
+        restart(cluster, list(cluster.replicas))
+        tid = upload(cluster.url("r1"), "animal_leather.png")
+        wait_texture(cluster.url("r1"), tid)
+        for balance in ("hash", "roundrobin"):
+            restart(cluster, list(cluster.replicas))
+            for n in cluster.replicas:
+                get(cluster.url(n) + f"/v1/textures/{tid}")
+            cluster.balancer(None if balance == "hash" else "roundrobin")
+            cluster.wait_ready(cluster.url("lb"))
+            total = loadtest(cluster.url("lb"), tid, seconds)
+            per = {}
+            for n in cluster.replicas:
+                hit = metric(cluster.url(n), "solidtex_synth_tiles_from_cache_total")
+                miss = metric(cluster.url(n), "solidtex_synth_tiles_computed_total")
+                per[n] = {"tiles_from_cache": hit, "tiles_computed": miss,
+                          "hit_ratio": round(hit / max(hit + miss, 1), 3)}
+            report[balance] = {"requests_per_s": total["requests_per_s"],
+                               "p50_ms": total["p50_ms"], "replicas": per}
+            cluster.procs["haproxy"].terminate()
+            cluster.procs["haproxy"].wait()
+            print(balance, json.dumps(report[balance]))
+        for via in ("bare", "balancer"):
+            restart(cluster, ["r1"])
+            get(cluster.url("r1") + f"/v1/textures/{tid}")
+            url = cluster.url("r1")
+            if via == "balancer":
+                cluster.balancer(names=["r1"])
+                cluster.wait_ready(cluster.url("lb"))
+                url = cluster.url("lb")
+            total = loadtest(url, tid, seconds)
+            report[via] = {k: total[k] for k in ("requests", "requests_per_s", "p50_ms", "p99_ms")}
+            if via == "balancer":
+                cluster.procs["haproxy"].terminate()
+                cluster.procs["haproxy"].wait()
+            print(via, json.dumps(report[via]))
+    finally:
+        cluster.stop_all()
+        with open(os.path.join(ROOT, "target", "cluster-bench.json"), "w") as f:
+            json.dump(report, f, indent=2)
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def main():
@@ -383,4 +466,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    bench() if sys.argv[1:] == ["--bench"] else main()

@@ -4,6 +4,7 @@
 #
 #   bash tests/cluster/run.sh --install   # haproxy (Debian), s3s-fs (crates.io)
 #   bash tests/cluster/run.sh             # needs target/release/solidtex
+#   bash tests/cluster/run.sh --bench     # hit ratios and the balancer's cost
 #
 # The store is s3s-fs, pinned: a real S3 server (SigV4, path-style
 # requests, If-None-Match and If-Match on PUT) that keeps each object as a
@@ -32,4 +33,4 @@ S3S_FS="$TOOLS/bin/s3s-fs"
 command -v haproxy >/dev/null || { echo "no haproxy: run $0 --install first" >&2; exit 1; }
 [[ -x target/release/solidtex ]] || cargo build --release --bin solidtex
 # The whole test stops itself well inside CI's budget.
-S3S_FS="$S3S_FS" timeout --kill-after=10 300 python3 tests/cluster/cluster.py
+S3S_FS="$S3S_FS" timeout --kill-after=10 600 python3 tests/cluster/cluster.py "$@"
