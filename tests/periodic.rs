@@ -10,7 +10,9 @@ mod server_support;
 use common::*;
 use server_support::*;
 use solidtex_core::eval::{RgbView, tiling_seam};
-use solidtex_core::{Axis, ExemplarSet, Region, SynthParams, Texture, TileCache, bundled};
+use solidtex_core::{
+    Axis, ExemplarSet, Region, Request, SynthParams, Texture, TileCache, Window, bundled,
+};
 use std::sync::Arc;
 
 fn bundled_texture(period: Option<[u32; 3]>) -> Texture {
@@ -34,7 +36,12 @@ fn a_periodic_block_tiles_without_a_seam_and_an_aperiodic_one_does_not() {
     let side = 128u32;
     let measure = |t: &Texture| {
         [Axis::Z, Axis::X].map(|axis| {
-            let (rgb, _) = t.slice(axis, 0, 0, 0, side, side, 0).unwrap();
+            let (rgb, _) = t
+                .render(
+                    &Request::slice(axis, 0, Window::new(0, 0, side, side)).unwrap(),
+                    0,
+                )
+                .unwrap();
             tiling_seam(RgbView {
                 width: side,
                 height: side,
@@ -78,11 +85,12 @@ fn two_periods_are_one_repeated_at_every_level_of_detail() {
         let p = [32i64 >> lod, 16 >> lod, 48 >> lod];
         let size = [2 * p[0] as u32, 2 * p[1] as u32, 3];
         let (rgb, _) = t
-            .region(
-                &Region {
+            .render(
+                &Request::region(Region {
                     origin: [-7, 5, 100],
                     size,
-                },
+                })
+                .unwrap(),
                 lod,
             )
             .unwrap();
@@ -128,7 +136,15 @@ fn the_command_line_takes_a_period() {
     let a = slice("a.png", "3");
     assert_eq!(a, slice("b.png", "35"));
     let t = bundled_texture(Some([64, 64, 32]));
-    assert_eq!(a, t.slice(Axis::Z, 3, 0, 0, 64, 32, 0).unwrap().0);
+    assert_eq!(
+        a,
+        t.render(
+            &Request::slice(Axis::Z, 3, Window::new(0, 0, 64, 32)).unwrap(),
+            0
+        )
+        .unwrap()
+        .0
+    );
 }
 
 /// Uploads with a period at and past each limit: the range (1 to 4096),
