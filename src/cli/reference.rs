@@ -69,7 +69,7 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
     let params = ReferenceParams {
         size: a.size,
         seed: a.seed,
-        levels: a.levels.unwrap_or_else(|| default_levels(a.size)),
+        levels: a.levels.unwrap_or_else(|| default_levels(a.size, a.grid)),
         neighbourhood: a.neighbourhood,
         grid: a.grid,
         iterations: a.iterations,
@@ -110,16 +110,15 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
     let mid = n / 2;
     // The same planes `solidtex volume` writes: z (u = x, v = y),
     // x (u = y, v = z), y (u = z, v = x).
-    let planes: [(&str, Box<dyn Fn(usize, usize) -> [u8; 3]>); 3] = [
-        ("z", Box::new(|u, v| at(u, v, mid))),
-        ("x", Box::new(|u, v| at(mid, u, v))),
-        ("y", Box::new(|u, v| at(v, mid, u))),
-    ];
-    for (name, f) in planes {
+    for name in ["z", "x", "y"] {
         let mut img = Vec::with_capacity(n * n * 3);
         for v in 0..n {
             for u in 0..n {
-                img.extend_from_slice(&f(u, v));
+                img.extend_from_slice(&match name {
+                    "z" => at(u, v, mid),
+                    "x" => at(mid, u, v),
+                    _ => at(v, mid, u),
+                });
             }
         }
         write_png(&a.output.join(format!("slice_{name}.png")), s, s, img)?;
@@ -130,9 +129,9 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
 /// Levels that leave a block of 8 voxels per side at the coarsest (at
 /// least 1, at most 5), where the exemplar is blurred enough for the
 /// layout of its largest features.
-fn default_levels(size: u32) -> u32 {
+fn default_levels(size: u32, grid: u32) -> u32 {
     let mut levels = 1;
-    while levels < 5 && (size >> levels) >= 8 && size % (1 << levels) == 0 {
+    while levels < 5 && (size >> levels) >= 8 && size.is_multiple_of(grid << levels) {
         levels += 1;
     }
     levels
@@ -142,9 +141,11 @@ fn default_levels(size: u32) -> u32 {
 mod tests {
     #[test]
     fn default_levels_leave_eight_voxels_at_the_coarsest() {
-        assert_eq!(super::default_levels(64), 4);
-        assert_eq!(super::default_levels(128), 5);
-        assert_eq!(super::default_levels(32), 3);
-        assert_eq!(super::default_levels(24), 2);
+        assert_eq!(super::default_levels(64, 2), 4);
+        assert_eq!(super::default_levels(128, 2), 5);
+        assert_eq!(super::default_levels(32, 2), 3);
+        assert_eq!(super::default_levels(24, 2), 2);
+        // Every level a multiple of the grid: 36 → 18 → 9 would not be.
+        assert_eq!(super::default_levels(36, 2), 2);
     }
 }

@@ -33,8 +33,8 @@ pub use candidates::{Candidates, PrecomputeReport, Stage};
 pub use error::{CorruptKind, Error, Result};
 pub use field::{Along, Curve, Field, Sketch};
 pub use params::{
-    AnalysisParams, Arrangement, Correction, Initialisation, Orientation, Scheme, SlabTiling, Slices,
-    SynthParams,
+    AnalysisParams, Arrangement, Correction, Initialisation, Orientation, Scheme, SlabTiling,
+    Slices, SynthParams,
 };
 pub use request::{
     Axis, COORD_LIMIT, Cut, CutPlane, Filter, MAX_REGION_VOXELS, MAX_SLICE_SIDE, Region, Request,

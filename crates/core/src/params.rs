@@ -60,8 +60,9 @@ pub struct AnalysisParams {
 pub enum Initialisation {
     /// A periodic block of the global reference (texture optimisation
     /// over a whole block, [`crate::reference`]), optimised once at
-    /// precompute and tiled in cells of a jittered grid, each reading the
-    /// block at its own hashed offset. Its structure is three-dimensional
+    /// precompute and tiled in Voronoi cells, each reading the block at
+    /// its own hashed offset (not jittered: a warp would break the thin
+    /// features the block holds). Its structure is three-dimensional
     /// from the start, so the correction refines a solid that already
     /// continues the exemplar in every plane.
     #[default]

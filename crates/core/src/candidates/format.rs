@@ -441,7 +441,11 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
             }
             let mut triples = Vec::with_capacity(voxels);
             for _ in 0..voxels {
-                triples.push([r.coord(wide, npx)?, r.coord(wide, npx)?, r.coord(wide, npx)?]);
+                triples.push([
+                    r.coord(wide, npx)?,
+                    r.coord(wide, npx)?,
+                    r.coord(wide, npx)?,
+                ]);
             }
             blocks.push(crate::reference::TripleBlock {
                 side,
@@ -453,7 +457,14 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     if r.pos != payload.len() {
         return Err(invalid("trailing bytes"));
     }
-    Candidates::from_stored(set, params, layout, levels, blocks, PrecomputeReport::default())
+    Candidates::from_stored(
+        set,
+        params,
+        layout,
+        levels,
+        blocks,
+        PrecomputeReport::default(),
+    )
 }
 
 /// The layout record, which must agree with an orientation that was given.
@@ -549,13 +560,21 @@ mod tests {
             ..AnalysisParams::default()
         };
         let c = Candidates::compute(&ExemplarSet::single(grain(16)), &params, &|_, _| {}).unwrap();
-        assert_eq!(c.blocks().iter().map(|b| b.level).collect::<Vec<_>>(), [0, 1]);
+        assert_eq!(
+            c.blocks().iter().map(|b| b.level).collect::<Vec<_>>(),
+            [0, 1]
+        );
         let bytes = encode(&c);
         let loaded = decode(&bytes).unwrap();
         assert_eq!(loaded.blocks(), c.blocks());
         // A block's side that claims more voxels than the file holds is
         // refused before anything is allocated for it.
-        let blocks_at = bytes.len() - c.blocks().iter().map(|b| 8 + b.triples.len() * 6).sum::<usize>() - 4;
+        let blocks_at = bytes.len()
+            - c.blocks()
+                .iter()
+                .map(|b| 8 + b.triples.len() * 6)
+                .sum::<usize>()
+            - 4;
         let mut payload = bytes[HEADER..].to_vec();
         let side_at = blocks_at - HEADER + 4 + 4;
         payload[side_at..side_at + 4].copy_from_slice(&200u32.to_le_bytes());

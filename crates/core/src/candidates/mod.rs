@@ -234,8 +234,10 @@ fn reference_blocks(
         return Ok(Vec::new());
     }
     let (finest, coarsest) = (*levels.start(), *levels.end());
-    let rp = crate::reference::seeding_params(exemplars.width(), exemplars.height(), finest, coarsest);
-    let blocks = crate::reference::triple_blocks(exemplars, weights, &rp, finest as usize, progress)?;
+    let rp =
+        crate::reference::seeding_params(exemplars.width(), exemplars.height(), finest, coarsest);
+    let blocks =
+        crate::reference::triple_blocks(exemplars, weights, &rp, finest as usize, progress)?;
     Ok(blocks
         .into_iter()
         .filter(|b| b.level <= coarsest)
@@ -274,7 +276,19 @@ impl Candidates {
         let kept = 40.0 * (f64::from(params.max_candidates) - 12.0).max(0.0);
         let per_pixel = search.max(later) + wider + kept;
         // Small exemplars peak at fixed costs (samples of set sizes, trees).
-        ((pixels * per_pixel) as u64 + (4 << 20)).max(6 << 20)
+        let analysis = ((pixels * per_pixel) as u64 + (4 << 20)).max(6 << 20);
+        // The reference block's optimisation state (positions, colours,
+        // matches and the blocks kept), per voxel of its finest level.
+        const REFERENCE_BYTES_PER_VOXEL: u64 = 80;
+        let levels = params.reference_levels();
+        let reference = if levels.is_empty() {
+            0
+        } else {
+            let rp =
+                crate::reference::seeding_params(width, height, *levels.start(), *levels.end());
+            u64::from(rp.size).pow(3) * REFERENCE_BYTES_PER_VOXEL
+        };
+        analysis + reference
     }
 
     /// Runs the whole precomputation; `progress(stage, fraction 0..1)` is

@@ -27,11 +27,11 @@
 mod palette;
 
 use crate::analysis::appearance::{Pca, Projector};
+use crate::analysis::exemplar::ExemplarSet;
+use crate::analysis::stack::{GaussianStack, spacing};
 use crate::candidates::geometry::AXES;
 use crate::error::{Error, Result};
-use crate::analysis::exemplar::ExemplarSet;
 use crate::hash::hash_pos;
-use crate::analysis::stack::{GaussianStack, spacing};
 use kiddo::SquaredEuclidean;
 use palette::Palette;
 use rayon::prelude::*;
@@ -115,19 +115,31 @@ impl ReferenceParams {
         range("neighbourhood", self.neighbourhood as f64, 3.0, 11.0)?;
         range("grid", self.grid as f64, 1.0, 4.0)?;
         range("iterations", self.iterations as f64, 0.0, 32.0)?;
-        range("finest_iterations", self.finest_iterations as f64, 0.0, 32.0)?;
+        range(
+            "finest_iterations",
+            self.finest_iterations as f64,
+            0.0,
+            32.0,
+        )?;
         range("robust", self.robust as f64, 0.1, 2.0)?;
         range("colour_histogram", self.colour_histogram as f64, 0.0, 4.0)?;
-        range("position_histogram", self.position_histogram as f64, 0.0, 16.0)?;
+        range(
+            "position_histogram",
+            self.position_histogram as f64,
+            0.0,
+            16.0,
+        )?;
         if self.neighbourhood.is_multiple_of(2) {
             return Err(Error::InvalidRequest("neighbourhood must be odd".into()));
         }
         let coarsest = self.size >> (self.levels - 1);
-        if coarsest << (self.levels - 1) != self.size || coarsest < 2 * self.grid {
+        // The sparse grid tiles every level's block, so each level's side
+        // is a multiple of the grid's spacing.
+        let unit = self.grid << (self.levels - 1);
+        if !self.size.is_multiple_of(unit) || coarsest < 2 * self.grid {
             return Err(Error::InvalidRequest(format!(
-                "size {} must be a multiple of 2^(levels − 1) = {} with at least {} voxels at the coarsest level",
+                "size {} must be a multiple of grid · 2^(levels − 1) = {unit} with at least {} voxels at the coarsest level",
                 self.size,
-                1u32 << (self.levels - 1),
                 2 * self.grid
             )));
         }
@@ -346,7 +358,16 @@ pub fn triple_blocks(
     let levels = params.levels as i32;
     let work = |j: i32, its: u32| its as f64 * 8f64.powi(levels - 1 - j);
     let total: f64 = (0..levels)
-        .map(|j| work(j, if j == 0 { params.finest_iterations } else { params.iterations }))
+        .map(|j| {
+            work(
+                j,
+                if j == 0 {
+                    params.finest_iterations
+                } else {
+                    params.iterations
+                },
+            )
+        })
         .sum();
     let mut done = 0.0;
     let report = |r: IterationReport| {
@@ -364,12 +385,12 @@ pub fn triple_blocks(
 /// exemplar when every level is, within [`MAX_SEED_VOXELS`].
 pub fn seeding_params(width: u32, height: u32, finest: u32, coarsest: u32) -> ReferenceParams {
     let levels = (coarsest.max(finest + 2) - finest) + 1;
-    let unit = 1u32 << (levels - 1);
+    let unit = ReferenceParams::default().grid << (levels - 1);
     let span = width.max(height) * if finest == coarsest { 2 } else { 1 };
     let cap = if finest == coarsest { 64 } else { 128 };
     let side = (span >> finest).div_ceil(unit) * unit;
     ReferenceParams {
-        size: side.clamp((4 * unit).max(16), cap),
+        size: side.clamp((2 * unit).max(16), cap),
         levels,
         ..ReferenceParams::default()
     }
@@ -440,7 +461,11 @@ fn optimise_block(
                 })
                 .sum::<f64>();
             let factors = Factors::new(&s, &matches, &palette, &target, params, plane);
-            let changed = optimise(&mut s, &matches, weights, &factors, params, k, copying, plane);
+            let step = Step {
+                level: k,
+                copy: copying,
+            };
+            let changed = optimise(&mut s, &matches, weights, &factors, params, step, plane);
             report(IterationReport {
                 level: k,
                 iteration: it,
@@ -601,7 +626,8 @@ fn search(
                         let mut best = u32::MAX;
                         let mut best_d = f32::INFINITY;
                         let mut try_pixel = |q: u32| {
-                            let d = crate::analysis::appearance::sq_dist(&v, &pl.vectors[q as usize]);
+                            let d =
+                                crate::analysis::appearance::sq_dist(&v, &pl.vectors[q as usize]);
                             if d < best_d || (d == best_d && q < best) {
                                 best_d = d;
                                 best = q;
@@ -756,6 +782,14 @@ struct Contribution {
     weight: f32,
 }
 
+/// Which optimisation step an iteration takes: its stack level, and
+/// whether it copies exemplar colours instead of averaging them.
+#[derive(Clone, Copy)]
+struct Step {
+    level: usize,
+    copy: bool,
+}
+
 /// The optimisation step: every voxel from the predictions of the matched
 /// neighbourhoods that overlap it. Returns how many voxels changed colour.
 fn optimise<'a>(
@@ -764,10 +798,10 @@ fn optimise<'a>(
     weights: [f32; 3],
     factors: &Factors,
     params: &ReferenceParams,
-    k: usize,
-    copy: bool,
+    step: Step,
     plane: impl Fn(usize) -> &'a PlaneLevel + Sync,
 ) -> usize {
+    let Step { level: k, copy } = step;
     let side = s.side;
     let g = params.grid as usize;
     let per = side / g;
@@ -820,8 +854,8 @@ fn optimise<'a>(
             let total: f32 = contrib.iter().map(|c| c.weight).sum();
             let mut mean = [0f32; 3];
             for c in contrib.iter() {
-                for ch in 0..3 {
-                    mean[ch] += c.colour[ch] * c.weight;
+                for (m, v) in mean.iter_mut().zip(c.colour) {
+                    *m += v * c.weight;
                 }
             }
             let mean = mean.map(|m| m / total);
@@ -834,7 +868,9 @@ fn optimise<'a>(
             let mut best = [f32::NEG_INFINITY; 3];
             let mut near = [[0f32; 3]; 3];
             for c in contrib.iter() {
-                let d = (0..3).map(|ch| (c.colour[ch] - mean[ch]).powi(2)).sum::<f32>();
+                let d = (0..3)
+                    .map(|ch| (c.colour[ch] - mean[ch]).powi(2))
+                    .sum::<f32>();
                 let score = c.weight * (-d * AGREE).exp();
                 let p = c.plane as usize;
                 if score > best[p] {
@@ -862,8 +898,8 @@ fn optimise<'a>(
         .collect();
     let mut changed = 0;
     for (i, (pos, pick, colour)) in results.into_iter().enumerate() {
-        for p in 0..3 {
-            s.pos[p][i] = pos[p];
+        for (plane, p) in s.pos.iter_mut().zip(pos) {
+            plane[i] = p;
         }
         changed += (s.colours[i] != colour) as usize;
         s.pick[i] = pick;
@@ -921,10 +957,18 @@ mod tests {
         let b = synthesize(&stripes(), [1.0; 3], &params, |_| {}).unwrap();
         let (across, inside) = steps(&b);
         assert!(inside > 1.0, "a flat block says nothing: {inside}");
-        assert!(across < 1.5 * inside, "seam: {across} across the wrap, {inside} inside");
+        assert!(
+            across < 1.5 * inside,
+            "seam: {across} across the wrap, {inside} inside"
+        );
         // The check can fail: two halves of different blocks side by side.
-        let other = synthesize(&stripes(), [1.0; 3], &ReferenceParams { seed: 9, ..params }, |_| {})
-            .unwrap();
+        let other = synthesize(
+            &stripes(),
+            [1.0; 3],
+            &ReferenceParams { seed: 9, ..params },
+            |_| {},
+        )
+        .unwrap();
         let n = 32usize;
         let mut spliced = b.clone();
         for z in 0..n {
@@ -934,7 +978,10 @@ mod tests {
             }
         }
         let (across, inside) = steps(&spliced);
-        assert!(across > 1.5 * inside, "a splice shows no seam: {across} vs {inside}");
+        assert!(
+            across > 1.5 * inside,
+            "a splice shows no seam: {across} vs {inside}"
+        );
     }
 
     #[test]
@@ -943,7 +990,10 @@ mod tests {
         let params = seeding_params(32, 32, 0, 1);
         assert_eq!(params.levels, 3);
         let blocks = triple_blocks(&set, [1.0; 3], &params, 0, &|_| {}).unwrap();
-        assert_eq!(blocks.iter().map(|b| b.level).collect::<Vec<_>>(), [2, 1, 0]);
+        assert_eq!(
+            blocks.iter().map(|b| b.level).collect::<Vec<_>>(),
+            [2, 1, 0]
+        );
         for b in &blocks {
             assert_eq!(b.triples.len(), (b.side as usize).pow(3));
             assert!(b.triples.iter().flatten().all(|&c| c < 32 * 32));
@@ -965,7 +1015,14 @@ mod tests {
         assert_eq!((p.size, p.levels), (128, 4));
         assert_eq!(seeding_params(512, 512, 0, 3).size, MAX_SEED_VOXELS);
         assert_eq!(seeding_params(16, 16, 3, 3).size, 16);
-        for (w, f, c) in [(100, 3, 3), (62, 0, 3), (512, 3, 3), (40, 1, 2)] {
+        for (w, f, c) in [
+            (100, 3, 3),
+            (100, 0, 3),
+            (62, 0, 3),
+            (156, 0, 3),
+            (512, 3, 3),
+            (40, 1, 2),
+        ] {
             assert!(seeding_params(w, w, f, c).validate().is_ok(), "{w} {f} {c}");
         }
     }
@@ -1013,14 +1070,13 @@ mod tests {
         let many = synthesize(&set, [1.0; 3], &params, |_| {}).unwrap();
         assert_eq!(one, many);
         assert_eq!(one.rgb.len(), 16 * 16 * 16 * 3);
-        let colours: std::collections::HashSet<[u8; 3]> = set
-            .plane(0)
-            .pixels()
-            .iter()
-            .copied()
-            .collect();
+        let colours: std::collections::HashSet<[u8; 3]> =
+            set.plane(0).pixels().iter().copied().collect();
         for v in one.rgb.chunks_exact(3) {
-            assert!(colours.contains(&[v[0], v[1], v[2]]), "{v:?} is not an exemplar colour");
+            assert!(
+                colours.contains(&[v[0], v[1], v[2]]),
+                "{v:?} is not an exemplar colour"
+            );
         }
     }
 }

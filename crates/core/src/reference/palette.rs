@@ -95,6 +95,9 @@ mod tests {
         let mut colours = vec![[230.0, 200.0, 200.0]; 1000];
         colours.extend(vec![[90.0, 20.0, 30.0]; 10]);
         let p = Palette::fit(&colours, 7);
-        assert_ne!(p.nearest([230.0, 200.0, 200.0]), p.nearest([90.0, 20.0, 30.0]));
+        assert_ne!(
+            p.nearest([230.0, 200.0, 200.0]),
+            p.nearest([90.0, 20.0, 30.0])
+        );
     }
 }
