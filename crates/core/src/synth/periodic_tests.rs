@@ -27,7 +27,7 @@ fn apart(params: SynthParams) -> Engine {
 }
 
 fn voxels(e: &Engine, points: &[[i64; 3]], lod: u32) -> Vec<[u8; 3]> {
-    let (rgb, _) = e.points_rgb(points, lod).unwrap();
+    let rgb = e.points_rgb(points, lod).unwrap().0;
     rgb.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 

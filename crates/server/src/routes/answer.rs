@@ -28,8 +28,10 @@ pub(super) async fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Textu
         return Err(ApiError::unknown_texture(id));
     }
     tracing::Span::current().record("texture", id);
+    // With a shared store, a texture another replica stored is taken up.
+    let found = s.registry.find(id).await?;
     if !s.pending_wait.is_zero()
-        && let Some(e) = s.registry.get(id)
+        && let Some(e) = found
     {
         e.settle(tokio::time::Instant::now() + s.pending_wait).await;
     }

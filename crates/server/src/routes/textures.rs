@@ -94,11 +94,12 @@ fn checked_id(id: &str) -> Result<(), ApiError> {
 }
 
 /// The texture `id`, in any status; the span records its id.
-fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
+async fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
     checked_id(id)?;
     tracing::Span::current().record("texture", id);
     s.registry
-        .get(id)
+        .find(id)
+        .await?
         .ok_or_else(|| ApiError::unknown_texture(id))
 }
 
@@ -108,7 +109,7 @@ pub(super) async fn show(
     Path(id): Path<String>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
 ) -> Result<Json<Value>, ApiError> {
-    let e = known(&s, &id)?;
+    let e = known(&s, &id).await?;
     Ok(Json(view(&e, s.brick_size)))
 }
 
@@ -456,7 +457,7 @@ pub(super) async fn variant(
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     req: Request,
 ) -> Result<Response, ApiError> {
-    let source = known(&s, &id)?;
+    let source = known(&s, &id).await?;
     let essence = req
         .headers()
         .get(header::CONTENT_TYPE)
@@ -506,7 +507,7 @@ pub(super) async fn exemplar(
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let e = known(&s, &id)?;
+    let e = known(&s, &id).await?;
     let tag = ETag::new(&e, "exemplar.png");
     if tag.matches(&headers) {
         return Ok(tag.not_modified(IMMUTABLE));
