@@ -4,8 +4,8 @@
 //! the viewer, the load test and the benchmarks ask for.
 
 use solidtex_core::{
-    AnalysisParams, Axis, CutPlane, ExemplarSet, Filter, Region, SynthParams, Texture, TileCache,
-    bundled,
+    AnalysisParams, Axis, CutPlane, ExemplarSet, Filter, Region, Request, SynthParams, Texture,
+    TileCache, bundled,
 };
 use solidtex_server::ServeArgs;
 use std::sync::Arc;
@@ -106,8 +106,15 @@ fn the_estimate_bounds_the_engine_count() {
             ),
         ];
         for (i, (r, lod)) in ordinary.iter().chain(&other).enumerate() {
-            let e = t.estimate(r, *lod, u64::MAX).unwrap();
-            let plan: u64 = t.plan(r, *lod).unwrap().voxels_per_level.iter().sum();
+            let e = t
+                .estimate(&Request::region(*r).unwrap(), *lod, u64::MAX)
+                .unwrap();
+            let plan: u64 = t
+                .plan(&Request::region(*r).unwrap(), *lod)
+                .unwrap()
+                .voxels_per_level
+                .iter()
+                .sum();
             assert!(e.complete);
             assert!(e.total >= plan, "{r:?} lod {lod}: {} < {plan}", e.total);
             if i < ordinary.len() {
@@ -131,9 +138,11 @@ fn the_estimate_bounds_the_engine_count() {
         ];
         for (plane, lod) in cuts {
             for filter in [Filter::Nearest, Filter::Trilinear] {
-                let e = t.estimate_cut(&plane, lod, filter, u64::MAX).unwrap();
+                let e = t
+                    .estimate(&Request::cut(plane, filter).unwrap(), lod, u64::MAX)
+                    .unwrap();
                 let plan: u64 = t
-                    .plan_cut(&plane, lod, filter)
+                    .plan(&Request::cut(plane, filter).unwrap(), lod)
                     .unwrap()
                     .voxels_per_level
                     .iter()
@@ -168,7 +177,9 @@ fn the_default_budget_admits_what_clients_ask_for() {
             }
             for axis in [Axis::X, Axis::Y, Axis::Z] {
                 let r = Region::slice(axis, 7, -3, 5, side, side);
-                let e = t.estimate(&r, lod, budget).unwrap();
+                let e = t
+                    .estimate(&Request::region(r).unwrap(), lod, budget)
+                    .unwrap();
                 assert!(e.complete && e.total <= budget, "{r:?} lod {lod}: {e:?}");
             }
             for d in directions {
@@ -181,7 +192,9 @@ fn the_default_budget_admits_what_clients_ask_for() {
                 ];
                 let plane = cut([10.5, -3.25, 7.0], u, v, side);
                 for filter in [Filter::Nearest, Filter::Trilinear] {
-                    let e = t.estimate_cut(&plane, lod, filter, budget).unwrap();
+                    let e = t
+                        .estimate(&Request::cut(plane, filter).unwrap(), lod, budget)
+                        .unwrap();
                     assert!(
                         e.complete && e.total <= budget,
                         "{plane:?} lod {lod}: {e:?}"
@@ -193,7 +206,9 @@ fn the_default_budget_admits_what_clients_ask_for() {
             origin: [64, 0, -128],
             size: [64; 3],
         };
-        let e = t.estimate(&brick, lod, budget).unwrap();
+        let e = t
+            .estimate(&Request::region(brick).unwrap(), lod, budget)
+            .unwrap();
         assert!(e.complete && e.total <= budget, "brick lod {lod}: {e:?}");
     }
 }

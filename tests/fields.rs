@@ -6,7 +6,8 @@ mod common;
 use common::*;
 use solidtex_core::eval::{RgbView, grain_map, line_angle};
 use solidtex_core::{
-    AnalysisParams, Axis, Candidates, ExemplarSet, Field, Region, SynthParams, Texture, TileCache,
+    AnalysisParams, Axis, Candidates, ExemplarSet, Field, Region, Request, SynthParams, Texture,
+    TileCache, Window,
 };
 use std::sync::{Arc, OnceLock};
 
@@ -46,7 +47,12 @@ const WINDOW: u32 = 32;
 /// window) and the local x axis of `guide`'s field projected into the
 /// slice, with the windows' angles.
 fn alignment_error(measured: &Texture, guide: &Texture) -> f64 {
-    let (rgb, _) = measured.slice(Axis::Z, 0, 0, 0, SIDE, SIDE, 0).unwrap();
+    let (rgb, _) = measured
+        .render(
+            &Request::slice(Axis::Z, 0, Window::new(0, 0, SIDE, SIDE)).unwrap(),
+            0,
+        )
+        .unwrap();
     let image = RgbView {
         width: SIDE,
         height: SIDE,
@@ -97,7 +103,9 @@ fn slices_follow_the_slant_and_circular_presets_and_a_sketch() {
 }
 
 fn region(t: &Texture, origin: [i64; 3], size: [u32; 3]) -> Vec<u8> {
-    t.region(&Region { origin, size }, 0).unwrap().0
+    t.render(&Request::region(Region { origin, size }).unwrap(), 0)
+        .unwrap()
+        .0
 }
 
 /// The determinism of unguided textures holds with a field: a region is
@@ -131,7 +139,10 @@ fn a_field_keeps_voxels_a_function_of_position() {
     let fresh = grain_texture(Some(field.clone()));
     for z in 0..s[2] as i64 {
         let (slice, _) = fresh
-            .slice(Axis::Z, o[2] + z, o[0], o[1], s[0], s[1], 0)
+            .render(
+                &Request::slice(Axis::Z, o[2] + z, Window::new(o[0], o[1], s[0], s[1])).unwrap(),
+                0,
+            )
             .unwrap();
         let n = (s[0] * s[1] * 3) as usize;
         assert_eq!(slice, alone[z as usize * n..(z as usize + 1) * n]);
@@ -166,11 +177,13 @@ fn plans_count_what_a_field_texture_computes() {
     let guided = grain_texture(Some(Field::Slant3d {
         direction: [1.0, 2.0, 2.0],
     }));
-    let planned = guided.plan(&region, 0).unwrap();
-    let (_, done) = guided.region(&region, 0).unwrap();
+    let planned = guided.plan(&Request::region(region).unwrap(), 0).unwrap();
+    let (_, done) = guided.render(&Request::region(region).unwrap(), 0).unwrap();
     assert_eq!(planned.voxels_per_level, done.voxels_per_level);
     assert_eq!(planned.corrections_per_level, done.corrections_per_level);
-    let unguided = grain_texture(None).plan(&region, 0).unwrap();
+    let unguided = grain_texture(None)
+        .plan(&Request::region(region).unwrap(), 0)
+        .unwrap();
     let total = |v: &[u64]| v.iter().sum::<u64>() as f64;
     let ratio = total(&planned.corrections_per_level) / total(&unguided.corrections_per_level);
     assert!((1.0..1.6).contains(&ratio), "{ratio}");

@@ -5,7 +5,7 @@ mod common;
 
 use common::*;
 use solidtex_core::{
-    AnalysisParams, Arrangement, Candidates, Exemplar, ExemplarSet, Orientation, Region,
+    AnalysisParams, Arrangement, Candidates, Exemplar, ExemplarSet, Orientation, Region, Request,
     SynthParams, Texture, TileCache,
 };
 use solidtex_core::{Grain, Layout};
@@ -30,7 +30,7 @@ fn voxels(c: &Arc<Candidates>) -> Vec<u8> {
         origin: [3, -5, 7],
         size: [12, 10, 6],
     };
-    t.region(&region, 0).unwrap().0
+    t.render(&Request::region(region).unwrap(), 0).unwrap().0
 }
 
 const TURNED: Arrangement = Arrangement {

@@ -4,10 +4,14 @@ mod common;
 
 use common::*;
 use solidtex_core::eval::{RgbView, anisotropy};
-use solidtex_core::{Axis, CutPlane, Filter, Region, Scheme, SlabTiling, SynthParams, Texture};
+use solidtex_core::{
+    Axis, CutPlane, Filter, Region, Request, Scheme, SlabTiling, SynthParams, Texture, Window,
+};
 
 fn region(t: &Texture, origin: [i64; 3], size: [u32; 3]) -> Vec<u8> {
-    t.region(&Region { origin, size }, 0).unwrap().0
+    t.render(&Request::region(Region { origin, size }).unwrap(), 0)
+        .unwrap()
+        .0
 }
 
 /// Cuts the voxels of `inner` out of a region `outer` (RGB8, x fastest).
@@ -37,7 +41,10 @@ fn a_region_equals_the_same_voxels_cut_from_larger_requests_and_slices() {
     let fresh = texture();
     for z in 0..s[2] as i64 {
         let (slice, _) = fresh
-            .slice(Axis::Z, o[2] + z, o[0], o[1], s[0], s[1], 0)
+            .render(
+                &Request::slice(Axis::Z, o[2] + z, Window::new(o[0], o[1], s[0], s[1])).unwrap(),
+                0,
+            )
             .unwrap();
         assert_eq!(
             slice,
@@ -46,7 +53,10 @@ fn a_region_equals_the_same_voxels_cut_from_larger_requests_and_slices() {
     }
     // An x slice: pixel (i, j) is voxel (at, u0 + i, v0 + j) = (x, y, z).
     let (xs, _) = fresh
-        .slice(Axis::X, o[0] + 2, o[1], o[2], s[1], s[2], 0)
+        .render(
+            &Request::slice(Axis::X, o[0] + 2, Window::new(o[1], o[2], s[1], s[2])).unwrap(),
+            0,
+        )
         .unwrap();
     for j in 0..s[2] as usize {
         for i in 0..s[1] as usize {
@@ -62,7 +72,10 @@ fn a_region_equals_the_same_voxels_cut_from_larger_requests_and_slices() {
     }
     // A y slice: pixel (i, j) is voxel (u0 + j... ) with u = z, v = x.
     let (ys, _) = fresh
-        .slice(Axis::Y, o[1] + 1, o[2], o[0], s[2], s[0], 0)
+        .render(
+            &Request::slice(Axis::Y, o[1] + 1, Window::new(o[2], o[0], s[2], s[0])).unwrap(),
+            0,
+        )
         .unwrap();
     for j in 0..s[0] as usize {
         for i in 0..s[2] as usize {
@@ -97,20 +110,22 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
     let t = texture();
     let r = ([0, 0, 0], [24u32, 24, 4]);
     let (cold, cold_stats) = t
-        .region(
-            &Region {
+        .render(
+            &Request::region(Region {
                 origin: r.0,
                 size: r.1,
-            },
+            })
+            .unwrap(),
             0,
         )
         .unwrap();
     let (warm, warm_stats) = t
-        .region(
-            &Region {
+        .render(
+            &Request::region(Region {
                 origin: r.0,
                 size: r.1,
-            },
+            })
+            .unwrap(),
             0,
         )
         .unwrap();
@@ -124,11 +139,12 @@ fn cold_warm_and_evicted_caches_give_the_same_bytes() {
     // A cache too small for one request's tiles evicts constantly.
     let tiny = texture_with(SynthParams::default(), 16 << 10);
     let (evicted, _) = tiny
-        .region(
-            &Region {
+        .render(
+            &Request::region(Region {
                 origin: r.0,
                 size: r.1,
-            },
+            })
+            .unwrap(),
             0,
         )
         .unwrap();
@@ -155,7 +171,13 @@ fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
     };
     for (params, free_wanted) in [(SynthParams::default(), 0), (blocks, 2)] {
         let max_percent = 25;
-        let slice = |t: &Texture, z: i64| t.slice(Axis::Z, z, -4, 3, 20, 20, 0).unwrap();
+        let slice = |t: &Texture, z: i64| {
+            t.render(
+                &Request::slice(Axis::Z, z, Window::new(-4, 3, 20, 20)).unwrap(),
+                0,
+            )
+            .unwrap()
+        };
         let sweep = texture_with(params.clone(), 256 << 20);
         let small = texture_with(params.clone(), 512 << 10);
         let (mut cold_corrections, mut swept_corrections, mut free_planes) = (0, 0, 0);
@@ -193,14 +215,18 @@ fn a_sweeping_cut_reuses_earlier_steps_and_keeps_its_bytes() {
 fn overlapping_requests_of_any_shape_share_work_and_keep_their_bytes() {
     let request = |t: &Texture, i: usize| -> (Vec<u8>, u64) {
         let (bytes, stats) = match i {
-            0 => t.region(
-                &Region {
+            0 => t.render(
+                &Request::region(Region {
                     origin: [-6, 2, 5],
                     size: [12, 10, 6],
-                },
+                })
+                .unwrap(),
                 0,
             ),
-            1 => t.slice(Axis::X, 1, 0, 3, 14, 12, 0),
+            1 => t.render(
+                &Request::slice(Axis::X, 1, Window::new(0, 3, 14, 12)).unwrap(),
+                0,
+            ),
             2 => {
                 let plane = CutPlane {
                     origin: [-4.0, 0.0, 4.0],
@@ -209,13 +235,14 @@ fn overlapping_requests_of_any_shape_share_work_and_keep_their_bytes() {
                     width: 14,
                     height: 10,
                 };
-                t.cut(&plane, 0, Filter::Nearest)
+                t.render(&Request::cut(plane, Filter::Nearest).unwrap(), 0)
             }
-            _ => t.region(
-                &Region {
+            _ => t.render(
+                &Request::region(Region {
                     origin: [-2, 6, 9],
                     size: [10, 8, 5],
-                },
+                })
+                .unwrap(),
                 0,
             ),
         }
@@ -263,11 +290,12 @@ fn overlapping_requests_of_any_shape_share_work_and_keep_their_bytes() {
 fn tiny_cache_evicted(t: &Texture) -> bool {
     // Ask again: with a 16 KiB cache the second request must recompute.
     let (_, s) = t
-        .region(
-            &Region {
+        .render(
+            &Request::region(Region {
                 origin: [0, 0, 0],
                 size: [24, 24, 4],
-            },
+            })
+            .unwrap(),
             0,
         )
         .unwrap();
@@ -292,13 +320,10 @@ fn far_coordinates_work_and_stay_deterministic() {
         );
     }
     assert!(
-        t.region(
-            &Region {
-                origin: [1 << 32, 0, 0],
-                size: [1, 1, 1]
-            },
-            0
-        )
+        Request::region(Region {
+            origin: [1 << 32, 0, 0],
+            size: [1, 1, 1]
+        })
         .is_err()
     );
 }
@@ -316,14 +341,18 @@ fn cuts_sample_the_same_volume() {
         width: 16,
         height: 16,
     };
-    let (cut, _) = texture().cut(&plane, 0, Filter::Nearest).unwrap();
+    let (cut, _) = texture()
+        .render(&Request::cut(plane, Filter::Nearest).unwrap(), 0)
+        .unwrap();
     for j in 0..16usize {
         for i in 0..16usize {
             let v = crop(&vol, o, s, [i as i64, i as i64, j as i64], [1, 1, 1]);
             assert_eq!(&cut[(j * 16 + i) * 3..][..3], &v[..], "pixel {i},{j}");
         }
     }
-    let (tri, _) = t.cut(&plane, 0, Filter::Trilinear).unwrap();
+    let (tri, _) = t
+        .render(&Request::cut(plane, Filter::Trilinear).unwrap(), 0)
+        .unwrap();
     assert_eq!(tri, cut, "integer positions interpolate to themselves");
 }
 
@@ -332,11 +361,12 @@ fn levels_of_detail_and_limits() {
     let t = texture();
     assert_eq!(t.max_lod(), 2);
     let (coarse, stats) = t
-        .region(
-            &Region {
+        .render(
+            &Request::region(Region {
                 origin: [0, 0, 0],
                 size: [8, 8, 8],
-            },
+            })
+            .unwrap(),
             2,
         )
         .unwrap();
@@ -346,47 +376,40 @@ fn levels_of_detail_and_limits() {
         "lod 2 must not touch level 0"
     );
     assert!(
-        t.region(
-            &Region {
+        t.render(
+            &Request::region(Region {
                 origin: [0, 0, 0],
                 size: [8, 8, 8]
-            },
+            })
+            .unwrap(),
             3
         )
         .is_err()
     );
-    assert!(
-        t.region(
-            &Region {
-                origin: [0, 0, 0],
-                size: [0, 8, 8]
-            },
-            0
-        )
-        .is_err()
-    );
-    assert!(
-        t.region(
-            &Region {
-                origin: [0, 0, 0],
-                size: [4096, 4096, 2]
-            },
-            0
-        )
-        .is_err()
-    );
-    // Sides whose product wraps a u64 to 0 are refused, not synthesized.
-    let huge = Region {
-        origin: [0, 0, 0],
-        size: [1 << 24; 3],
+    // A request is checked once, when it is built.
+    let region = |size| {
+        Request::region(Region {
+            origin: [0; 3],
+            size,
+        })
     };
-    assert_eq!(huge.voxel_count(), None);
+    assert!(region([0, 8, 8]).is_err());
+    assert!(region([4096, 4096, 2]).is_err());
+    // Sides whose product wraps a u64 to 0 are refused, not synthesized.
+    let huge = [1 << 24; 3];
+    assert_eq!(
+        Region {
+            origin: [0; 3],
+            size: huge
+        }
+        .voxel_count(),
+        None
+    );
     assert!(matches!(
-        t.region(&huge, 0),
+        region(huge),
         Err(solidtex_core::Error::TooLarge(_))
     ));
-    assert!(t.plan(&huge, 0).is_err());
-    assert!(t.slice(Axis::Z, 0, 0, 0, 5000, 1, 0).is_err());
+    assert!(Request::slice(Axis::Z, 0, Window::new(0, 0, 5000, 1)).is_err());
 }
 
 #[test]
@@ -404,7 +427,7 @@ fn fine_levels_take_the_finest_passes() {
             },
             1 << 20,
         )
-        .plan(&region, 0)
+        .plan(&Request::region(region).unwrap(), 0)
         .unwrap()
         .corrections_per_level
     };
@@ -424,7 +447,9 @@ fn dual_grid_needs_fewer_voxels_than_standard() {
         origin: [0, 0, 0],
         size: [64, 64, 1],
     };
-    let dual = texture().plan(&region, 0).unwrap();
+    let dual = texture()
+        .plan(&Request::region(region).unwrap(), 0)
+        .unwrap();
     let standard = texture_with(
         SynthParams {
             scheme: Scheme::Standard,
@@ -432,7 +457,7 @@ fn dual_grid_needs_fewer_voxels_than_standard() {
         },
         1 << 20,
     )
-    .plan(&region, 0)
+    .plan(&Request::region(region).unwrap(), 0)
     .unwrap();
     let total = |v: &[u64]| v.iter().sum::<u64>();
     assert!(total(&dual.voxels_per_level) < total(&standard.voxels_per_level));
@@ -441,10 +466,12 @@ fn dual_grid_needs_fewer_voxels_than_standard() {
     // subpass) reads them at version 0, so its finest chain is exactly
     // those voxels; reading N×N slices (radius N/2) would cost three times
     // as many.
-    let chain = texture().dependency_chain(&[[0, 0, 0]], 0).unwrap();
+    let chain = texture().dependency_chain(&[[0, 0, 0]], 0, None).unwrap();
     assert_eq!(chain.len(), 3);
     assert_eq!(chain[0].0, 19, "a correction reads 19 neighbours");
-    let full = texture().dependency_chain_for(&[[0, 0, 0]], 0, 5).unwrap();
+    let full = texture()
+        .dependency_chain(&[[0, 0, 0]], 0, Some(5))
+        .unwrap();
     let total = |c: &[(u64, u64)]| c.iter().map(|l| l.0).sum::<u64>();
     assert!(
         total(&chain) * 3 < total(&full),
@@ -468,7 +495,7 @@ fn dual_grid_saves_more_with_larger_neighbourhoods() {
     let (dual, standard) = (with(Scheme::DualGrid), with(Scheme::Standard));
     let plane: Vec<[i64; 3]> = (0..24 * 24).map(|i| [i % 24, i / 24, 0]).collect();
     let voxels = |t: &Texture, n| -> u64 {
-        t.dependency_chain_for(&plane, 0, n)
+        t.dependency_chain(&plane, 0, Some(n))
             .unwrap()
             .iter()
             .map(|l| l.0)
@@ -476,22 +503,27 @@ fn dual_grid_saves_more_with_larger_neighbourhoods() {
     };
     // A correction reads its direct neighbours: like N = 3.
     assert_eq!(
-        dual.dependency_chain(&plane, 0).unwrap(),
-        dual.dependency_chain_for(&plane, 0, 3).unwrap()
+        dual.dependency_chain(&plane, 0, None).unwrap(),
+        dual.dependency_chain(&plane, 0, Some(3)).unwrap()
     );
     let saving = |n| 1.0 - voxels(&dual, n) as f64 / voxels(&standard, n) as f64;
     let (s5, s9) = (saving(5), saving(9));
     println!("dual-grid saving: N=5 {s5:.3}, N=9 {s9:.3}");
     assert!(s9 > s5 + 0.2, "N=5 saves {s5:.3}, N=9 {s9:.3}");
-    assert!(dual.dependency_chain_for(&plane, 0, 4).is_err());
-    assert!(dual.dependency_chain_for(&plane, 0, 11).is_err());
+    assert!(dual.dependency_chain(&plane, 0, Some(4)).is_err());
+    assert!(dual.dependency_chain(&plane, 0, Some(11)).is_err());
 }
 
 #[test]
 fn a_long_slice_does_not_repeat_at_the_exemplar_period() {
     let t = texture();
     let (w, h) = (256u32, 12u32);
-    let (img, _) = t.slice(Axis::Z, 3, 0, 0, w, h, 0).unwrap();
+    let (img, _) = t
+        .render(
+            &Request::slice(Axis::Z, 3, Window::new(0, 0, w, h)).unwrap(),
+            0,
+        )
+        .unwrap();
     let msd = |shift: usize| {
         let mut sum = 0f64;
         let mut n = 0f64;
@@ -558,7 +590,12 @@ fn thin_slab_layers_do_not_extrude_along_z() {
                 },
                 64 << 20,
             );
-            let (img, _) = t.slice(Axis::X, 7, 0, 0, 96, 96, 0).unwrap();
+            let (img, _) = t
+                .render(
+                    &Request::slice(Axis::X, 7, Window::new(0, 0, 96, 96)).unwrap(),
+                    0,
+                )
+                .unwrap();
             let slice = RgbView {
                 width: 96,
                 height: 96,
@@ -596,7 +633,12 @@ fn slab_cells_leave_no_seams_on_the_block_grid() {
                 64 << 20,
             );
             let n = 64;
-            let (img, _) = t.slice(Axis::Z, 3, 0, 0, n, n, lod).unwrap();
+            let (img, _) = t
+                .render(
+                    &Request::slice(Axis::Z, 3, Window::new(0, 0, n, n)).unwrap(),
+                    lod,
+                )
+                .unwrap();
             let lum = |x: usize, y: usize| {
                 let p = &img[(y * n as usize + x) * 3..][..3];
                 0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64
@@ -655,9 +697,12 @@ fn a_slice_region_spans_its_axes_and_lists_voxels_x_fastest() {
 #[test]
 fn where_a_slice_lies_changes_its_chain_with_block_subpasses_only() {
     let finest = |t: &Texture, axis, at| {
-        t.plan(&Region::slice(axis, at, 0, 0, 32, 32), 0)
-            .unwrap()
-            .corrections_per_level[0]
+        t.plan(
+            &Request::region(Region::slice(axis, at, 0, 0, 32, 32)).unwrap(),
+            0,
+        )
+        .unwrap()
+        .corrections_per_level[0]
     };
     // Block subpasses run z-even first: an even z plane's finest pass
     // reads its z neighbours before they are corrected, an odd one after,
@@ -695,7 +740,7 @@ fn appearance_texture(cache_bytes: usize) -> Texture {
 fn the_appearance_correction_reads_its_direct_neighbours_and_keeps_its_bytes() {
     // It reads the 19 direct neighbours: its 12 diagonal locations are
     // predicted from them.
-    let chain = texture().dependency_chain(&[[0, 0, 0]], 0).unwrap();
+    let chain = texture().dependency_chain(&[[0, 0, 0]], 0, None).unwrap();
     assert_eq!(chain[0].0, 19, "{chain:?}");
     let (o, s) = ([3, -5, 7], [9u32, 6, 5]);
     let alone = region(&appearance_texture(256 << 20), o, s);
@@ -768,8 +813,8 @@ fn plans_count_what_cold_synthesis_computes() {
         size: [20, 9, 5],
     };
     let cold = texture_with(SynthParams::default(), 256 << 20);
-    let planned = cold.plan(&region, 0).unwrap();
-    let (_, done) = cold.region(&region, 0).unwrap();
+    let planned = cold.plan(&Request::region(region).unwrap(), 0).unwrap();
+    let (_, done) = cold.render(&Request::region(region).unwrap(), 0).unwrap();
     assert_eq!(planned.voxels_per_level, done.voxels_per_level);
     assert_eq!(planned.corrections_per_level, done.corrections_per_level);
 
@@ -797,8 +842,10 @@ fn plans_count_what_cold_synthesis_computes() {
     ];
     for (plane, filter) in cuts {
         let cold = texture_with(SynthParams::default(), 256 << 20);
-        let planned = cold.plan_cut(&plane, 0, filter).unwrap();
-        let (_, done) = cold.cut(&plane, 0, filter).unwrap();
+        let planned = cold.plan(&Request::cut(plane, filter).unwrap(), 0).unwrap();
+        let (_, done) = cold
+            .render(&Request::cut(plane, filter).unwrap(), 0)
+            .unwrap();
         assert_eq!(
             planned.voxels_per_level, done.voxels_per_level,
             "{filter:?}"

@@ -20,7 +20,7 @@ use anyhow::Context;
 use serde::Serialize;
 use solidtex_core::{
     AnalysisParams, Axis, Candidates, Curve, CutPlane, Exemplar, ExemplarSet, Field, Filter,
-    Region, Scheme, Sketch, SynthParams, SynthStats, Texture, TileCache,
+    Region, Request, Scheme, Sketch, SynthParams, SynthStats, Texture, TileCache, Window,
 };
 use solidtex_server::peak_alloc;
 use std::collections::HashMap;
@@ -315,7 +315,7 @@ fn plans(c: &Arc<Candidates>, side: u32) -> anyhow::Result<Vec<PlanRow>> {
     ] {
         let tex = texture(c, scheme);
         let z0 = [Region::slice(Axis::Z, 0, 0, 0, side, side)];
-        let p = tex.plan(&z0[0], 0)?;
+        let p = tex.plan(&Request::region(z0[0])?, 0)?;
         out.push(PlanRow {
             scheme: name,
             request: format!("{side}² axis slice (4³ tiles, cold cache)"),
@@ -325,7 +325,7 @@ fn plans(c: &Arc<Candidates>, side: u32) -> anyhow::Result<Vec<PlanRow>> {
         out.push(PlanRow::from_chain(
             name,
             "single voxel (exact dependency chain)".into(),
-            &tex.dependency_chain(&[[0, 0, 0]], 0)?,
+            &tex.dependency_chain(&[[0, 0, 0]], 0, None)?,
         ));
         // Zhang et al. measured their dual grid at N = 9, where the
         // standard chain is much thicker; the chains are geometry only.
@@ -394,7 +394,7 @@ fn full_slice_chain(
     let mut sum = Vec::<(u64, u64)>::new();
     for slice in slices {
         let voxels: Vec<[i64; 3]> = slice.voxels().collect();
-        let chain = tex.dependency_chain_for(&voxels, 0, n)?;
+        let chain = tex.dependency_chain(&voxels, 0, Some(n))?;
         sum.resize(chain.len(), (0, 0));
         for (s, l) in sum.iter_mut().zip(&chain) {
             *s = (s.0 + l.0, s.1 + l.1);
@@ -484,7 +484,7 @@ fn synthesis_rows(
         predictor,
         None,
         None,
-        || Ok(tex.points(&[far], 0)?),
+        || Ok(tex.render(&Request::points([far].to_vec())?, 0)?),
     )?);
 
     let tex = texture(c, Scheme::DualGrid);
@@ -496,18 +496,18 @@ fn synthesis_rows(
     let target = (b == 64).then_some("≤ 150 ms");
     rows.push(cold_row(
         format!("brick {b}³ cold"),
-        Some(&tex.plan(&brick, 0)?),
+        Some(&tex.plan(&Request::region(brick)?, 0)?),
         predictor,
         target,
         None,
-        || Ok(tex.region(&brick, 0)?),
+        || Ok(tex.render(&Request::region(brick)?, 0)?),
     )?);
     if rows.last().is_some_and(|r| r.seconds.is_some()) {
         rows.push(warm_row(
             format!("brick {b}³ warm"),
             sizes.warm_runs,
             None,
-            || tex.region(&brick, 0),
+            || tex.render(&Request::region(brick)?, 0),
         )?);
     }
 
@@ -524,11 +524,11 @@ fn synthesis_rows(
         };
         rows.push(cold_row(
             format!("full volume {n}³ cold"),
-            Some(&tex.plan(&cube, 0)?),
+            Some(&tex.plan(&Request::region(cube)?, 0)?),
             predictor,
             target,
             paper,
-            || Ok(tex.region(&cube, 0)?),
+            || Ok(tex.render(&Request::region(cube)?, 0)?),
         )?);
     }
 
@@ -539,14 +539,19 @@ fn synthesis_rows(
             origin: [0, 0, 5],
             size: [side, side, 1],
         };
-        let plan = tex.plan(&slice, 0)?;
+        let plan = tex.plan(&Request::region(slice)?, 0)?;
         let cold = cold_row(
             format!("axis slice {side}² cold"),
             Some(&plan),
             predictor,
             is_256.then_some("≤ 200 ms"),
             is_256.then_some(paper::CUT_256),
-            || Ok(tex.slice(Axis::Z, 5, 0, 0, side, side, 0)?),
+            || {
+                Ok(tex.render(
+                    &Request::slice(Axis::Z, 5, Window::new(0, 0, side, side))?,
+                    0,
+                )?)
+            },
         )?;
         let measured = cold.seconds.is_some();
         rows.push(cold);
@@ -555,7 +560,12 @@ fn synthesis_rows(
                 format!("axis slice {side}² warm"),
                 sizes.warm_runs,
                 is_256.then_some("≤ 10 ms"),
-                || tex.slice(Axis::Z, 5, 0, 0, side, side, 0),
+                || {
+                    tex.render(
+                        &Request::slice(Axis::Z, 5, Window::new(0, 0, side, side))?,
+                        0,
+                    )
+                },
             )?);
         }
         // Chains grow differently along each axis (the subpass order), so
@@ -568,11 +578,11 @@ fn synthesis_rows(
             let region = Region { origin, size };
             rows.push(cold_row(
                 format!("axis slice {side}² cold, {name} axis"),
-                Some(&tex.plan(&region, 0)?),
+                Some(&tex.plan(&Request::region(region)?, 0)?),
                 predictor,
                 is_256.then_some("≤ 200 ms"),
                 None,
-                || Ok(tex.slice(axis, 5, 0, 0, side, side, 0)?),
+                || Ok(tex.render(&Request::slice(axis, 5, Window::new(0, 0, side, side))?, 0)?),
             )?);
         }
         // A cut has no plan of its own; its dependency set is about that
@@ -591,7 +601,7 @@ fn synthesis_rows(
             predictor,
             None,
             is_256.then_some(paper::CUT_MEMORY),
-            || Ok(tex.cut(&plane, 0, Filter::Nearest)?),
+            || Ok(tex.render(&Request::cut(plane, Filter::Nearest)?, 0)?),
         )?;
         let measured = cold.seconds.is_some();
         rows.push(cold);
@@ -600,7 +610,7 @@ fn synthesis_rows(
                 format!("oblique cut {side}² warm"),
                 sizes.warm_runs,
                 None,
-                || tex.cut(&plane, 0, Filter::Nearest),
+                || tex.render(&Request::cut(plane, Filter::Nearest)?, 0),
             )?);
         }
     }
@@ -656,11 +666,11 @@ fn preview_rows(
         let tex = texture_with(c, SynthParams::preview());
         rows.push(cold_row(
             name,
-            Some(&tex.plan(&region, 0)?),
+            Some(&tex.plan(&Request::region(region)?, 0)?),
             predictor,
             target,
             None,
-            || Ok(tex.region(&region, 0)?),
+            || Ok(tex.render(&Request::region(region)?, 0)?),
         )?);
     }
     Ok(())
@@ -745,11 +755,11 @@ fn field_rows(
         );
         rows.push(cold_row(
             format!("field {name}: axis slice {side}² cold"),
-            Some(&tex.plan(&slice, 0)?),
+            Some(&tex.plan(&Request::region(slice)?, 0)?),
             predictor,
             (side == 256).then_some("≤ 2× unguided"),
             None,
-            || Ok(tex.region(&slice, 0)?),
+            || Ok(tex.render(&Request::region(slice)?, 0)?),
         )?);
     }
     Ok(())

@@ -2,7 +2,7 @@
 
 use super::source::{SourceArgs, load_source, summary, write_png};
 use clap::Args;
-use solidtex_core::{CutPlane, Filter};
+use solidtex_core::{CutPlane, Filter, Request};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -48,7 +48,7 @@ pub fn run(a: CutArgs) -> anyhow::Result<()> {
         CutFilter::Trilinear => Filter::Trilinear,
     };
     let t0 = Instant::now();
-    let (rgb, stats) = tex.cut(&plane, a.src.lod, filter)?;
+    let (rgb, stats) = tex.render(&Request::cut(plane, filter)?, a.src.lod)?;
     write_png(&a.output, a.width, a.height, rgb)?;
     let what = format!(
         "a {}×{} oblique cut from ({}, {}, {})",

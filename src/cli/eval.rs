@@ -13,8 +13,8 @@ use solidtex_core::eval::{
     RgbView, SliceScores, Structure, anisotropy, score_slice, shuffled_exemplar, structure,
 };
 use solidtex_core::{
-    AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Scheme, SynthParams,
-    Texture, TileCache,
+    AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Request, Scheme,
+    SynthParams, Texture, TileCache, Window,
 };
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -102,7 +102,11 @@ pub struct Score {
 fn slices(tex: &Texture, side: u32) -> anyhow::Result<Vec<(&'static str, Vec<u8>)>> {
     let mut out = Vec::new();
     for (name, axis) in [("xy", Axis::Z), ("yz", Axis::X), ("zx", Axis::Y)] {
-        out.push((name, tex.slice(axis, 21, 3, 5, side, side, 0)?.0));
+        out.push((
+            name,
+            tex.render(&Request::slice(axis, 21, Window::new(3, 5, side, side))?, 0)?
+                .0,
+        ));
     }
     let plane = CutPlane {
         origin: [0.0, 0.0, 0.0],
@@ -111,7 +115,10 @@ fn slices(tex: &Texture, side: u32) -> anyhow::Result<Vec<(&'static str, Vec<u8>
         width: side,
         height: side,
     };
-    out.push(("oblique", tex.cut(&plane, 0, Filter::Nearest)?.0));
+    out.push((
+        "oblique",
+        tex.render(&Request::cut(plane, Filter::Nearest)?, 0)?.0,
+    ));
     Ok(out)
 }
 

@@ -4,7 +4,7 @@
 use super::source::{SourceArgs, load_source};
 use anyhow::bail;
 use clap::Args;
-use solidtex_core::{Axis, Region, Scheme, SynthParams, Texture, TileCache};
+use solidtex_core::{Axis, Region, Request, Scheme, SynthParams, Texture, TileCache};
 use std::sync::Arc;
 
 #[derive(Args)]
@@ -150,13 +150,15 @@ fn count(
     let mut other_n = Vec::new();
     for &n in &a.neighbourhoods {
         let points = points.unwrap_or_default();
-        other_n.push((n, tex.dependency_chain_for(points, lod, n)?));
+        other_n.push((n, tex.dependency_chain(points, lod, Some(n))?));
     }
     Ok(Counts {
         scheme,
-        tiles: tex.plan(region, lod)?,
-        chain: tex.dependency_chain(&[[0, 0, 0]], lod)?,
-        exact: points.map(|p| tex.dependency_chain(p, lod)).transpose()?,
+        tiles: tex.plan(&Request::region(*region)?, lod)?,
+        chain: tex.dependency_chain(&[[0, 0, 0]], lod, None)?,
+        exact: points
+            .map(|p| tex.dependency_chain(p, lod, None))
+            .transpose()?,
         other_n,
     })
 }

@@ -2,7 +2,7 @@
 
 use super::source::{SourceArgs, load_source, summary, write_atomically};
 use clap::Args;
-use solidtex_core::Region;
+use solidtex_core::{Region, Request};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -41,7 +41,7 @@ pub fn run(a: RegionArgs) -> anyhow::Result<()> {
         size: [a.w, a.h, a.d],
     };
     let t0 = Instant::now();
-    let (rgb, stats) = tex.region(&region, a.src.lod)?;
+    let (rgb, stats) = tex.render(&Request::region(region)?, a.src.lod)?;
     write_atomically(&a.output, &rgb)?;
     let [w, h, d] = region.size;
     eprintln!(

@@ -2,7 +2,7 @@
 
 use super::source::{SourceArgs, load_source, summary, write_png};
 use clap::Args;
-use solidtex_core::Axis;
+use solidtex_core::{Axis, Request, Window};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -37,7 +37,10 @@ pub struct SliceArgs {
 pub fn run(a: SliceArgs) -> anyhow::Result<()> {
     let tex = load_source(&a.src)?;
     let t0 = Instant::now();
-    let (rgb, stats) = tex.slice(a.axis, a.at, a.u0, a.v0, a.w, a.h, a.src.lod)?;
+    let (rgb, stats) = tex.render(
+        &Request::slice(a.axis, a.at, Window::new(a.u0, a.v0, a.w, a.h))?,
+        a.src.lod,
+    )?;
     write_png(&a.output, a.w, a.h, rgb)?;
     let axis = format!("{:?}", a.axis).to_lowercase();
     let what = format!("a {}×{} {axis} slice at {axis} = {}", a.w, a.h, a.at);

@@ -85,6 +85,15 @@ pub struct SynthArgs {
     /// `@FILE` holding one (docs/fields.md).
     #[arg(long, value_parser = parse_field)]
     field: Option<Field>,
+    /// Make the solid periodic with this period in finest voxels: one
+    /// side (`128`) or three (`128,128,64`), each a multiple of the
+    /// coarsest level's spacing times 4 (32 by default).
+    #[arg(long, value_parser = parse_period)]
+    period: Option<[u32; 3]>,
+}
+
+fn parse_period(s: &str) -> anyhow::Result<[u32; 3]> {
+    Ok(solidtex_core::period::parse(s)?)
 }
 
 /// A `--field` value, reading `@FILE` from the file.
@@ -121,6 +130,7 @@ impl SynthArgs {
             slab_thickness: self.slab_thickness,
             slab_tiling: self.slab_tiling,
             field: self.field.clone(),
+            period: self.period,
             ..base
         }
     }

@@ -2,7 +2,7 @@
 
 use super::source::{SourceArgs, load_source, summary, write_atomically, write_png};
 use clap::Args;
-use solidtex_core::{Axis, Region};
+use solidtex_core::{Axis, Region, Request, Window};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -24,11 +24,11 @@ pub fn run(a: VolumeArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.output)?;
     let s = a.size;
     let t0 = Instant::now();
-    let (rgb, stats) = tex.region(
-        &Region {
+    let (rgb, stats) = tex.render(
+        &Request::region(Region {
             origin: [0, 0, 0],
             size: [s, s, s],
-        },
+        })?,
         a.src.lod,
     )?;
     let raw = a.output.join(format!("volume_{s}.raw"));
@@ -44,7 +44,10 @@ pub fn run(a: VolumeArgs) -> anyhow::Result<()> {
     );
     let mid = (s / 2) as i64;
     for axis in [Axis::X, Axis::Y, Axis::Z] {
-        let (img, _) = tex.slice(axis, mid, 0, 0, s, s, a.src.lod)?;
+        let (img, _) = tex.render(
+            &Request::slice(axis, mid, Window::new(0, 0, s, s))?,
+            a.src.lod,
+        )?;
         let name = format!("slice_{axis:?}.png").to_lowercase();
         write_png(&a.output.join(name), s, s, img)?;
     }

@@ -2,7 +2,8 @@
 //! `cargo run --release -p solidtex-core --example region -- EXEMPLAR.png out.raw`
 
 use solidtex_core::{
-    AnalysisParams, Candidates, Exemplar, ExemplarSet, Region, SynthParams, Texture, TileCache,
+    AnalysisParams, Candidates, Exemplar, ExemplarSet, Region, Request, SynthParams, Texture,
+    TileCache,
 };
 use std::sync::Arc;
 
@@ -22,7 +23,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         origin: [-1000, 250, 7],
         size: [64, 64, 16],
     };
-    let (rgb, _) = texture.region(&region, 0)?;
+    let (rgb, _) = texture.render(&Request::region(region)?, 0)?;
     std::fs::write(&out, rgb)?;
     println!("wrote {out}: 64×64×16 voxels, RGB8, x fastest");
     Ok(())

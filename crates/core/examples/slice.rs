@@ -1,7 +1,9 @@
 //! An axis-aligned slice of the bundled marble as a PNG:
 //! `cargo run --release -p solidtex-core --example slice -- slice.png`
 
-use solidtex_core::{AnalysisParams, Axis, ExemplarSet, SynthParams, Texture, TileCache, bundled};
+use solidtex_core::{
+    AnalysisParams, Axis, ExemplarSet, Request, SynthParams, Texture, TileCache, Window, bundled,
+};
 use std::sync::Arc;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -15,7 +17,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cache = Arc::new(TileCache::new(256 << 20));
     let texture = Texture::new(Arc::new(candidates), SynthParams::default(), cache)?;
     // A 256² slice normal to z at z = 40, corner (0, 0), finest level.
-    let (rgb, stats) = texture.slice(Axis::Z, 40, 0, 0, 256, 256, 0)?;
+    let (rgb, stats) = texture.render(
+        &Request::slice(Axis::Z, 40, Window::new(0, 0, 256, 256))?,
+        0,
+    )?;
     std::fs::write(&out, solidtex_core::png::encode(256, 256, &rgb)?)?;
     let corrections: u64 = stats.corrections_per_level.iter().sum();
     println!("wrote {out}: {corrections} voxel corrections");

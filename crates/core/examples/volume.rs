@@ -3,7 +3,7 @@
 //! `cargo run --release -p solidtex-core --example volume -- cube.raw`
 
 use solidtex_core::{
-    AnalysisParams, ExemplarSet, Region, SynthParams, Texture, TileCache, bundled,
+    AnalysisParams, ExemplarSet, Region, Request, SynthParams, Texture, TileCache, bundled,
 };
 use std::sync::Arc;
 
@@ -19,14 +19,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         origin: [0, 0, 0],
         size: [64, 64, 64],
     };
-    let (rgb, _) = texture.region(&cube, 1)?;
+    let (rgb, _) = texture.render(&Request::region(cube)?, 1)?;
     std::fs::write(&out, &rgb)?;
     // The voxel at (5, 6, 7), asked for alone, has the same colour.
-    let (one, _) = texture.region(
-        &Region {
+    let (one, _) = texture.render(
+        &Request::region(Region {
             origin: [5, 6, 7],
             size: [1, 1, 1],
-        },
+        })?,
         1,
     )?;
     let at = 3 * (5 + 64 * (6 + 64 * 7));

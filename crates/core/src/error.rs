@@ -37,6 +37,15 @@ pub enum Error {
         /// Largest accepted value.
         max: f64,
     },
+    /// A named parameter is malformed (not a range problem: see
+    /// [`Error::InvalidRange`]).
+    #[error("parameter `{name}`: {reason}")]
+    InvalidParameter {
+        /// Parameter name as the user spells it.
+        name: &'static str,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// A request is larger than the configured limit.
     #[error("request too large: {0}")]
     TooLarge(String),

@@ -20,6 +20,7 @@ pub mod eval;
 mod field;
 pub mod hash;
 mod params;
+pub mod period;
 pub mod png;
 mod request;
 mod synth;
@@ -33,7 +34,10 @@ pub use field::{Along, Curve, Field, Sketch};
 pub use params::{
     AnalysisParams, Arrangement, Correction, Orientation, Scheme, SlabTiling, Slices, SynthParams,
 };
-pub use request::{Axis, COORD_LIMIT, CutPlane, Filter, MAX_REGION_VOXELS, MAX_SLICE_SIDE, Region};
+pub use request::{
+    Axis, COORD_LIMIT, Cut, CutPlane, Filter, MAX_REGION_VOXELS, MAX_SLICE_SIDE, Region, Request,
+    RequestKind, Slice, Window,
+};
 pub use synth::cache::{CacheStats, TileCache};
 pub use synth::cancel::{CancelFlag, Cancelled, run_cancellable};
 pub use synth::estimate::WorkEstimate;

@@ -463,6 +463,18 @@ pub struct SynthParams {
         deserialize_with = "field_or_text"
     )]
     pub field: Option<Field>,
+    /// The solid's period along x, y and z, in voxels of the finest level
+    /// (see [`crate::period`]): with one, voxel(p) = voxel(p + period·eᵢ)
+    /// everywhere and at every level of detail, so a block of one period
+    /// tiles space without a seam. Each side must be a multiple of
+    /// [`crate::period::multiple`] (the coarsest level's spacing times
+    /// the tile side); none leaves the solid aperiodic. Not written when
+    /// none, so aperiodic textures keep their ids.
+    #[serde(
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "crate::period::deserialize"
+    )]
+    pub period: Option<[u32; 3]>,
 }
 
 /// Default [`SynthParams::fine_levels`], measured on the shared exemplars
@@ -501,6 +513,7 @@ impl Default for SynthParams {
             slab_tiling: SlabTiling::default(),
             correction: Correction::default(),
             field: None,
+            period: None,
         }
     }
 }
@@ -536,6 +549,11 @@ impl SynthParams {
         range("slab_thickness", self.slab_thickness, 1, 9)?;
         if let Some(field) = &self.field {
             field.validate()?;
+        }
+        if let Some(period) = self.period {
+            for side in period {
+                range("period", side, 1, crate::period::MAX_PERIOD)?;
+            }
         }
         Ok(())
     }

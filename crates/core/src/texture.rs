@@ -1,13 +1,11 @@
-//! The public face of synthesis: a [`Texture`] answers requests for voxel
-//! regions, axis slices and oblique cuts by synthesizing exactly their
-//! dependency set (see [`crate::synth`]).
+//! The public face of synthesis: a [`Texture`] answers [`Request`]s (voxel
+//! regions, axis slices, oblique cuts, scattered voxels) by synthesizing
+//! exactly their dependency set (see [`crate::synth`]).
 
 use crate::candidates::Candidates;
 use crate::error::{Error, Result};
 use crate::params::SynthParams;
-use crate::request::{
-    Axis, CutPlane, Filter, MAX_REGION_VOXELS, Region, check_coords, check_region, check_side,
-};
+use crate::request::{Request, RequestKind, Slice};
 use crate::synth::cache::TileCache;
 use crate::synth::estimate::WorkEstimate;
 use crate::synth::{Engine, SynthStats};
@@ -67,146 +65,73 @@ impl Texture {
         self.engine.max_lod()
     }
 
-    /// RGB8 voxels of `region` at level of detail `lod`, x fastest, then y,
-    /// then z.
-    pub fn region(&self, region: &Region, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
+    /// The answer to `request` at level of detail `lod`, as RGB8 in the
+    /// order its kind gives (see [`RequestKind`]), with what it cost.
+    pub fn render(&self, request: &Request, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
         self.check_lod(lod)?;
-        check_region(region)?;
-        self.engine.region_rgb(region, lod)
-    }
-
-    /// An axis-aligned slice as RGB8 rows: pixel (i, j) is voxel
-    /// (u0 + i, v0 + j) in the plane `axis = at`, with (u, v) = (x, y) for z,
-    /// (y, z) for x and (z, x) for y.
-    #[allow(clippy::too_many_arguments)]
-    pub fn slice(
-        &self,
-        axis: Axis,
-        at: i64,
-        u0: i64,
-        v0: i64,
-        width: u32,
-        height: u32,
-        lod: u32,
-    ) -> Result<(Vec<u8>, SynthStats)> {
-        check_side(width, height)?;
-        let (_, u, v) = axis.frame();
-        let region = Region::slice(axis, at, u0, v0, width, height);
-        let (rgb, stats) = self.region(&region, lod)?;
-        if u < v {
-            // Region order is x fastest: for z slices (u=x, v=y) and x
-            // slices (u=y, v=z) that already is row-major (u fastest).
-            return Ok((rgb, stats));
-        }
-        // y slices: u = z, v = x, but the region is stored x fastest.
-        let mut out = vec![0u8; rgb.len()];
-        for j in 0..height as usize {
-            for i in 0..width as usize {
-                let src = (i * height as usize + j) * 3;
-                let dst = (j * width as usize + i) * 3;
-                out[dst..dst + 3].copy_from_slice(&rgb[src..src + 3]);
+        let e = &self.engine;
+        match request.kind() {
+            RequestKind::Region(r) => e.region_rgb(r, lod),
+            RequestKind::Slice(s) => {
+                let (rgb, stats) = e.region_rgb(&s.region(), lod)?;
+                Ok((slice_rows(s, rgb), stats))
             }
+            RequestKind::Cut(c) => e.cut_rgb(&c.plane, lod, c.filter),
+            RequestKind::Points(p) => e.points_rgb(p, lod),
         }
-        Ok((out, stats))
     }
 
-    /// An oblique cut as RGB8 rows (see [`CutPlane`]).
-    pub fn cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> Result<(Vec<u8>, SynthStats)> {
+    /// What a cold-cache synthesis of `request` would compute, per level,
+    /// counted without computing it (the paper's Table 1/2 form).
+    pub fn plan(&self, request: &Request, lod: u32) -> Result<SynthStats> {
         self.check_lod(lod)?;
-        check_side(plane.width, plane.height)?;
-        for c in plane.origin.iter().chain(&plane.u).chain(&plane.v) {
-            if !c.is_finite() {
-                return Err(Error::InvalidRequest("cut plane must be finite".into()));
-            }
-        }
-        self.engine.cut_rgb(plane, lod, filter)
+        let e = &self.engine;
+        Ok(match request.kind() {
+            RequestKind::Region(r) => e.plan_region(r, lod),
+            RequestKind::Slice(s) => e.plan_region(&s.region(), lod),
+            RequestKind::Cut(c) => e.plan_cut(&c.plane, lod, c.filter),
+            RequestKind::Points(p) => e.plan_points(p, lod),
+        })
     }
 
-    /// What a cold-cache synthesis of the cut `plane` would compute, per
-    /// level, counted without computing it.
-    pub fn plan_cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> Result<SynthStats> {
-        self.check_lod(lod)?;
-        check_side(plane.width, plane.height)?;
-        Ok(self.engine.plan_cut(plane, lod, filter))
-    }
-
-    /// An upper bound of the voxels a cold-cache synthesis of `region`
+    /// An upper bound of the voxels a cold-cache synthesis of `request`
     /// computes over all levels (what [`Texture::plan`] counts), found in
     /// time that depends on the request's size in tile groups rather than
     /// voxels. Counting stops once the bound passes `limit`.
-    pub fn estimate(&self, region: &Region, lod: u32, limit: u64) -> Result<WorkEstimate> {
+    pub fn estimate(&self, request: &Request, lod: u32, limit: u64) -> Result<WorkEstimate> {
         self.check_lod(lod)?;
-        check_region(region)?;
-        Ok(self.engine.estimate_region(region, lod, limit))
-    }
-
-    /// [`Texture::estimate`] for the cut `plane` (what
-    /// [`Texture::plan_cut`] counts).
-    pub fn estimate_cut(
-        &self,
-        plane: &CutPlane,
-        lod: u32,
-        filter: Filter,
-        limit: u64,
-    ) -> Result<WorkEstimate> {
-        self.check_lod(lod)?;
-        check_side(plane.width, plane.height)?;
-        for c in plane.origin.iter().chain(&plane.u).chain(&plane.v) {
-            if !c.is_finite() {
-                return Err(Error::InvalidRequest("cut plane must be finite".into()));
-            }
-        }
-        Ok(self.engine.estimate_cut(plane, lod, filter, limit))
-    }
-
-    /// RGB8 colours of arbitrary voxels at level of detail `lod`.
-    pub fn points(&self, points: &[[i64; 3]], lod: u32) -> Result<(Vec<[u8; 3]>, SynthStats)> {
-        self.check_lod(lod)?;
-        if points.len() as u64 > MAX_REGION_VOXELS {
-            return Err(Error::TooLarge(format!(
-                "{} points (limit {MAX_REGION_VOXELS})",
-                points.len()
-            )));
-        }
-        for p in points {
-            check_coords(p)?;
-        }
-        self.engine.points_rgb(points, lod)
-    }
-
-    /// What a cold-cache synthesis of `region` would compute, per level,
-    /// counted without computing it (the paper's Table 1/2 form).
-    pub fn plan(&self, region: &Region, lod: u32) -> Result<SynthStats> {
-        self.check_lod(lod)?;
-        check_region(region)?;
-        Ok(self.engine.plan_region(region, lod))
+        let e = &self.engine;
+        Ok(match request.kind() {
+            RequestKind::Region(r) => e.estimate_region(r, lod, limit),
+            RequestKind::Slice(s) => e.estimate_region(&s.region(), lod, limit),
+            RequestKind::Cut(c) => e.estimate_cut(&c.plane, lod, c.filter, limit),
+            RequestKind::Points(p) => e.estimate_points(p, lod, limit),
+        })
     }
 
     /// Exact voxel-level dependency chain of a few voxels at `lod`:
-    /// version-0 voxels and corrections per level, finest first. It follows
-    /// what a correction reads: its direct neighbours (radius 1).
-    pub fn dependency_chain(&self, voxels: &[[i64; 3]], lod: u32) -> Result<Vec<(u64, u64)>> {
-        self.check_lod(lod)?;
-        self.chain(voxels, lod, self.engine.radius())
-    }
-
-    /// Like [`Texture::dependency_chain`], for neighbourhood side
-    /// `neighbourhood` instead of the analysed one: the chain is geometry
-    /// only, so this answers what a larger N (Zhang et al. use 9) would cost
+    /// version-0 voxels and corrections per level, finest first. It
+    /// follows what a correction reads, its direct neighbours, unless
+    /// `neighbourhood` names another side N: the chain is geometry only,
+    /// so this answers what a larger N (Zhang et al. use 9) would cost
     /// without precomputing for it.
-    pub fn dependency_chain_for(
+    pub fn dependency_chain(
         &self,
         voxels: &[[i64; 3]],
         lod: u32,
-        neighbourhood: u32,
+        neighbourhood: Option<u32>,
     ) -> Result<Vec<(u64, u64)>> {
         self.check_lod(lod)?;
-        if neighbourhood.is_multiple_of(2) || !(3..=9).contains(&neighbourhood) {
-            return Err(Error::InvalidRequest(
-                "neighbourhood must be odd, 3 to 9".into(),
-            ));
-        }
-        self.chain(voxels, lod, neighbourhood as i64 / 2)
+        let radius = match neighbourhood {
+            None => self.engine.radius(),
+            Some(n) if !n.is_multiple_of(2) && (3..=9).contains(&n) => n as i64 / 2,
+            Some(_) => {
+                return Err(Error::InvalidRequest(
+                    "neighbourhood must be odd, 3 to 9".into(),
+                ));
+            }
+        };
+        self.chain(voxels, lod, radius)
     }
 
     fn chain(&self, voxels: &[[i64; 3]], lod: u32, radius: i64) -> Result<Vec<(u64, u64)>> {
@@ -232,4 +157,25 @@ impl Texture {
         }
         Ok(())
     }
+}
+
+/// A slice's voxels, x fastest, as rows of its window (u fastest).
+fn slice_rows(s: &Slice, rgb: Vec<u8>) -> Vec<u8> {
+    let (_, u, v) = s.axis.frame();
+    if u < v {
+        // For z slices (u = x, v = y) and x slices (u = y, v = z) x fastest
+        // already is u fastest.
+        return rgb;
+    }
+    // y slices: u = z, v = x.
+    let (width, height) = (s.window.width as usize, s.window.height as usize);
+    let mut out = vec![0u8; rgb.len()];
+    for j in 0..height {
+        for i in 0..width {
+            let src = (i * height + j) * 3;
+            let dst = (j * width + i) * 3;
+            out[dst..dst + 3].copy_from_slice(&rgb[src..src + 3]);
+        }
+    }
+    out
 }

@@ -18,6 +18,27 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_DATA_DIR")]
     pub data_dir: Option<PathBuf>,
 
+    /// Keep textures in an S3-compatible bucket shared by replicas instead
+    /// of the data directory: `s3://BUCKET` or `s3://BUCKET/PREFIX`.
+    /// Credentials come from `AWS_ACCESS_KEY_ID`, `AWS_SECRET_ACCESS_KEY`
+    /// (and `AWS_SESSION_TOKEN`), or the instance's role.
+    #[arg(long, env = "SOLIDTEX_STORE")]
+    pub store: Option<String>,
+
+    /// Endpoint of an S3-compatible store other than AWS
+    /// (`http://127.0.0.1:9000`; `http://` allows plain HTTP).
+    #[arg(long, env = "SOLIDTEX_S3_ENDPOINT")]
+    pub s3_endpoint: Option<String>,
+
+    /// Region of the bucket.
+    #[arg(long, env = "SOLIDTEX_S3_REGION", default_value = "us-east-1")]
+    pub s3_region: String,
+
+    /// Seconds between two listings of a shared store, after which
+    /// textures deleted through another replica are gone here too.
+    #[arg(long, env = "SOLIDTEX_STORE_POLL", default_value_t = 2.0, value_parser = parse_poll)]
+    pub store_poll: f64,
+
     /// Bytes of synthesized tiles kept in the shared LRU cache (suffixes
     /// K, M, G accepted).
     #[arg(long, env = "SOLIDTEX_CACHE_BYTES", default_value = "512M", value_parser = parse_bytes)]
@@ -212,6 +233,10 @@ impl ServeArgs {
         ServeArgs {
             addr: SocketAddr::from(([127, 0, 0, 1], 0)),
             data_dir: Some(data_dir.into()),
+            store: None,
+            s3_endpoint: None,
+            s3_region: "us-east-1".into(),
+            store_poll: 2.0,
             cache_bytes: 256 << 20,
             max_jobs: 4,
             queue: 64,
@@ -263,6 +288,18 @@ impl ServeArgs {
                 .map(|d| d.join("solidtex"))
                 .unwrap_or_else(|| PathBuf::from("data")),
         }
+    }
+}
+
+/// Parses the shared store's listing period: 0.1 to 3600 seconds.
+pub fn parse_poll(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number of seconds"))?;
+    if (0.1..=3600.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} is outside 0.1..=3600 seconds"))
     }
 }
 

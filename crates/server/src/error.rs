@@ -175,6 +175,7 @@ impl From<solidtex_core::Error> for ApiError {
             E::SizeMismatch(_) => (StatusCode::BAD_REQUEST, "size_mismatch"),
             E::InvalidRange { .. } => (StatusCode::BAD_REQUEST, "out_of_range"),
             E::TooLarge(_) => (StatusCode::BAD_REQUEST, "too_large"),
+            E::InvalidParameter { .. } => (StatusCode::BAD_REQUEST, "invalid_parameter"),
             E::InvalidRequest(_) => (StatusCode::BAD_REQUEST, "invalid_request"),
             E::CorruptFile(_) => (StatusCode::INTERNAL_SERVER_ERROR, "corrupt_file"),
             E::Io(_) => (StatusCode::INTERNAL_SERVER_ERROR, "io"),

@@ -10,7 +10,8 @@
 //!
 //! - [`config`]: flags and `SOLIDTEX_*` variables ([`ServeArgs`]).
 //! - [`spec`]: what a texture is made of and its content id.
-//! - [`store`]: the data directory, written atomically and durably.
+//! - [`store`]: where textures are kept: the data directory, written
+//!   atomically and durably, or an S3-compatible object store.
 //! - [`registry`]: textures, their status and background precomputes.
 //! - [`jobs`]: the bounded synthesis queue (backpressure → 503);
 //!   [`decodes`]: the bound on decoding uploaded images.
@@ -95,14 +96,7 @@ impl Server {
         let listener = tokio::net::TcpListener::bind(args.addr)
             .await
             .with_context(|| format!("binding {}", args.addr))?;
-        let data_dir = args.resolved_data_dir();
-        let store = {
-            let d = data_dir.clone();
-            tokio::task::spawn_blocking(move || store::Store::open(&d))
-                .await?
-                .with_context(|| format!("opening data directory {}", data_dir.display()))?
-        };
-        let store = Arc::new(store);
+        let store = open_store(args).await?;
         let cache = Arc::new(TileCache::new(
             usize::try_from(args.cache_bytes).unwrap_or(usize::MAX),
         ));
@@ -136,6 +130,7 @@ impl Server {
                 .context("reading the data directory")?
         };
         registry.resume(todo);
+        registry.follow_deletes(Duration::from_secs_f64(args.store_poll));
         if args.default_texture {
             let spec = TextureSpec {
                 planes: Planes::Single(solidtex_core::bundled::exemplar()),
@@ -179,7 +174,7 @@ impl Server {
         });
         tracing::info!(
             addr = %listener.local_addr()?,
-            data_dir = %data_dir.display(),
+            store = %state.registry.location(),
             textures = state.registry.list().len(),
             "server ready"
         );
@@ -226,6 +221,28 @@ impl Server {
         listen::serve(self.listener, app, self.limits, metrics, shutdown).await;
         Ok(())
     }
+}
+
+/// The storage `args` name: the data directory, or a shared bucket.
+async fn open_store(args: &ServeArgs) -> anyhow::Result<Arc<dyn store::Storage>> {
+    if let Some(url) = &args.store {
+        let opts = store::s3::S3Options {
+            url: url.clone(),
+            endpoint: args.s3_endpoint.clone(),
+            region: args.s3_region.clone(),
+        };
+        let runtime = tokio::runtime::Handle::current();
+        let s = tokio::task::spawn_blocking(move || store::s3::ObjectStorage::open(&opts, runtime))
+            .await?
+            .with_context(|| format!("opening the object store {url}"))?;
+        return Ok(Arc::new(s));
+    }
+    let data_dir = args.resolved_data_dir();
+    let d = data_dir.clone();
+    let s = tokio::task::spawn_blocking(move || store::local::DataDir::open(&d))
+        .await?
+        .with_context(|| format!("opening data directory {}", data_dir.display()))?;
+    Ok(Arc::new(s))
 }
 
 /// Resolves on SIGINT or SIGTERM.

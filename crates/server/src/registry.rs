@@ -5,14 +5,14 @@
 //! precomputed in the background — at most `max_precomputes` at once, on
 //! a blocking thread driving a rayon pool of its own, so uploads never
 //! starve voxel requests of synthesis threads — and becomes `ready` once
-//! its candidates are durable in the [`Store`], or `failed` with a reason.
+//! its candidates are durable in the [`Storage`], or `failed` with a reason.
 //! Uploading content that is already known returns the existing texture;
 //! uploading a failed one tries again.
 
 use super::metrics::{Metrics, OutcomeLabels};
 use super::panics::panic_message;
 use super::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec};
-use super::store::{Found, META_VERSION, Store, StoredMeta, StoredStatus};
+use super::store::{Found, META_VERSION, Storage, StoredMeta, StoredStatus};
 use crate::peak_alloc::{self, Meter};
 use parking_lot::{Mutex, RwLock};
 use solidtex_core::Layout;
@@ -124,6 +124,9 @@ pub(crate) struct Entry {
     max_lod: AtomicU32,
     /// Serialises loading it back from disk.
     loading: Mutex<()>,
+    /// Since when its metadata is known to be in the storage (a texture
+    /// missing from a listing that started later was deleted).
+    stored_since: Mutex<Option<Instant>>,
 }
 
 impl Entry {
@@ -175,6 +178,7 @@ impl Entry {
             on_disk: AtomicBool::new(false),
             max_lod: AtomicU32::new(0),
             loading: Mutex::new(()),
+            stored_since: Mutex::new(None),
         }
     }
 
@@ -331,7 +335,7 @@ pub(crate) enum Submitted {
 /// All textures of a server.
 pub struct Registry {
     map: RwLock<HashMap<String, Arc<Entry>>>,
-    store: Arc<Store>,
+    store: Arc<dyn Storage>,
     cache: Arc<TileCache>,
     metrics: Arc<Metrics>,
     slots: Arc<Semaphore>,
@@ -357,6 +361,8 @@ pub struct Registry {
     precompute_reserved_peak: AtomicU64,
     /// Counts the allocations of the precompute pool's threads.
     meter: Option<&'static Meter>,
+    /// Serialises taking up textures found in a shared storage.
+    adopting: Mutex<()>,
 }
 
 /// Granularity of the precompute memory bound.
@@ -400,7 +406,7 @@ fn now() -> u64 {
 impl Registry {
     /// An empty registry over `store`; precomputes run on `pool`.
     pub(crate) fn new(
-        store: Arc<Store>,
+        store: Arc<dyn Storage>,
         cache: Arc<TileCache>,
         metrics: Arc<Metrics>,
         max_precomputes: u32,
@@ -425,6 +431,7 @@ impl Registry {
             precompute_reserved: AtomicU64::new(0),
             precompute_reserved_peak: AtomicU64::new(0),
             meter: None,
+            adopting: Mutex::new(()),
         }
     }
 
@@ -553,6 +560,11 @@ impl Registry {
         self.max_textures = max_textures;
         self.max_stored_bytes = max_stored_bytes;
         self
+    }
+
+    /// Where the textures are kept, for people.
+    pub(crate) fn location(&self) -> String {
+        self.store.location()
     }
 
     /// The shared tile cache.
@@ -710,7 +722,10 @@ impl Registry {
         })
         .await;
         let failure = match written {
-            Ok(Ok(())) => None,
+            Ok(Ok(())) => {
+                *entry.stored_since.lock() = Some(Instant::now());
+                None
+            }
             Ok(Err(e)) => Some(e.to_string()),
             Err(e) => Some(e.to_string()),
         };
@@ -734,7 +749,8 @@ impl Registry {
     /// cannot be removed the texture stays as it was.
     pub(crate) async fn delete(self: &Arc<Self>, id: &str) -> Result<(), RegistryError> {
         let entry = self
-            .get(id)
+            .find(id)
+            .await?
             .ok_or_else(|| RegistryError::UnknownTexture(id.to_string()))?;
         let this = self.clone();
         let id_for_error = id.to_string();
@@ -889,6 +905,7 @@ impl Registry {
         let t0 = Instant::now();
         let shared = self
             .shared_candidates(entry)
+            .or_else(|| self.stored_own_candidates(entry))
             .or_else(|| self.stored_shared_candidates(entry));
         let reused = shared.is_some();
         let mut computed = false;
@@ -992,8 +1009,16 @@ impl Registry {
                         reason: None,
                         ..entry.meta()
                     };
-                    if let Err(e) = self.store.write_meta(&meta) {
-                        tracing::error!(error = %e, "could not store texture metadata");
+                    match self.store.write_meta(&meta) {
+                        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                            tracing::info!(
+                                "texture deleted by another server during its precompute; result dropped"
+                            );
+                            self.forget(entry);
+                            return;
+                        }
+                        Err(e) => tracing::error!(error = %e, "could not store texture metadata"),
+                        Ok(()) => {}
                     }
                     entry.set_ready(c, t);
                 }
@@ -1020,105 +1045,20 @@ impl Registry {
             .inc();
     }
 
-    /// Brings back every texture of the data directory (blocking): ready
-    /// ones are loaded from their `.stx` without recomputation, interrupted
-    /// or unreadable ones are queued for a new precompute (or marked failed
+    /// Brings back every texture of the storage (blocking): ready ones
+    /// are loaded from their `.stx` without recomputation, interrupted or
+    /// unreadable ones are queued for a new precompute (or marked failed
     /// when their exemplars are gone), failed ones stay failed. Returns the
     /// entries to precompute; start them with [`Registry::resume`].
     pub(crate) fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
         let mut todo = Vec::new();
-        for Found { meta, dir } in self.store.scan()? {
-            let params = match TextureParams::from_stored(&meta.params) {
-                Ok(p) => p,
-                Err(e) => {
-                    tracing::warn!(dir = %dir.display(), error = %e, "skipping texture with unreadable parameters");
-                    continue;
-                }
-            };
-            let planes = match self.store.read_planes(&meta) {
-                Ok(p) => p,
-                Err(e) => {
-                    tracing::warn!(id = %meta.id, error = %e, "texture exemplars unreadable; marking failed");
-                    // Keep something to report: a 16×16 black placeholder.
-                    let blank = solidtex_core::Exemplar::from_rgb(16, 16, &[0; 16 * 16 * 3])
-                        .expect("valid placeholder");
-                    let entry = Arc::new(
-                        Entry::new(
-                            meta.id.clone(),
-                            meta.content_hash.clone(),
-                            meta.created,
-                            TextureSpec {
-                                planes: Planes::Single(blank),
-                                params,
-                            },
-                        )
-                        .named(meta.name.clone()),
-                    );
-                    let why = format!("stored exemplars unreadable: {e}");
-                    entry.set_status(Status::Failed(why));
-                    let _ = self.store.write_meta(&StoredMeta {
-                        exemplar: meta.exemplar,
-                        ..entry.meta()
-                    });
-                    self.insert(entry);
-                    continue;
-                }
-            };
-            let spec = TextureSpec { planes, params };
-            // What is served must be what the id names: recompute it from
-            // the pixels and parameters as loaded (a tampered exemplar or
-            // metadata is refused, and never shares its candidates).
-            let hash = spec.content_hash_as_stored(&meta.params);
-            if hash != meta.content_hash
-                || (meta.id != meta.content_hash && meta.id != super::DEFAULT_ID)
-            {
-                tracing::error!(
-                    id = %meta.id,
-                    content_hash = %meta.content_hash,
-                    computed = %hash,
-                    "stored texture does not match its id; not served"
-                );
-                self.metrics.textures_refused.inc();
-                continue;
-            }
-            let entry = Arc::new(
-                Entry::new(
-                    meta.id.clone(),
-                    meta.content_hash.clone(),
-                    meta.created,
-                    spec,
-                )
-                .named(meta.name.clone()),
-            );
-            *entry.precompute_seconds.lock() = meta.precompute_seconds;
-            *entry.precompute_peak.lock() = meta.precompute_peak_bytes;
-            match meta.status {
-                StoredStatus::Ready => match self.load_ready(&entry) {
-                    Ok((c, t)) => {
-                        entry.set_progress("done", 1.0);
-                        entry.on_disk.store(true, Ordering::Relaxed);
-                        entry.set_ready(c, t);
-                        self.metrics.textures_loaded.inc();
-                        tracing::info!(id = %meta.id, "texture loaded");
-                    }
-                    Err(e) => {
-                        tracing::warn!(id = %meta.id, error = %e, "stored candidates unusable; recomputing");
-                        todo.push(entry.clone());
-                    }
-                },
-                StoredStatus::Pending => {
-                    tracing::info!(id = %meta.id, "precompute was interrupted; recomputing");
+        for found in self.store.scan()? {
+            if let Some((entry, precompute)) = self.restore(found) {
+                if precompute {
                     todo.push(entry.clone());
                 }
-                StoredStatus::Failed => {
-                    entry.set_status(Status::Failed(
-                        meta.reason
-                            .clone()
-                            .unwrap_or_else(|| "precompute failed".into()),
-                    ));
-                }
+                self.insert(entry);
             }
-            self.insert(entry);
             // A data directory larger than the memory bound loads one
             // texture at a time past it.
             self.keep_within_memory("");
@@ -1127,12 +1067,115 @@ impl Registry {
         Ok(todo)
     }
 
-    fn load_ready(&self, entry: &Entry) -> Result<(Arc<Candidates>, Texture), String> {
-        if let Some(c) = self.shared_candidates(entry) {
-            let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
-                .map_err(|e| e.to_string())?;
-            return Ok((c, t));
+    /// The entry of one stored texture, and whether it needs a precompute;
+    /// `None` when it cannot be served.
+    fn restore(&self, Found { meta, location }: Found) -> Option<(Arc<Entry>, bool)> {
+        let params = match TextureParams::from_stored(&meta.params) {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::warn!(location = %location, error = %e, "skipping texture with unreadable parameters");
+                return None;
+            }
+        };
+        let planes = match self.store.read_planes(&meta) {
+            Ok(p) => p,
+            Err(e) => {
+                tracing::warn!(id = %meta.id, error = %e, "texture exemplars unreadable; marking failed");
+                // Keep something to report: a 16×16 black placeholder.
+                let blank = solidtex_core::Exemplar::from_rgb(16, 16, &[0; 16 * 16 * 3])
+                    .expect("valid placeholder");
+                let entry = Arc::new(
+                    Entry::new(
+                        meta.id.clone(),
+                        meta.content_hash.clone(),
+                        meta.created,
+                        TextureSpec {
+                            planes: Planes::Single(blank),
+                            params,
+                        },
+                    )
+                    .named(meta.name.clone()),
+                );
+                let why = format!("stored exemplars unreadable: {e}");
+                entry.set_status(Status::Failed(why));
+                let _ = self.store.write_meta(&StoredMeta {
+                    exemplar: meta.exemplar,
+                    ..entry.meta()
+                });
+                return Some((entry, false));
+            }
+        };
+        let spec = TextureSpec { planes, params };
+        // What is served must be what the id names: recompute it from
+        // the pixels and parameters as loaded (a tampered exemplar or
+        // metadata is refused, and never shares its candidates).
+        let hash = spec.content_hash_as_stored(&meta.params);
+        if hash != meta.content_hash
+            || (meta.id != meta.content_hash && meta.id != super::DEFAULT_ID)
+        {
+            tracing::error!(
+                id = %meta.id,
+                content_hash = %meta.content_hash,
+                computed = %hash,
+                "stored texture does not match its id; not served"
+            );
+            self.metrics.textures_refused.inc();
+            return None;
         }
+        let entry = Arc::new(
+            Entry::new(
+                meta.id.clone(),
+                meta.content_hash.clone(),
+                meta.created,
+                spec,
+            )
+            .named(meta.name.clone()),
+        );
+        *entry.precompute_seconds.lock() = meta.precompute_seconds;
+        *entry.precompute_peak.lock() = meta.precompute_peak_bytes;
+        *entry.stored_since.lock() = Some(Instant::now());
+        let mut precompute = false;
+        match meta.status {
+            StoredStatus::Ready => match self.load_ready(&entry) {
+                Ok((c, t)) => {
+                    entry.set_progress("done", 1.0);
+                    entry.on_disk.store(true, Ordering::Relaxed);
+                    entry.set_ready(c, t);
+                    self.metrics.textures_loaded.inc();
+                    tracing::info!(id = %meta.id, "texture loaded");
+                }
+                Err(e) => {
+                    tracing::warn!(id = %meta.id, error = %e, "stored candidates unusable; recomputing");
+                    precompute = true;
+                }
+            },
+            StoredStatus::Pending => {
+                tracing::info!(id = %meta.id, "precompute was interrupted; recomputing");
+                precompute = true;
+            }
+            StoredStatus::Failed => {
+                entry.set_status(Status::Failed(
+                    meta.reason
+                        .clone()
+                        .unwrap_or_else(|| "precompute failed".into()),
+                ));
+            }
+        }
+        Some((entry, precompute))
+    }
+
+    fn load_ready(&self, entry: &Entry) -> Result<(Arc<Candidates>, Texture), String> {
+        let c = match self.shared_candidates(entry) {
+            Some(c) => c,
+            None => Arc::new(self.read_verified(entry)?),
+        };
+        let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
+            .map_err(|e| e.to_string())?;
+        Ok((c, t))
+    }
+
+    /// The texture's own stored candidates, checked against it.
+    fn read_verified(&self, entry: &Entry) -> Result<Candidates, String> {
         let bytes = self
             .store
             .read_candidates(&entry.id)
@@ -1150,10 +1193,121 @@ impl Registry {
                 "stored candidates were made with another arrangement of the planes".into(),
             );
         }
-        let c = Arc::new(c);
-        let t = Texture::new(c.clone(), entry.params.synth.clone(), self.cache.clone())
-            .map_err(|e| e.to_string())?;
-        Ok((c, t))
+        Ok(c)
+    }
+
+    /// With a shared storage, the candidates another server stored for
+    /// this texture (it finished the precompute first).
+    fn stored_own_candidates(&self, entry: &Entry) -> Option<Arc<Candidates>> {
+        if !self.store.shared() {
+            return None;
+        }
+        self.read_verified(entry).ok().map(Arc::new)
+    }
+
+    /// The texture `id`: known here or, with a shared storage, stored by
+    /// another server and taken up now (its candidates loaded, or
+    /// recomputed when they are not stored yet).
+    pub(crate) async fn find(
+        self: &Arc<Self>,
+        id: &str,
+    ) -> Result<Option<Arc<Entry>>, RegistryError> {
+        if let Some(e) = self.get(id) {
+            return Ok(Some(e));
+        }
+        if !self.store.shared() || !super::spec::valid_id(id) {
+            return Ok(None);
+        }
+        let this = self.clone();
+        let id = id.to_string();
+        tokio::task::spawn_blocking(move || this.adopt(&id))
+            .await
+            .map_err(|e| RegistryError::Internal(e.to_string()))?
+    }
+
+    /// Takes up texture `id` from the shared storage (blocking).
+    fn adopt(self: &Arc<Self>, id: &str) -> Result<Option<Arc<Entry>>, RegistryError> {
+        let _one = self.adopting.lock();
+        if let Some(e) = self.get(id) {
+            return Ok(Some(e));
+        }
+        let found = self.store.find(id).map_err(|e| {
+            RegistryError::Internal(format!("reading {}: {e}", self.store.location()))
+        })?;
+        let Some((entry, precompute)) = found.and_then(|f| self.restore(f)) else {
+            return Ok(None);
+        };
+        *entry.stored_since.lock() = Some(Instant::now());
+        self.insert(entry.clone());
+        if precompute {
+            self.reserve_precompute();
+            self.start_precompute(entry.clone());
+        }
+        self.keep_within_memory(id);
+        self.update_gauges();
+        Ok(Some(entry))
+    }
+
+    /// With a shared storage, checks every `every` which textures are
+    /// still stored, and forgets those another server deleted: a delete
+    /// reaches this server within `every` and one listing of the store.
+    pub(crate) fn follow_deletes(self: &Arc<Self>, every: std::time::Duration) {
+        if !self.store.shared() {
+            return;
+        }
+        let weak = Arc::downgrade(self);
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(every);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            loop {
+                tick.tick().await;
+                let Some(this) = weak.upgrade() else { return };
+                let checked = tokio::task::spawn_blocking(move || {
+                    let listed_at = Instant::now();
+                    let ids = this.store.ids()?;
+                    this.forget_deleted(&ids, listed_at);
+                    Ok::<_, std::io::Error>(())
+                })
+                .await;
+                match checked {
+                    Ok(Ok(())) => {}
+                    Ok(Err(e)) => tracing::warn!(error = %e, "could not list the shared store"),
+                    Err(e) => tracing::warn!(error = %e, "listing the shared store failed"),
+                }
+            }
+        });
+    }
+
+    /// Forgets the textures stored before `listed_at` that the listing
+    /// `stored` (sorted) no longer holds.
+    fn forget_deleted(&self, stored: &[String], listed_at: Instant) {
+        let gone: Vec<Arc<Entry>> = self
+            .map
+            .read()
+            .values()
+            .filter(|e| {
+                e.stored_since.lock().is_some_and(|t| t < listed_at)
+                    && stored.binary_search(&e.id).is_err()
+            })
+            .cloned()
+            .collect();
+        for e in gone {
+            let _g = self.store.lock();
+            tracing::info!(id = %e.id, "texture deleted by another server");
+            self.forget(&e);
+        }
+        self.update_gauges();
+    }
+
+    /// Drops `entry` from the registry (requests in flight keep theirs).
+    fn forget(&self, entry: &Arc<Entry>) {
+        let mut map = self.map.write();
+        if map.get(&entry.id).is_some_and(|e| Arc::ptr_eq(e, entry)) {
+            map.remove(&entry.id);
+        }
+        drop(map);
+        entry.deleted.store(true, Ordering::SeqCst);
+        *entry.candidates.lock() = None;
     }
 
     fn insert(&self, entry: Arc<Entry>) {

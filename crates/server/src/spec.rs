@@ -62,8 +62,9 @@ impl TextureParams {
     pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, SpecError> {
         let analysis_keys = analysis_keys();
         let mut synth_keys = keys_of::<SynthParams>();
-        // Left out of the defaults' JSON, which has no field.
+        // Left out of the defaults' JSON, which has no field and no period.
         synth_keys.push("field".to_string());
+        synth_keys.push("period".to_string());
         let mut a = Map::new();
         let mut s = Map::new();
         if let Some(preset) = obj.get("preset") {
@@ -109,6 +110,11 @@ impl TextureParams {
             serde_json::from_value(Value::Object(s)).map_err(|e| invalid_params(e.to_string()))?;
         analysis.validate()?;
         synth.validate()?;
+        // The period must fit the levels the analysis makes: refused with
+        // the upload, not when the precompute is done.
+        if let Some(period) = synth.period {
+            solidtex_core::period::check(period, analysis.levels as usize, &synth)?;
+        }
         Ok(TextureParams { analysis, synth })
     }
 

@@ -117,6 +117,62 @@ impl RgbView<'_> {
     }
 }
 
+/// How visible the seams of an image tiled 2×2 are (see [`tiling_seam`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TilingSeam {
+    /// Mean absolute luminance step across the vertical border (the last
+    /// column to the first) and across the horizontal one (last row to
+    /// first).
+    pub border: [f64; 2],
+    /// The same mean step between every other pair of neighbouring
+    /// columns, then rows: the steps inside a tile, sorted.
+    pub inside: Vec<f64>,
+}
+
+impl TilingSeam {
+    /// Where the larger border step ranks among the steps inside: the
+    /// fraction of them that are smaller (1: above every one of them).
+    pub fn rank(&self) -> f64 {
+        let b = self.border[0].max(self.border[1]);
+        self.inside.iter().filter(|&&s| s < b).count() as f64 / self.inside.len().max(1) as f64
+    }
+
+    /// Whether both border steps lie within the distribution of the steps
+    /// inside (no larger than the largest of them).
+    pub fn within(&self) -> bool {
+        let max = self.inside.last().copied().unwrap_or(0.0);
+        self.border.iter().all(|&b| b <= max)
+    }
+}
+
+/// The seams of `image` laid 2×2 (as a shader repeating a texture shows
+/// it): the luminance step across each tile border, against the steps
+/// between neighbouring columns and rows inside the tile. A tile that
+/// continues across its borders has border steps like the inside ones; a
+/// block cut from an aperiodic texture has a border between unrelated
+/// voxels, a step larger than any inside.
+pub fn tiling_seam(image: RgbView) -> TilingSeam {
+    image.check("image");
+    let (w, h) = (image.width as usize, image.height as usize);
+    let lum = |x: usize, y: usize| {
+        let p = image.pixel(x, y);
+        crate::analysis::exemplar::luminance([p[0], p[1], p[2]])
+    };
+    let column_step =
+        |a: usize, b: usize| (0..h).map(|y| (lum(a, y) - lum(b, y)).abs()).sum::<f64>() / h as f64;
+    let row_step =
+        |a: usize, b: usize| (0..w).map(|x| (lum(x, a) - lum(x, b)).abs()).sum::<f64>() / w as f64;
+    let mut inside: Vec<f64> = (0..w.saturating_sub(1))
+        .map(|x| column_step(x, x + 1))
+        .chain((0..h.saturating_sub(1)).map(|y| row_step(y, y + 1)))
+        .collect();
+    inside.sort_by(f64::total_cmp);
+    TilingSeam {
+        border: [column_step(w - 1, 0), row_step(h - 1, 0)],
+        inside,
+    }
+}
+
 /// The grain of one window of an image (see [`grain_map`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct WindowGrain {

@@ -271,13 +271,25 @@ pub(crate) enum FrameField {
     Bands { frames: [Frame; 2], period: f64 },
     /// Interpolated from sketched curves.
     Sketch(Box<sketch::SolvedSketch>),
+    /// Another field read at the point moved into the period at the
+    /// origin (finest voxels per axis): a periodic solid's field.
+    Repeating(Box<FrameField>, [f64; 3]),
 }
 
 impl FrameField {
+    /// This field, read modulo `period` when there is one.
+    pub(crate) fn repeating(self, period: Option<&crate::period::Period>) -> FrameField {
+        match period {
+            None => self,
+            Some(p) => FrameField::Repeating(Box::new(self), p.finest()),
+        }
+    }
+
     /// The frame, when it is the same everywhere.
     pub(crate) fn constant(&self) -> Option<&Frame> {
         match self {
             FrameField::Constant(f) => Some(f),
+            FrameField::Repeating(f, _) => f.constant(),
             _ => None,
         }
     }
@@ -314,6 +326,11 @@ impl FrameField {
                 frames[(band.rem_euclid(2.0)) as usize]
             }
             FrameField::Sketch(s) => s.frame(p),
+            // Exact for p and p + period: both are sums of halves and
+            // whole voxels, and the remainder of a float is exact.
+            FrameField::Repeating(f, period) => {
+                f.frame([0, 1, 2].map(|a| p[a].rem_euclid(period[a])))
+            }
         }
     }
 }

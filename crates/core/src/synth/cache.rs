@@ -111,10 +111,25 @@ impl TileData {
         self.mask & want == want
     }
 
-    /// The triple of known voxel `p`.
+    /// Lowest corner of the cell the voxels are placed in.
+    pub fn origin(&self) -> [i64; 3] {
+        self.origin
+    }
+
+    /// The same voxels placed in the cell at `origin` (a copy of the cell
+    /// one or more periods away, in a periodic solid).
+    pub fn moved_to(&self, origin: [i64; 3]) -> TileData {
+        TileData {
+            origin,
+            ..self.clone()
+        }
+    }
+
+    /// The triple of known voxel `p`, of this cell or of a copy of it one
+    /// or more periods away (by its place in the cell).
     #[inline]
     pub fn get(&self, p: [i64; 3]) -> [u32; 3] {
-        let l = [0, 1, 2].map(|a| p[a] - self.origin[a]);
+        let l = p.map(|v| v.rem_euclid(TILE));
         let i = l[0] + TILE * (l[1] + TILE * l[2]);
         debug_assert!(self.mask >> i & 1 == 1, "voxel {p:?} is not known");
         let below = self.mask & ((1u64 << i) - 1);

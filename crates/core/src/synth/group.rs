@@ -95,7 +95,7 @@ impl Engine {
             self.radius,
             self.field.is_some(),
             plan::Classes::at(&self.params, k),
-            self.barrier_cell(),
+            self.barrier_cells(k).as_ref(),
             |pass, forward, voxels| {
                 if acc.dry {
                     return Vec::new();
@@ -180,7 +180,7 @@ impl Engine {
         acc: &Acc,
     ) -> (Grid<[u32; 3]>, HashMap<[i64; 3], u64>) {
         let steps = self.steps_at(k);
-        let barrier_cell = self.barrier_cell();
+        let barrier_cells = self.barrier_cells(k);
         // Voxels corrected in the current pass: their values after it,
         // cached once it ends.
         let mut ended: HashMap<[i64; 3], u64> = HashMap::default();
@@ -198,7 +198,7 @@ impl Engine {
                 ended.clear();
                 current_pass = forward / classes;
             }
-            if barrier_cell.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
+            if barrier_cells.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
                 step_start = Some((*si, work.clone()));
             }
             let offset = steps[*si].offset;
@@ -207,11 +207,7 @@ impl Engine {
             let new: Vec<(usize, [u32; 3], [f32; 3])> = voxels
                 .par_iter()
                 .map(|&p| {
-                    // Spelled out: an array `map` here is compiled out of line.
-                    let barrier = barrier_cell.map(|m| {
-                        let lo = |v: i64| (v - offset).div_euclid(m) * m + offset;
-                        Box3::new([lo(p[0]), lo(p[1]), lo(p[2])], [m; 3])
-                    });
+                    let barrier = barrier_cells.as_ref().map(|c| plan::cell_of(c, p, offset));
                     let t = match (start, barrier) {
                         (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p),
                         _ => corrector.correct(w, None, p),
@@ -268,14 +264,22 @@ impl Engine {
             if acc.dry {
                 return g;
             }
-            let jitter =
-                init::JitterField::new(&self.cands, self.params.seed, self.params.jitter, k, &b);
+            let period = self.period_at(k);
+            let jitter = init::JitterField::new(
+                &self.cands,
+                self.params.seed,
+                self.params.jitter,
+                k,
+                &b,
+                period,
+            );
             let slab = init::Slab {
                 cands: &self.cands,
                 seed: self.params.seed,
                 thickness: self.params.slab_thickness,
                 tiling: self.params.slab_tiling,
                 field: self.field.as_deref(),
+                period,
             };
             g.data
                 .par_chunks_mut(layer)

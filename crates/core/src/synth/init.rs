@@ -8,6 +8,7 @@ use crate::candidates::geometry::offset_triple;
 use crate::field::{FrameField, round, world};
 use crate::hash::{hash_pos, mix, unit as unit_f};
 use crate::params::SlabTiling;
+use crate::period::Intervals;
 
 const TAG_SLAB: u32 = 1;
 const TAG_JITTER: u32 = 2;
@@ -36,6 +37,8 @@ pub struct Slab<'a> {
     pub tiling: SlabTiling,
     /// The texture's field, if any.
     pub field: Option<&'a FrameField>,
+    /// The period of a periodic solid at this level.
+    pub period: Option<[i64; 3]>,
 }
 
 impl Slab<'_> {
@@ -62,18 +65,36 @@ impl Slab<'_> {
         let r = n / 2;
         let h = spacing(k) as i64;
         let dims = c.dims();
-        let side = (period(c, k) as i64 / 2).max(4);
-        // The piece that holds `p`, and the point it turns about in a field.
-        let (piece, pivot) = match tiling {
+        let side = (period_of(c, k) as i64 / 2).max(4);
+        let pieces = [0, 1, 2].map(|a| Intervals::nearest(self.period.map(|q| q[a]), side));
+        // The piece that holds `p`, and the point it turns about in a
+        // field. In a periodic solid, the piece and `p` are moved together
+        // into the piece's copy in the period at the origin: every number
+        // below is then the same for p and p + P.
+        let (piece, pivot, p) = match tiling {
             SlabTiling::Blocks => {
-                let block = [p[0].div_euclid(side), p[1].div_euclid(side)];
-                let centre = block.map(|b| (b * side) as f64 + (side as f64 - 1.0) / 2.0);
-                (Piece::Block(block), [centre[0], centre[1], p[2] as f64])
+                let block = [0, 1].map(|a| pieces[a].index_of(p[a]));
+                let shift = [
+                    pieces[0].copy_of(block[0]) * pieces[0].period(),
+                    pieces[1].copy_of(block[1]) * pieces[1].period(),
+                    self.period.map_or(0, |q| p[2].div_euclid(q[2]) * q[2]),
+                ];
+                let p = [0, 1, 2].map(|a| p[a] - shift[a]);
+                let centre = [0, 1].map(|a| {
+                    let start = pieces[a].start(block[a]) - shift[a];
+                    start as f64 + (pieces[a].size(block[a]) as f64 - 1.0) / 2.0
+                });
+                let block = [0, 1].map(|a| pieces[a].label(block[a]));
+                (Piece::Block(block), [centre[0], centre[1], p[2] as f64], p)
             }
             SlabTiling::Cells => {
-                let (cube, site) = sites.nearest(seed, k, side, p);
-                let site = site.map(|v| v as f64 / SITE_STEPS as f64 - 0.5);
-                (Piece::Cell(cube), site)
+                let (cube, site) = sites.nearest(seed, k, &pieces, p);
+                let shift = [0, 1, 2].map(|a| pieces[a].copy_of(cube[a]) * pieces[a].period());
+                let p = [0, 1, 2].map(|a| p[a] - shift[a]);
+                let site = [0, 1, 2]
+                    .map(|a| (site[a] - shift[a] * SITE_STEPS) as f64 / SITE_STEPS as f64 - 0.5);
+                let cube = [0, 1, 2].map(|a| pieces[a].label(cube[a]));
+                (Piece::Cell(cube), site, p)
             }
         };
         // In a field, each piece is the slab turned into the local frame at
@@ -124,45 +145,51 @@ const SITE_STEPS: i64 = 256;
 /// The sites of the cubes around one cube (see [`Sites::nearest`]).
 #[derive(Default)]
 pub struct Sites {
-    /// The level, cube side and cube they are for.
-    key: Option<(usize, i64, [i64; 3])>,
+    /// The level, cubes and cube they are for.
+    key: Option<(usize, [Intervals; 3], [i64; 3])>,
     /// Each cube around it, z outermost, and its site.
     around: [([i64; 3], [i64; 3]); 27],
 }
 
 impl Sites {
     /// The cell that holds `p`: its site's cube, and the site in
-    /// [`SITE_STEPS`] of a voxel. Cubes of side `side` each own one site
-    /// at a hashed position inside them, and a voxel belongs to the
-    /// nearest site among its own cube's and the 26 around it (a
-    /// jittered-grid Voronoi partition, in integers so every machine draws
-    /// the same borders). Borders run at every angle, and they are the
-    /// same in neighbouring layers, as the blocks' were: a seam scattered
-    /// anew in every layer would spoil far more x and y slice
+    /// [`SITE_STEPS`] of a voxel. The cubes (`cubes` along x, y and z)
+    /// each own one site at a hashed position inside them, and a voxel
+    /// belongs to the nearest site among its own cube's and the 26 around
+    /// it (a jittered-grid Voronoi partition, in integers so every machine
+    /// draws the same borders). Borders run at every angle, and they are
+    /// the same in neighbouring layers, as the blocks' were: a seam
+    /// scattered anew in every layer would spoil far more x and y slice
     /// neighbourhoods than one that continues across the layers.
-    fn nearest(&mut self, seed: u64, k: usize, side: i64, p: [i64; 3]) -> ([i64; 3], [i64; 3]) {
-        let span = side * SITE_STEPS;
+    fn nearest(
+        &mut self,
+        seed: u64,
+        k: usize,
+        cubes: &[Intervals; 3],
+        p: [i64; 3],
+    ) -> ([i64; 3], [i64; 3]) {
         let at = p.map(|v| v * SITE_STEPS + SITE_STEPS / 2);
-        let cube = at.map(|v| v.div_euclid(span));
-        if self.key != Some((k, side, cube)) {
+        let cube = [0, 1, 2].map(|a| cubes[a].index_of(p[a]));
+        if self.key != Some((k, *cubes, cube)) {
             let mut n = 0;
             for dz in -1..=1 {
                 for dy in -1..=1 {
                     for dx in -1..=1 {
                         let c = [cube[0] + dx, cube[1] + dy, cube[2] + dz];
-                        let hs = hash_pos(seed, k as u32, TAG_CELL, c);
+                        let label = [0, 1, 2].map(|a| cubes[a].label(c[a]));
+                        let hs = hash_pos(seed, k as u32, TAG_CELL, label);
                         let hz = mix(hs);
-                        let site = [
-                            c[0] * span + (hs % span as u64) as i64,
-                            c[1] * span + ((hs >> 32) % span as u64) as i64,
-                            c[2] * span + (hz % span as u64) as i64,
-                        ];
+                        let place = |a: usize, h: u64| {
+                            let span = cubes[a].size(c[a]) * SITE_STEPS;
+                            cubes[a].start(c[a]) * SITE_STEPS + (h % span as u64) as i64
+                        };
+                        let site = [place(0, hs), place(1, hs >> 32), place(2, hz)];
                         self.around[n] = (c, site);
                         n += 1;
                     }
                 }
             }
-            self.key = Some((k, side, cube));
+            self.key = Some((k, *cubes, cube));
         }
         let mut best = (i64::MAX, cube, at);
         for &(c, site) in &self.around {
@@ -176,7 +203,7 @@ impl Sites {
 }
 
 /// The exemplar's period in voxels of level `k`.
-fn period(c: &Candidates, k: usize) -> f32 {
+fn period_of(c: &Candidates, k: usize) -> f32 {
     let dims = c.dims();
     (dims.w.min(dims.h) as f32 / spacing(k) as f32).max(1.0)
 }
@@ -195,18 +222,65 @@ struct Bump {
 /// exemplar-period cube). Larger amplitudes go with smaller widths, so small
 /// scales are disturbed strongly and coarse scales only subtly. A field is
 /// built for one box: the bumps of the cells around it are generated once.
+/// A periodic solid's field has a whole number of cells per period, hashed
+/// by their number within it, and is read at the point moved into the
+/// period at the origin; its bumps are generated where they are read.
 pub struct JitterField {
-    lo: [i64; 3],
-    cells: [i64; 3],
-    cell: f32,
-    bumps: Vec<[Bump; GAUSSIANS_PER_CELL as usize]>,
+    seed: u64,
+    strength: f32,
+    k: usize,
+    /// The exemplar's period at the level.
+    unit: f32,
+    kind: Cells,
 }
 
+enum Cells {
+    /// The cells around one box, `cell` voxels wide, and their bumps.
+    Table {
+        lo: [i64; 3],
+        cells: [i64; 3],
+        cell: f32,
+        bumps: Vec<[Bump; GAUSSIANS_PER_CELL as usize]>,
+    },
+    /// Cells laid per period, and how many cells around a voxel's own
+    /// its bumps may reach from.
+    Periodic { cells: [Intervals; 3], around: i64 },
+}
+
+/// Most a bump reaches, in exemplar periods (3σ at the widest σ).
+const BUMP_REACH: f32 = 0.15;
+
 impl JitterField {
-    /// The field over `b` (voxels of level `k`).
-    pub fn new(c: &Candidates, seed: u64, strength: f32, k: usize, b: &super::grid::Box3) -> Self {
-        let unit = period(c, k);
+    /// The field over `b` (voxels of level `k`), or over all space in a
+    /// solid of period `period` (voxels of level `k`).
+    pub fn new(
+        c: &Candidates,
+        seed: u64,
+        strength: f32,
+        k: usize,
+        b: &super::grid::Box3,
+        period: Option<[i64; 3]>,
+    ) -> Self {
+        let unit = period_of(c, k);
         let cell = (unit / 4.0).max(1.0);
+        let mut field = JitterField {
+            seed,
+            strength,
+            k,
+            unit,
+            kind: Cells::Periodic {
+                cells: [Intervals::Uniform(1); 3],
+                around: 1,
+            },
+        };
+        if let Some(period) = period {
+            let side = (cell.round() as i64).max(1);
+            let cells = period.map(|p| Intervals::nearest(Some(p), side));
+            let narrowest = cells.iter().map(Intervals::narrowest).min().unwrap_or(1);
+            let around = ((BUMP_REACH * unit / narrowest as f32).ceil() as i64).max(1);
+            field.kind = Cells::Periodic { cells, around };
+            return field;
+        }
         let to_cell = |v: i64| (v as f32 / cell).floor() as i64;
         let lo = b.lo.map(|v| to_cell(v) - 1);
         let hi = b.hi.map(|v| to_cell(v - 1) + 1);
@@ -215,72 +289,114 @@ impl JitterField {
         for cz in lo[2]..=hi[2] {
             for cy in lo[1]..=hi[1] {
                 for cx in lo[0]..=hi[0] {
-                    bumps.push(std::array::from_fn(|g| {
-                        let hsh = |i: u64| {
-                            unit_f(hash_pos(
-                                seed,
-                                k as u32,
-                                TAG_JITTER + (((g as u64) * 8 + i) << 8) as u32,
-                                [cx, cy, cz],
-                            ))
-                        };
-                        let centre = [
-                            (cx as f32 + hsh(0)) * cell,
-                            (cy as f32 + hsh(1)) * cell,
-                            (cz as f32 + hsh(2)) * cell,
-                        ];
-                        let t = hsh(3);
-                        let sigma = (0.01 + 0.04 * t) * unit;
-                        let amp = (0.3 - 0.2 * t) * unit * strength;
-                        let dir = [hsh(4) * 2.0 - 1.0, hsh(5) * 2.0 - 1.0, hsh(6) * 2.0 - 1.0];
-                        let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
-                        let push = if len < 1e-3 {
-                            [0.0; 3]
-                        } else {
-                            dir.map(|v| v / len * amp)
-                        };
-                        Bump {
-                            centre,
-                            inv_sigma2: 1.0 / (sigma * sigma),
-                            reach2: 9.0 * sigma * sigma,
-                            push,
-                        }
-                    }));
+                    let c = [cx, cy, cz];
+                    bumps.push(field.bumps(c, |a, h| (c[a] as f32 + h) * cell));
                 }
             }
         }
-        JitterField {
+        field.kind = Cells::Table {
             lo,
             cells,
             cell,
             bumps,
-        }
+        };
+        field
+    }
+
+    /// The bumps of the cell hashed as `label`, each centred at
+    /// `centre(axis, u)` for a hashed u in [0, 1) per axis.
+    fn bumps(
+        &self,
+        label: [i64; 3],
+        centre: impl Fn(usize, f32) -> f32,
+    ) -> [Bump; GAUSSIANS_PER_CELL as usize] {
+        let unit = self.unit;
+        std::array::from_fn(|g| {
+            let hsh = |i: u64| {
+                unit_f(hash_pos(
+                    self.seed,
+                    self.k as u32,
+                    TAG_JITTER + (((g as u64) * 8 + i) << 8) as u32,
+                    label,
+                ))
+            };
+            let centre = [centre(0, hsh(0)), centre(1, hsh(1)), centre(2, hsh(2))];
+            let t = hsh(3);
+            let sigma = (0.01 + 0.04 * t) * unit;
+            let amp = (0.3 - 0.2 * t) * unit * self.strength;
+            let dir = [hsh(4) * 2.0 - 1.0, hsh(5) * 2.0 - 1.0, hsh(6) * 2.0 - 1.0];
+            let len = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+            let push = if len < 1e-3 {
+                [0.0; 3]
+            } else {
+                dir.map(|v| v / len * amp)
+            };
+            Bump {
+                centre,
+                inv_sigma2: 1.0 / (sigma * sigma),
+                reach2: 9.0 * sigma * sigma,
+                push,
+            }
+        })
     }
 
     /// Displacement at `p` (inside the field's box), in voxels.
     pub fn displacement(&self, p: [i64; 3]) -> [f32; 3] {
-        let pc = p.map(|v| (v as f32 / self.cell).floor() as i64);
-        let pf = p.map(|v| v as f32);
         let mut d = [0f32; 3];
-        for cz in pc[2] - 1..=pc[2] + 1 {
-            for cy in pc[1] - 1..=pc[1] + 1 {
-                for cx in pc[0] - 1..=pc[0] + 1 {
-                    let i = ((cz - self.lo[2]) * self.cells[1] + (cy - self.lo[1])) * self.cells[0]
-                        + (cx - self.lo[0]);
-                    for bump in &self.bumps[i as usize] {
-                        let dist2: f32 = (0..3).map(|a| (pf[a] - bump.centre[a]).powi(2)).sum();
-                        if dist2 > bump.reach2 {
-                            continue;
+        match &self.kind {
+            Cells::Table {
+                lo,
+                cells,
+                cell,
+                bumps,
+            } => {
+                let pc = p.map(|v| (v as f32 / cell).floor() as i64);
+                let pf = p.map(|v| v as f32);
+                for cz in pc[2] - 1..=pc[2] + 1 {
+                    for cy in pc[1] - 1..=pc[1] + 1 {
+                        for cx in pc[0] - 1..=pc[0] + 1 {
+                            let i =
+                                ((cz - lo[2]) * cells[1] + (cy - lo[1])) * cells[0] + (cx - lo[0]);
+                            push_by(&mut d, pf, &bumps[i as usize]);
                         }
-                        let w = exp_neg(dist2 * bump.inv_sigma2);
-                        for (da, pa) in d.iter_mut().zip(bump.push) {
-                            *da += w * pa;
+                    }
+                }
+            }
+            Cells::Periodic { cells, around } => {
+                let p = [0, 1, 2].map(|a| p[a].rem_euclid(cells[a].period()));
+                let pc = [0, 1, 2].map(|a| cells[a].index_of(p[a]));
+                let pf = p.map(|v| v as f32);
+                let r = *around;
+                for cz in pc[2] - r..=pc[2] + r {
+                    for cy in pc[1] - r..=pc[1] + r {
+                        for cx in pc[0] - r..=pc[0] + r {
+                            let c = [cx, cy, cz];
+                            let label = [0, 1, 2].map(|a| cells[a].label(c[a]));
+                            let bumps = self.bumps(label, |a, h| {
+                                cells[a].start(c[a]) as f32 + h * cells[a].size(c[a]) as f32
+                            });
+                            push_by(&mut d, pf, &bumps);
                         }
                     }
                 }
             }
         }
         d
+    }
+}
+
+/// Adds the push of each of `bumps` at `pf` to `d`.
+#[inline]
+fn push_by(d: &mut [f32; 3], pf: [f32; 3], bumps: &[Bump]) {
+    for bump in bumps {
+        let dist2: f32 = (0..3).map(|a| (pf[a] - bump.centre[a]).powi(2)).sum();
+        if dist2 > bump.reach2 {
+            continue;
+        }
+        let w = exp_neg(dist2 * bump.inv_sigma2);
+        for (da, pa) in d.iter_mut().zip(bump.push) {
+            *da += w * pa;
+        }
     }
 }
 
@@ -340,7 +456,7 @@ fn exp_neg(x: f32) -> f32 {
 
 #[cfg(test)]
 mod tests {
-    use super::{Sites, exp_neg};
+    use super::{Intervals, Sites, exp_neg};
 
     /// Sites remembered from the last voxel give the same cell as sites
     /// looked up afresh, wherever the walk goes next (rows, jumps, other
@@ -359,11 +475,16 @@ mod tests {
                 )
             }));
         for (k, side, p) in walk {
-            assert_eq!(
-                kept.nearest(7, k, side, p),
-                Sites::default().nearest(7, k, side, p),
-                "level {k}, side {side}, voxel {p:?}"
-            );
+            for cubes in [
+                [Intervals::Uniform(side); 3],
+                [Intervals::nearest(Some(8 * side + 4), side); 3],
+            ] {
+                assert_eq!(
+                    kept.nearest(7, k, &cubes, p),
+                    Sites::default().nearest(7, k, &cubes, p),
+                    "level {k}, cubes {cubes:?}, voxel {p:?}"
+                );
+            }
         }
     }
 

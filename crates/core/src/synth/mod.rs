@@ -32,6 +32,8 @@ pub mod grid;
 mod group;
 pub mod init;
 mod inspect;
+#[cfg(test)]
+mod periodic_tests;
 pub mod plan;
 mod stats;
 
@@ -39,6 +41,7 @@ use crate::candidates::Candidates;
 use crate::error::Result;
 use crate::field::FrameField;
 use crate::params::{Scheme, SynthParams};
+use crate::period::{Intervals, Period};
 use crate::request::{CutPlane, Filter, Region};
 use cache::{Claim, Tile, TileCache, TileKey};
 use colour::{colour, rgb8, triple_rgb8};
@@ -126,7 +129,12 @@ pub(crate) struct Engine {
     key: u64,
     init_level: usize,
     radius: i64,
-    cell: i64,
+    /// The solid's period, if it has one.
+    period: Option<Period>,
+    /// Whether a tile and its copies a period away share one cache key
+    /// (always, but in the tests that synthesize copies apart to check
+    /// that they come out the same).
+    share_copies: bool,
     steps: Vec<Step>,
     /// Steps of the finest levels (see [`SynthParams::finest_passes`] and
     /// [`SynthParams::fine_levels`]).
@@ -162,10 +170,14 @@ impl Engine {
         params: SynthParams,
         cache: Arc<TileCache>,
     ) -> Result<Self> {
+        if let Some(p) = params.period {
+            crate::period::check(p, cands.level_count(), &params)?;
+        }
+        let period = Period::of(&params);
         let field = params
             .field
             .as_ref()
-            .map(|f| f.compile().map(Arc::new))
+            .map(|f| f.compile().map(|f| Arc::new(f.repeating(period.as_ref()))))
             .transpose()?;
         let mut bytes = cands.digest().to_le_bytes().to_vec();
         bytes.extend_from_slice(&serde_json::to_vec(&params).expect("params serialise"));
@@ -180,7 +192,8 @@ impl Engine {
         let mut engine = Engine {
             init_level: cands.level_count() - 1,
             radius: correction::REACH,
-            cell: params.grid as i64,
+            period,
+            share_copies: true,
             cands,
             params,
             field,
@@ -190,13 +203,20 @@ impl Engine {
             finest_steps,
             reach: Vec::new(),
         };
+        // The walk that finds a level's reach assumes uniform cells; the
+        // per-period cells of a periodic solid are bounded by the reach
+        // without walls.
+        let uniform_cell = match (engine.params.scheme, engine.period) {
+            (Scheme::DualGrid, None) => Some(engine.params.grid as i64),
+            _ => None,
+        };
         engine.reach = (0..=engine.init_level)
             .map(|k| {
                 known_reach(
                     engine.steps_at(k),
                     engine.radius,
                     plan::Classes::at(&engine.params, k),
-                    engine.barrier_cell(),
+                    uniform_cell,
                 )
             })
             .collect();
@@ -208,12 +228,20 @@ impl Engine {
         self.field.as_deref()
     }
 
-    /// The dual grid's cell side, or `None` under the standard scheme.
-    fn barrier_cell(&self) -> Option<i64> {
-        match self.params.scheme {
-            Scheme::DualGrid => Some(self.cell),
-            Scheme::Standard => None,
-        }
+    /// The dual grid's cells at level `k`, or `None` under the standard
+    /// scheme.
+    fn barrier_cells(&self, k: usize) -> Option<[Intervals; 3]> {
+        crate::period::barrier_cells(&self.params, self.period.as_ref(), k)
+    }
+
+    /// The period whose copies of a tile share its key.
+    fn shared_period(&self) -> Option<Period> {
+        self.period.filter(|_| self.share_copies)
+    }
+
+    /// The period at level `k` of a periodic solid.
+    pub(crate) fn period_at(&self, k: usize) -> Option<[i64; 3]> {
+        self.period.map(|p| p.at(k))
     }
 
     /// How far a correction reads, in voxels of its level.
@@ -298,9 +326,37 @@ impl Engine {
     }
 
     /// Final tiles of level `k` holding at least the wanted voxels, from
-    /// the cache or computed; a tile another request is computing is
-    /// waited for (outside rayon).
+    /// the cache or computed. In a periodic solid a tile is its copy in the
+    /// period at the origin: the wanted voxels of all copies are gathered
+    /// there, synthesized once, and each copy gets the tile moved to its
+    /// place.
     fn tiles(&self, k: usize, wanted: Wanted, acc: &Acc) -> HashMap<[i64; 3], Tile> {
+        let Some(period) = self.shared_period() else {
+            return self.tiles_at_home(k, wanted, acc);
+        };
+        let mut home = Wanted::new();
+        for (&c, &mask) in &wanted {
+            *home.entry(period.wrap_tile(k, c)).or_default() |= mask;
+        }
+        let found = self.tiles_at_home(k, home, acc);
+        wanted
+            .keys()
+            .map(|&c| {
+                let t = &found[&period.wrap_tile(k, c)];
+                let origin = Self::tile_box(c).lo;
+                let t = if t.origin() == origin {
+                    t.clone()
+                } else {
+                    Arc::new(t.moved_to(origin))
+                };
+                (c, t)
+            })
+            .collect()
+    }
+
+    /// [`Engine::tiles`] for tiles that are their own keys; a tile another
+    /// request is computing is waited for (outside rayon).
+    fn tiles_at_home(&self, k: usize, wanted: Wanted, acc: &Acc) -> HashMap<[i64; 3], Tile> {
         let mut out = HashMap::default();
         let mut mine = Vec::new();
         let mut theirs = Vec::new();
@@ -308,15 +364,7 @@ impl Engine {
         let mut unclaimed = Vec::new();
         let keys: Vec<(TileKey, u64)> = wanted
             .iter()
-            .map(|(&c, &want)| {
-                let key = TileKey {
-                    texture: self.key,
-                    level: k as u8,
-                    version: 0,
-                    cell: c,
-                };
-                (key, want)
-            })
+            .map(|(&c, &want)| (self.version_key(k, 0, c), want))
             .collect();
         for ((key, want), claim) in keys.iter().zip(self.cache.claim_all(&keys)) {
             let (c, want) = (key.cell, *want);
@@ -392,13 +440,14 @@ impl Engine {
     }
 
     /// Key of the version after `done` correction passes of level `k` (0:
-    /// the final version) in tile `cell`.
+    /// the final version) in tile `cell` (in a periodic solid, shared by
+    /// its copies).
     fn version_key(&self, k: usize, done: usize, cell: [i64; 3]) -> TileKey {
         TileKey {
             texture: self.key,
             level: k as u8,
             version: done as u8,
-            cell,
+            cell: self.shared_period().map_or(cell, |p| p.wrap_tile(k, cell)),
         }
     }
 
@@ -417,12 +466,13 @@ impl Engine {
 
     /// Counts what the cut `plane` would compute from a cold cache.
     pub(crate) fn plan_cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> SynthStats {
+        self.plan_points(&cut_points(plane, filter).0, lod)
+    }
+
+    /// Counts what the voxels `points` would compute from a cold cache.
+    pub(crate) fn plan_points(&self, points: &[[i64; 3]], lod: u32) -> SynthStats {
         let acc = Acc::new(self.init_level + 1, true);
-        let mut wanted = Wanted::new();
-        for p in cut_points(plane, filter).0 {
-            *wanted.entry(Self::tile_of(p)).or_default() |= Self::bit_of(p);
-        }
-        self.dry().tiles(lod as usize, wanted, &acc);
+        self.dry().tiles(lod as usize, wanted_points(points), &acc);
         acc.stats()
     }
 
@@ -436,7 +486,8 @@ impl Engine {
             key: self.key,
             init_level: self.init_level,
             radius: self.radius,
-            cell: self.cell,
+            period: self.period,
+            share_copies: self.share_copies,
             steps: self.steps.clone(),
             finest_steps: self.finest_steps.clone(),
             reach: self.reach.clone(),
@@ -474,6 +525,41 @@ impl Engine {
         estimate::estimate(piece, &self.reach[lod as usize..], MAX_GROUP_TILES, limit)
     }
 
+    /// An upper bound of what [`Engine::plan_points`] counts: the sum of
+    /// each voxel's own bound (the chain of a set of voxels lies in the
+    /// union of their chains).
+    pub(crate) fn estimate_points(
+        &self,
+        points: &[[i64; 3]],
+        lod: u32,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
+        let reach = &self.reach[lod as usize..];
+        let mut out = estimate::WorkEstimate {
+            per_level: vec![0; reach.len()],
+            total: 0,
+            complete: true,
+        };
+        for p in points {
+            let left = limit.saturating_sub(out.total);
+            let one = estimate::estimate(
+                estimate::Piece::region(*p, [1; 3]),
+                reach,
+                MAX_GROUP_TILES,
+                left,
+            );
+            for (sum, n) in out.per_level.iter_mut().zip(&one.per_level) {
+                *sum = sum.saturating_add(*n);
+            }
+            out.total = out.total.saturating_add(one.total);
+            if !one.complete || out.total > limit {
+                out.complete = false;
+                break;
+            }
+        }
+        out
+    }
+
     /// Exact voxel-level dependency chain of a few voxels (see
     /// [`plan::exact_chain`]).
     /// `radius` is the neighbourhood's half side (the analysis's own unless
@@ -484,27 +570,15 @@ impl Engine {
         lod: u32,
         radius: i64,
     ) -> Vec<plan::LevelPlan> {
-        let levels: Vec<(Vec<Step>, plan::Classes)> = (0..=self.init_level)
+        let levels: Vec<plan::LevelSteps> = (0..=self.init_level)
             .skip(lod as usize)
-            .map(|k| {
-                (
-                    self.steps_at(k).to_vec(),
-                    plan::Classes::at(&self.params, k),
-                )
+            .map(|k| plan::LevelSteps {
+                steps: self.steps_at(k).to_vec(),
+                order: plan::Classes::at(&self.params, k),
+                cells: self.barrier_cells(k),
             })
             .collect();
-        let cell = match self.params.scheme {
-            Scheme::DualGrid => Some(self.cell),
-            Scheme::Standard => None,
-        };
-        plan::exact_chain(
-            voxels,
-            levels.len(),
-            &levels,
-            radius,
-            self.field.is_some(),
-            cell,
-        )
+        plan::exact_chain(voxels, levels.len(), &levels, radius, self.field.is_some())
     }
 
     pub(crate) fn region_rgb(&self, r: &Region, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
@@ -522,11 +596,7 @@ impl Engine {
     /// Final triples at arbitrary voxels of level `k`, fetched tile by tile
     /// so scattered points never pull in their bounding box.
     fn triples_at(&self, k: usize, points: &[[i64; 3]], acc: &Acc) -> Vec<[u32; 3]> {
-        let mut wanted = Wanted::new();
-        for p in points {
-            *wanted.entry(Self::tile_of(*p)).or_default() |= Self::bit_of(*p);
-        }
-        let tiles = self.tiles(k, wanted, acc);
+        let tiles = self.tiles(k, wanted_points(points), acc);
         points
             .iter()
             .map(|p| tiles[&Self::tile_of(*p)].get(*p))
@@ -537,13 +607,13 @@ impl Engine {
         &self,
         points: &[[i64; 3]],
         lod: u32,
-    ) -> Result<(Vec<[u8; 3]>, SynthStats)> {
+    ) -> Result<(Vec<u8>, SynthStats)> {
         let acc = self.new_acc();
         let k = lod as usize;
         let triples = self.triples_at(k, points, &acc);
         let out = triples
             .par_iter()
-            .map(|t| triple_rgb8(&self.cands, k, *t))
+            .flat_map_iter(|t| triple_rgb8(&self.cands, k, *t))
             .collect();
         Ok((out, acc.stats()))
     }
@@ -557,20 +627,6 @@ impl Engine {
         let acc = self.new_acc();
         let k = lod as usize;
         let (w, h) = (plane.width as usize, plane.height as usize);
-        let at = |i: usize, j: usize| {
-            [0, 1, 2].map(|a| plane.origin[a] + i as f64 * plane.u[a] + j as f64 * plane.v[a])
-        };
-        let limit = crate::request::COORD_LIMIT as f64;
-        for (i, j) in [(0, 0), (w - 1, 0), (0, h - 1), (w - 1, h - 1)] {
-            if at(i, j).iter().any(|v| v.abs() > limit) {
-                return Err(crate::Error::InvalidRange {
-                    name: "cut coordinate",
-                    value: at(i, j).iter().fold(0f64, |m, v| m.max(v.abs())),
-                    min: -limit,
-                    max: limit,
-                });
-            }
-        }
         let (pts, weights) = cut_points(plane, filter);
         let rgb = match filter {
             Filter::Nearest => {
@@ -662,6 +718,15 @@ fn tile_masks(need: &plan::Mask, scale: i64) -> Wanted {
     out
 }
 
+/// The tiles of `points`, each with the mask of the points in it.
+fn wanted_points(points: &[[i64; 3]]) -> Wanted {
+    let mut wanted = Wanted::new();
+    for &p in points {
+        *wanted.entry(Engine::tile_of(p)).or_default() |= Engine::bit_of(p);
+    }
+    wanted
+}
+
 #[inline]
 fn position(b: &Box3, i: usize) -> [i64; 3] {
     let s = b.size();
@@ -677,9 +742,7 @@ fn position(b: &Box3, i: usize) -> [i64; 3] {
 /// the eight corners of each pixel with their weights (nearest: no weights).
 fn cut_points(plane: &CutPlane, filter: Filter) -> (Vec<[i64; 3]>, Vec<f32>) {
     let (w, h) = (plane.width as usize, plane.height as usize);
-    let at = |i: usize, j: usize| {
-        [0, 1, 2].map(|a| plane.origin[a] + i as f64 * plane.u[a] + j as f64 * plane.v[a])
-    };
+    let at = |i: usize, j: usize| plane.at(i as u32, j as u32);
     match filter {
         Filter::Nearest => {
             let pts = (0..w * h)

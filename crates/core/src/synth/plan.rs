@@ -36,6 +36,7 @@ fn split(mut cells: Vec<[i64; 3]>, max: usize, out: &mut Vec<Vec<[i64; 3]>>) {
 use super::Step;
 use super::grid::{Box3, Grid};
 use crate::params::SynthParams;
+use crate::period::Intervals;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -364,11 +365,31 @@ impl LevelChain {
     }
 }
 
+/// The cell of the dual grid shifted by `offset` that holds `v`, under the
+/// cells `cells` (along x, y and z).
+#[inline]
+pub fn cell_of(cells: &[Intervals; 3], v: [i64; 3], offset: i64) -> Box3 {
+    // Spelled out: an array `map` here is compiled out of line.
+    let (ix, iy, iz) = (
+        cells[0].index_of(v[0] - offset),
+        cells[1].index_of(v[1] - offset),
+        cells[2].index_of(v[2] - offset),
+    );
+    Box3::new(
+        [
+            cells[0].start(ix) + offset,
+            cells[1].start(iy) + offset,
+            cells[2].start(iz) + offset,
+        ],
+        [cells[0].size(ix), cells[1].size(iy), cells[2].size(iz)],
+    )
+}
+
 /// Walks the correction steps of one level backwards from `targets` (voxels
 /// needed at the final version), following each correction's history
 /// window: a neighbour is needed at the previous subpass's version, or, when
-/// `cell` is set and the neighbour lies across the step's cell wall, at the
-/// version the step started from (Zhang et al.'s barrier).
+/// `cells` are given and the neighbour lies across the step's cell wall, at
+/// the version the step started from (Zhang et al.'s barrier).
 ///
 /// A voxel's correction in a pass produces its value at the end of that
 /// pass (its final value in the last pass), so `known_after(pass, subpass,
@@ -385,7 +406,7 @@ pub fn backward(
     radius: i64,
     cube: bool,
     order: Classes,
-    cell: Option<i64>,
+    cells: Option<&[Intervals; 3]>,
     mut known_after: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
 ) -> LevelChain {
     let classes = order.count();
@@ -427,12 +448,12 @@ pub fn backward(
             corrected
                 .par_iter()
                 .with_min_len(1024)
-                .for_each(|&v| match cell {
+                .for_each(|&v| match cells {
                     None => need.mark_around(v, &reads),
-                    Some(m) => {
-                        let lo = v.map(|c| (c - step.offset).div_euclid(m) * m + step.offset);
-                        let cell_box = Box3::new(lo, [m; 3]);
-                        if (0..3).all(|a| v[a] - radius >= lo[a] && v[a] + radius < lo[a] + m) {
+                    Some(cells) => {
+                        let cell_box = cell_of(cells, v, step.offset);
+                        let (lo, hi) = (cell_box.lo, cell_box.hi);
+                        if (0..3).all(|a| v[a] - radius >= lo[a] && v[a] + radius < hi[a]) {
                             need.mark_around(v, &reads);
                             return;
                         }
@@ -462,29 +483,43 @@ pub fn backward(
     LevelChain { need, subpasses }
 }
 
+/// How one level is corrected, as the planner walks it.
+#[derive(Clone, Debug)]
+pub struct LevelSteps {
+    /// The correction steps (empty: no correction).
+    pub steps: Vec<Step>,
+    /// The subpasses of each pass.
+    pub order: Classes,
+    /// The dual grid's cells, or `None` for the standard scheme.
+    pub cells: Option<[Intervals; 3]>,
+}
+
 /// Exact voxel-level dependency sets of a request (Dong et al.'s
 /// "Mask ⊗ Neighborhood" chain, with Zhang et al.'s history windows),
 /// level by level from the finest: for each level, the version-0 voxels and
-/// the corrections needed. `steps_per_level[k]` lists the correction steps
-/// at level k (empty: no correction) and its subpasses; `cell` is the
-/// dual-grid cell side, or `None` for the standard scheme.
+/// the corrections needed. `per_level[k]` says how level k is corrected.
 pub fn exact_chain(
     request: &[[i64; 3]],
     levels: usize,
-    steps_per_level: &[(Vec<Step>, Classes)],
+    per_level: &[LevelSteps],
     radius: i64,
     cube: bool,
-    cell: Option<i64>,
 ) -> Vec<LevelPlan> {
     let mut points: Vec<[i64; 3]> = request.to_vec();
     let mut out = Vec::new();
-    for (steps, order) in steps_per_level.iter().take(levels) {
+    for level in per_level.iter().take(levels) {
         if points.is_empty() {
             break;
         }
-        let chain = backward(&points, steps, radius, cube, *order, cell, |_, _, _| {
-            Vec::new()
-        });
+        let chain = backward(
+            &points,
+            &level.steps,
+            radius,
+            cube,
+            level.order,
+            level.cells.as_ref(),
+            |_, _, _| Vec::new(),
+        );
         out.push(LevelPlan {
             voxels: chain.need.count(),
             corrections: chain.corrections(),
@@ -566,9 +601,16 @@ pub fn reach(steps: &[Step], radius: i64, order: Classes, cell: Option<i64>) -> 
                 }
             }
             // The cube reads no further along an axis than the planes.
-            let need = backward(&layer, steps, radius, false, order, cell, |_, _, _| {
-                Vec::new()
-            })
+            let cells = cell.map(|m| [Intervals::Uniform(m); 3]);
+            let need = backward(
+                &layer,
+                steps,
+                radius,
+                false,
+                order,
+                cells.as_ref(),
+                |_, _, _| Vec::new(),
+            )
             .need
             .bounds();
             out.lo[a] = out.lo[a].max(at - need.lo[a]);
@@ -709,11 +751,18 @@ mod tests {
             }];
             3
         ];
-        let blocks = |s: Vec<Vec<Step>>| -> Vec<_> {
-            s.into_iter().map(|s| (s, Classes::Blocks(2))).collect()
+        let blocks = |s: Vec<Vec<Step>>, cells| -> Vec<_> {
+            s.into_iter()
+                .map(|steps| LevelSteps {
+                    steps,
+                    order: Classes::Blocks(2),
+                    cells,
+                })
+                .collect()
         };
-        let dual = exact_chain(&[[5, 5, 5]], 3, &blocks(steps), 2, false, Some(12));
-        let standard = exact_chain(&[[5, 5, 5]], 3, &blocks(standard_steps), 2, false, None);
+        let twelve = Some([Intervals::Uniform(12); 3]);
+        let dual = exact_chain(&[[5, 5, 5]], 3, &blocks(steps, twelve), 2, false);
+        let standard = exact_chain(&[[5, 5, 5]], 3, &blocks(standard_steps, None), 2, false);
         let total = |v: &[LevelPlan]| v.iter().map(|l| l.voxels).sum::<u64>();
         assert!(total(&dual) < total(&standard), "{dual:?} vs {standard:?}");
     }
@@ -745,9 +794,16 @@ mod tests {
                 for y in 0..period {
                     for x in 0..period {
                         let p = [x, y, z];
-                        let b = backward(&[p], &steps, radius, false, order, cell, |_, _, _| {
-                            Vec::new()
-                        })
+                        let cells = cell.map(|m| [Intervals::Uniform(m); 3]);
+                        let b = backward(
+                            &[p],
+                            &steps,
+                            radius,
+                            false,
+                            order,
+                            cells.as_ref(),
+                            |_, _, _| Vec::new(),
+                        )
                         .need
                         .bounds();
                         for (a, c) in p.into_iter().enumerate() {

@@ -9,31 +9,46 @@
 //! immutable.
 
 use super::AppState;
-use super::paths::{Json, Stem, TypedPath};
-use super::voxels::{
-    SliceWindow, body_response, etag, not_modified, not_modified_response, parse_axis,
-    slice_window, texture,
-};
+use super::IMMUTABLE;
+use super::answer::{ETag, body, texture};
+use super::params::{Int, Json, Stem, TypedPath, TypedQuery};
+use super::voxels::{Coord, Lod, Side};
 use crate::error::ApiError;
-use crate::query::{Query, parse_int};
-use axum::extract::{RawQuery, State};
+use axum::extract::State;
 use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
 use serde_json::{Value, json};
-use solidtex_core::{COORD_LIMIT, MAX_SLICE_SIDE};
+use solidtex_core::{Axis, MAX_SLICE_SIDE, Request, Window};
 
 /// Most samples one request may ask for.
 pub const MAX_FRAME_SAMPLES: u64 = 4096;
-/// Distance between samples when not given, in voxels of the lod.
-const DEFAULT_STEP: u32 = 16;
 
 /// The path of a frames request: `/v1/textures/{id}/frames/{axis}/{at}.json`.
 #[derive(Deserialize)]
 pub(super) struct FramesPath {
     id: String,
-    axis: String,
-    at: Stem<Json>,
+    axis: Axis,
+    at: Stem<Json, Coord>,
+}
+
+/// The slice window sampled, and the distance between samples (in voxels
+/// of the lod, 16 unless given).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct FramesQuery {
+    #[serde(default)]
+    u0: Coord,
+    #[serde(default)]
+    v0: Coord,
+    #[serde(default)]
+    w: Side,
+    #[serde(default)]
+    h: Side,
+    #[serde(default)]
+    lod: Lod,
+    #[serde(default)]
+    step: Int<1, { MAX_SLICE_SIDE as i64 }, 16>,
 }
 
 fn axis_name(i: usize) -> &'static str {
@@ -49,16 +64,20 @@ fn short(x: f64) -> f64 {
 /// `GET /v1/textures/{id}/frames/{axis}/{at}.json`
 pub(super) async fn frames(
     State(s): State<AppState>,
-    TypedPath(FramesPath { id, axis, at }): TypedPath<FramesPath>,
-    RawQuery(raw): RawQuery,
+    TypedPath(p): TypedPath<FramesPath>,
+    TypedQuery(q): TypedQuery<FramesQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id).await?;
-    let axis = parse_axis(&axis)?;
-    let at = parse_int("at", at.as_str(), -COORD_LIMIT, COORD_LIMIT)?;
-    let q = Query::parse(raw.as_deref())?;
-    let SliceWindow { u0, v0, w, h, lod } = slice_window(&q, &tex)?;
-    let step = q.int("step", DEFAULT_STEP, 1, MAX_SLICE_SIDE)?;
+    let (entry, tex) = texture(&s, &p.id).await?;
+    let (axis, at) = (p.axis, p.at.0.get());
+    let window = Window::new(q.u0.get(), q.v0.get(), q.w.get_u32(), q.h.get_u32());
+    // The window as a slice request: within the coordinate limit.
+    let slice = Request::slice(axis, at, window)?;
+    let (lod, step) = (q.lod.get_u32(), q.step.get_u32());
+    if lod > tex.max_lod() {
+        return Err(ApiError::out_of_range("lod", lod, 0, tex.max_lod()));
+    }
+    let (w, h) = (window.width, window.height);
     let columns = w.div_ceil(step);
     let rows = h.div_ceil(step);
     let count = u64::from(columns) * u64::from(rows);
@@ -68,15 +87,13 @@ pub(super) async fn frames(
              {MAX_FRAME_SAMPLES}: ask for a smaller area or a larger step"
         )));
     }
-    let (n, ia, ib) = axis.frame();
-    let name = axis_name(n);
-    let tag = etag(
-        &entry,
-        &format!("frames/{name}/{at}/{u0}/{v0}/{w}/{h}/{step}/{lod}"),
-    );
-    if not_modified(&headers, &tag) {
-        return Ok(not_modified_response(&tag));
+    let tag = ETag::new(&entry, &format!("frames/{step}/{}", slice.key(lod)));
+    if tag.matches(&headers) {
+        return Ok(tag.not_modified(IMMUTABLE));
     }
+    let (u0, v0) = (window.u0, window.v0);
+    let (n, ia, ib) = axis.frame();
+    let name = axis.name();
     let kind = entry
         .params
         .synth
@@ -86,9 +103,9 @@ pub(super) async fn frames(
             Ok(Value::Object(m)) => m.get("kind").cloned().unwrap_or(Value::Null),
             _ => Value::Null,
         });
-    let body = tokio::task::spawn_blocking(move || {
+    let json = tokio::task::spawn_blocking(move || {
         let mut samples = Vec::with_capacity(count as usize);
-        // Every sample lies within the rectangle that check_extent bounded.
+        // Every sample lies within the window the slice request bounded.
         for j in 0..rows {
             let v = v0 + i64::from(j) * i64::from(step);
             for i in 0..columns {
@@ -128,7 +145,7 @@ pub(super) async fn frames(
     })
     .await
     .map_err(|e| ApiError::internal(e.to_string()))?;
-    Ok(body_response(body.into_bytes(), "application/json", &tag))
+    Ok(tag.stamp(body(json.into_bytes(), "application/json"), IMMUTABLE))
 }
 
 #[cfg(test)]

@@ -6,9 +6,10 @@
 //! → JSON error shape → handler. Handlers only parse, call the registry or the job
 //! queue, and shape responses; no synthesis logic lives here.
 
+mod answer;
 mod frames;
 mod ops;
-mod paths;
+mod params;
 mod textures;
 mod viewer;
 mod volumes;

@@ -1,7 +1,9 @@
 //! `/v1/textures`: upload exemplars, list, inspect and delete textures.
 
 use super::AppState;
-use super::voxels::{body_response, etag, not_modified, not_modified_response};
+use super::IMMUTABLE;
+use super::answer::{ETag, body};
+use super::params::{NoQuery, TypedQuery};
 use crate::error::ApiError;
 use crate::query::Query;
 use crate::registry::{Entry, RegistryError, Status, Submitted};
@@ -70,7 +72,10 @@ fn layout_view(l: &Layout) -> Value {
 }
 
 /// `GET /v1/textures`.
-pub async fn list(State(s): State<AppState>) -> Json<Value> {
+pub(super) async fn list(
+    State(s): State<AppState>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
+) -> Json<Value> {
     let all: Vec<Value> = s
         .registry
         .list()
@@ -89,27 +94,30 @@ fn checked_id(id: &str) -> Result<(), ApiError> {
 }
 
 /// The texture `id`, in any status; the span records its id.
-fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
+async fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
     checked_id(id)?;
     tracing::Span::current().record("texture", id);
     s.registry
-        .get(id)
+        .find(id)
+        .await?
         .ok_or_else(|| ApiError::unknown_texture(id))
 }
 
 /// `GET /v1/textures/{id}`.
-pub async fn show(
+pub(super) async fn show(
     State(s): State<AppState>,
     Path(id): Path<String>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
 ) -> Result<Json<Value>, ApiError> {
-    let e = known(&s, &id)?;
+    let e = known(&s, &id).await?;
     Ok(Json(view(&e, s.brick_size)))
 }
 
 /// `DELETE /v1/textures/{id}`.
-pub async fn remove(
+pub(super) async fn remove(
     State(s): State<AppState>,
     Path(id): Path<String>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
 ) -> Result<StatusCode, ApiError> {
     checked_id(&id)?;
     tracing::Span::current().record("texture", id.as_str());
@@ -494,12 +502,13 @@ pub const MAX_VARIANT_BYTES: usize = 512 << 10;
 /// exemplars and analysis parameters with the synthesis parameters of the
 /// JSON body changed. Its id is a content hash like an upload's, so asking
 /// twice finds the same texture, and it shares the source's candidates.
-pub async fn variant(
+pub(super) async fn variant(
     State(s): State<AppState>,
     Path(id): Path<String>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     req: Request,
 ) -> Result<Response, ApiError> {
-    let source = known(&s, &id)?;
+    let source = known(&s, &id).await?;
     let essence = req
         .headers()
         .get(header::CONTENT_TYPE)
@@ -543,15 +552,16 @@ pub async fn variant(
 
 /// `GET /v1/textures/{id}/exemplar.png`: the texture's xy exemplar, for a
 /// thumbnail beside its slices.
-pub async fn exemplar(
+pub(super) async fn exemplar(
     State(s): State<AppState>,
     Path(id): Path<String>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let e = known(&s, &id)?;
-    let tag = etag(&e, "exemplar.png");
-    if not_modified(&headers, &tag) {
-        return Ok(not_modified_response(&tag));
+    let e = known(&s, &id).await?;
+    let tag = ETag::new(&e, "exemplar.png");
+    if tag.matches(&headers) {
+        return Ok(tag.not_modified(IMMUTABLE));
     }
     let xy = e.exemplar_xy().clone();
     let png = tokio::task::spawn_blocking(move || {
@@ -560,7 +570,7 @@ pub async fn exemplar(
     .await
     .map_err(|e| ApiError::internal(e.to_string()))?
     .map_err(|e| ApiError::internal(e.to_string()))?;
-    Ok(body_response(png, "image/png", &tag))
+    Ok(tag.stamp(body(png, "image/png"), IMMUTABLE))
 }
 
 #[cfg(test)]

@@ -16,18 +16,16 @@
 //! (`no-cache`), because they name the server's chunk size.
 
 use super::AppState;
-use super::voxels::{
-    body_response, check_budget, check_work, etag, not_modified, not_modified_response, raw_job,
-    texture,
-};
+use super::answer::{ETag, Encoding, answer, body, texture};
+use super::params::{NoQuery, TypedPath, TypedQuery};
 use crate::error::ApiError;
 use crate::registry::Entry;
-use axum::body::Body;
-use axum::extract::{Path, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::extract::State;
+use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
+use serde::Deserialize;
 use serde_json::{Value, json};
-use solidtex_core::Region;
+use solidtex_core::{Region, Request};
 
 /// log2 of the window side at level of detail 0.
 pub const WINDOW_LOG2: u32 = 20;
@@ -44,25 +42,12 @@ const REVALIDATE: &str = "no-cache";
 
 /// A JSON metadata document with its ETag, or 304.
 fn metadata_response(entry: &Entry, key: &str, headers: &HeaderMap, doc: &Value) -> Response {
-    let tag = etag(entry, key);
-    let mut res = if not_modified(headers, &tag) {
-        let mut r = Response::new(Body::empty());
-        *r.status_mut() = StatusCode::NOT_MODIFIED;
-        r
-    } else {
-        let mut r = Response::new(Body::from(doc.to_string()));
-        r.headers_mut().insert(
-            header::CONTENT_TYPE,
-            HeaderValue::from_static("application/json"),
-        );
-        r
-    };
-    let h = res.headers_mut();
-    if let Ok(v) = HeaderValue::from_str(&tag) {
-        h.insert(header::ETAG, v);
+    let tag = ETag::new(entry, key);
+    if tag.matches(headers) {
+        return tag.not_modified(REVALIDATE);
     }
-    h.insert(header::CACHE_CONTROL, HeaderValue::from_static(REVALIDATE));
-    res
+    let json = body(doc.to_string().into_bytes(), "application/json");
+    tag.stamp(json, REVALIDATE)
 }
 
 /// 404 for a path that is well formed but names no chunk or array.
@@ -79,35 +64,13 @@ fn path_lod(s: &str, max_lod: u32) -> Result<u32, ApiError> {
     lod.ok_or_else(|| no_chunk(format_args!("no level of detail `{s}` (0..={max_lod})")))
 }
 
-/// Synthesizes the cube of edge `edge` at `origin` (texture coordinates of
-/// level `lod`) as RGB8, x fastest, then y, z, channel interleaved.
-async fn chunk_rgb(
-    s: &AppState,
-    tex: solidtex_core::Texture,
-    origin: [i64; 3],
-    lod: u32,
-) -> Result<Vec<u8>, ApiError> {
-    let edge = s.chunk_size;
-    check_budget(s, "chunk", u64::from(edge).pow(3))?;
-    let region = Region {
+/// The chunk of edge `edge` at `origin` (texture coordinates of its
+/// level), as a request.
+fn chunk(origin: [i64; 3], edge: u32) -> Result<Request, ApiError> {
+    Ok(Request::region(Region {
         origin,
         size: [edge; 3],
-    };
-    check_work(s, tex.estimate(&region, lod, s.max_request_work))?;
-    raw_job(s, move || tex.region(&region, lod)).await
-}
-
-/// Reorders interleaved RGB8 (channel fastest) into planes (channel
-/// slowest), as precomputed `raw` chunks are laid out.
-fn planar(rgb: &[u8]) -> Vec<u8> {
-    let n = rgb.len() / 3;
-    let mut out = vec![0u8; rgb.len()];
-    for (i, px) in rgb.chunks_exact(3).enumerate() {
-        out[i] = px[0];
-        out[n + i] = px[1];
-        out[2 * n + i] = px[2];
-    }
-    out
+    })?)
 }
 
 // ---------------------------------------------------------------------
@@ -138,10 +101,17 @@ fn precomputed_info(max_lod: u32, chunk: u32) -> Value {
     })
 }
 
+/// The path of a texture's metadata document.
+#[derive(Deserialize)]
+pub(super) struct TexturePath {
+    id: String,
+}
+
 /// `GET /v1/textures/{id}/precomputed/info`
-pub async fn precomputed_info_route(
+pub(super) async fn precomputed_info_route(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id }): TypedPath<TexturePath>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let (entry, tex) = texture(&s, &id).await?;
@@ -197,30 +167,27 @@ fn precomputed_chunk_origin(name: &str, lod: u32, edge: u32) -> Result<[i64; 3],
     Ok(origin)
 }
 
+/// The path of a precomputed chunk: `{scale}/{x0}-{x1}_{y0}-{y1}_{z0}-{z1}`.
+#[derive(Deserialize)]
+pub(super) struct PrecomputedChunkPath {
+    id: String,
+    scale: String,
+    chunk: String,
+}
+
 /// `GET /v1/textures/{id}/precomputed/{scale}/{chunk}`: raw chunk, x
 /// fastest, then y, then z, then channel.
-pub async fn precomputed_chunk(
+pub(super) async fn precomputed_chunk(
     State(s): State<AppState>,
-    Path((id, scale, name)): Path<(String, String, String)>,
+    TypedPath(p): TypedPath<PrecomputedChunkPath>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id).await?;
-    let lod = path_lod(&scale, tex.max_lod())?;
-    let origin = precomputed_chunk_origin(&name, lod, s.chunk_size)?;
-    let [x, y, z] = origin;
-    let tag = etag(
-        &entry,
-        &format!("precomputed/{lod}/{x}/{y}/{z}/{}", s.chunk_size),
-    );
-    if not_modified(&headers, &tag) {
-        return Ok(not_modified_response(&tag));
-    }
-    let rgb = chunk_rgb(&s, tex, origin, lod).await?;
-    Ok(body_response(
-        planar(&rgb),
-        "application/octet-stream",
-        &tag,
-    ))
+    let t = texture(&s, &p.id).await?;
+    let lod = path_lod(&p.scale, t.1.max_lod())?;
+    let origin = precomputed_chunk_origin(&p.chunk, lod, s.chunk_size)?;
+    let request = chunk(origin, s.chunk_size)?;
+    answer(&s, t, request, lod, Encoding::Planar, &headers).await
 }
 
 // ---------------------------------------------------------------------
@@ -287,9 +254,10 @@ fn zarr_array(lod: u32, chunk: u32) -> Value {
 }
 
 /// `GET /v1/textures/{id}/zarr/zarr.json`
-pub async fn zarr_group_route(
+pub(super) async fn zarr_group_route(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id }): TypedPath<TexturePath>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let (entry, tex) = texture(&s, &id).await?;
@@ -298,10 +266,18 @@ pub async fn zarr_group_route(
     Ok(metadata_response(&entry, &key, &headers, &doc))
 }
 
+/// The path of a Zarr array's metadata: `{lod}/zarr.json`.
+#[derive(Deserialize)]
+pub(super) struct ZarrArrayPath {
+    id: String,
+    lod: String,
+}
+
 /// `GET /v1/textures/{id}/zarr/{lod}/zarr.json`
-pub async fn zarr_array_route(
+pub(super) async fn zarr_array_route(
     State(s): State<AppState>,
-    Path((id, lod)): Path<(String, String)>,
+    TypedPath(ZarrArrayPath { id, lod }): TypedPath<ZarrArrayPath>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let (entry, tex) = texture(&s, &id).await?;
@@ -320,36 +296,37 @@ fn chunk_index(s: &str, count: i64) -> Result<i64, ApiError> {
     i.ok_or_else(|| no_chunk(format_args!("no chunk index `{s}` (0..{count})")))
 }
 
+/// The path of a Zarr chunk: `{lod}/c/{cz}/{cy}/{cx}/{cc}`.
+#[derive(Deserialize)]
+pub(super) struct ZarrChunkPath {
+    id: String,
+    lod: String,
+    cz: String,
+    cy: String,
+    cx: String,
+    cc: String,
+}
+
 /// `GET /v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}`: the chunk as
-/// C-order bytes of shape (edge, edge, edge, 3).
-pub async fn zarr_chunk(
+/// C-order bytes of shape (edge, edge, edge, 3), which is how a region is
+/// rendered: x fastest, then y, then z, channel interleaved.
+pub(super) async fn zarr_chunk(
     State(s): State<AppState>,
-    Path((id, lod, cz, cy, cx, cc)): Path<(String, String, String, String, String, String)>,
+    TypedPath(p): TypedPath<ZarrChunkPath>,
+    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
-    let (entry, tex) = texture(&s, &id).await?;
-    let lod = path_lod(&lod, tex.max_lod())?;
+    let t = texture(&s, &p.id).await?;
+    let lod = path_lod(&p.lod, t.1.max_lod())?;
     let (side, offset) = window(lod);
     let edge = i64::from(s.chunk_size);
     let count = side / edge;
-    let (iz, iy, ix) = (
-        chunk_index(&cz, count)?,
-        chunk_index(&cy, count)?,
-        chunk_index(&cx, count)?,
-    );
-    chunk_index(&cc, 1)?;
+    let [iz, iy, ix] = [&p.cz, &p.cy, &p.cx].map(|c| chunk_index(c, count));
+    let (iz, iy, ix) = (iz?, iy?, ix?);
+    chunk_index(&p.cc, 1)?;
     let origin = [offset + ix * edge, offset + iy * edge, offset + iz * edge];
-    let tag = etag(
-        &entry,
-        &format!("zarr/{lod}/{ix}/{iy}/{iz}/{}", s.chunk_size),
-    );
-    if not_modified(&headers, &tag) {
-        return Ok(not_modified_response(&tag));
-    }
-    // Region bytes are x fastest, then y, then z, channel interleaved:
-    // exactly C order over (z, y, x, c).
-    let rgb = chunk_rgb(&s, tex, origin, lod).await?;
-    Ok(body_response(rgb, "application/octet-stream", &tag))
+    let request = chunk(origin, s.chunk_size)?;
+    answer(&s, t, request, lod, Encoding::Chunk, &headers).await
 }
 
 #[cfg(test)]
@@ -403,11 +380,6 @@ mod tests {
         let name = format!("{edge}-{}_0-32_0-32", edge + 32);
         assert!(precomputed_chunk_origin(&name, 0, 32).is_ok());
         assert!(precomputed_chunk_origin(&name, 2, 32).is_err());
-    }
-
-    #[test]
-    fn planar_puts_channels_last() {
-        assert_eq!(planar(&[1, 2, 3, 4, 5, 6]), vec![1, 4, 2, 5, 3, 6]);
     }
 
     #[test]

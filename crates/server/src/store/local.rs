@@ -1,11 +1,8 @@
-//! The data directory: exemplars, metadata and `.stx` candidate files of
-//! every texture, so that a restart serves the same textures without
-//! recomputing them.
+//! The data directory: the default [`Storage`], on this machine.
 //!
 //! ```text
-//! <data-dir>/textures/<id>/meta.json       status, params, exemplar size
-//!                         /exemplar.png    (or xy.png, yz.png, zx.png)
-//!                         /candidates.stx  written once the precompute ends
+//! <data-dir>/textures/<id>/...   as laid out in the parent module
+//!           /solidtex.lock       held locked while a server uses it
 //! ```
 //!
 //! Every file is written to a temporary name, fsynced, renamed over its
@@ -13,117 +10,48 @@
 //! or the new file, never a torn one. `meta.json` is written last on
 //! creation (a directory without it is debris) and flips to `ready` only
 //! after `candidates.stx` is durable, so a texture whose precompute was
-//! interrupted is found `pending` at start and computed again. A mutex
-//! serialises directory-level changes (create, delete, final writes) so a
-//! delete racing a re-upload of the same content cannot remove the new
-//! files.
+//! interrupted is found `pending` at start and computed again.
 //!
 //! `<data-dir>/solidtex.lock` is held locked while a server uses the
 //! directory, so that two servers never write it at once. Only files the
 //! server writes are ever removed: anything else found there is reported
 //! and left alone.
 
-use super::spec::{ExemplarInfo, Planes, valid_id};
+use super::{
+    Found, Storage, StoredMeta, WRITTEN, oldest_first, parse_meta, plane_files, planes_from,
+    save_candidates,
+};
+use crate::spec::{Planes, valid_id};
 use parking_lot::{Mutex, MutexGuard};
-use serde::{Deserialize, Serialize};
-use serde_json::{Map, Value};
-use solidtex_core::{Candidates, Exemplar};
+use solidtex_core::Candidates;
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-/// Version of the metadata layout.
-pub const META_VERSION: u32 = 1;
 const TMP_SUFFIX: &str = ".tmp";
 /// Suffix of a texture directory being deleted.
 const DELETING_SUFFIX: &str = ".deleting.tmp";
 /// The file locked while a server uses the data directory.
 pub const LOCK_FILE: &str = "solidtex.lock";
-/// The files the server writes in a texture directory (besides their
-/// temporaries): only these are ever removed.
-const WRITTEN: [&str; 10] = [
-    "meta.json",
-    "exemplar.png",
-    "xy.png",
-    "yz.png",
-    "zx.png",
-    "exemplar.mask.png",
-    "xy.mask.png",
-    "yz.mask.png",
-    "zx.mask.png",
-    "candidates.stx",
-];
-
-/// Status as persisted.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum StoredStatus {
-    /// Precompute not finished (or interrupted).
-    Pending,
-    /// `candidates.stx` is complete.
-    Ready,
-    /// Precompute failed for good.
-    Failed,
-}
-
-/// The persisted `meta.json` of a texture.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct StoredMeta {
-    /// Layout version.
-    pub version: u32,
-    /// Texture id (the content hash, or `default`).
-    pub id: String,
-    /// The uploaded file's name.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub name: Option<String>,
-    /// Content hash of exemplars and parameters.
-    pub content_hash: String,
-    /// Creation time, seconds since the Unix epoch.
-    pub created: u64,
-    /// Exemplar size and plane count.
-    pub exemplar: ExemplarInfo,
-    /// Complete flat parameters.
-    pub params: Map<String, Value>,
-    /// Status.
-    pub status: StoredStatus,
-    /// Why the precompute failed.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub reason: Option<String>,
-    /// Seconds the precompute took.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub precompute_seconds: Option<f64>,
-    /// Heap bytes the precompute peaked at, when measured.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub precompute_peak_bytes: Option<u64>,
-}
-
-/// A texture found in the data directory at start.
-pub struct Found {
-    /// Its metadata.
-    pub meta: StoredMeta,
-    /// Its directory.
-    pub dir: PathBuf,
-}
-
 /// The data directory.
-pub struct Store {
+pub struct DataDir {
     root: PathBuf,
     lock: Mutex<()>,
     /// Holds the exclusive lock on [`LOCK_FILE`] while the store lives.
     _owner: File,
 }
 
-impl Store {
+impl DataDir {
     /// Opens (creating) `root`, locks it against other servers, and clears
     /// debris of interrupted writes: temporary files, texture directories
     /// without metadata and deletions cut short. Only files the server
     /// writes are removed; anything else is reported and left alone.
-    pub fn open(root: &Path) -> io::Result<Store> {
+    pub fn open(root: &Path) -> io::Result<DataDir> {
         fs::create_dir_all(root)?;
         let owner = lock_exclusive(root)?;
         let textures = root.join("textures");
         fs::create_dir_all(&textures)?;
-        let store = Store {
+        let store = DataDir {
             root: root.to_path_buf(),
             lock: Mutex::new(()),
             _owner: owner,
@@ -153,9 +81,45 @@ impl Store {
         Ok(store)
     }
 
-    /// Bytes of the files under `textures/` (every texture's exemplars,
-    /// metadata and candidates).
-    pub fn bytes(&self) -> io::Result<u64> {
+    /// The directory of texture `id`.
+    pub fn dir(&self, id: &str) -> PathBuf {
+        self.root.join("textures").join(id)
+    }
+
+    /// The texture in directory `dir`, when its metadata is readable.
+    fn read_found(&self, dir: &Path) -> Option<Found> {
+        let id = dir.file_name()?.to_string_lossy().to_string();
+        let meta_path = dir.join("meta.json");
+        let meta = fs::read(&meta_path)
+            .map_err(|e| e.to_string())
+            .and_then(|b| parse_meta(&id, &b));
+        match meta {
+            Ok(meta) => Some(Found {
+                meta,
+                location: dir.display().to_string(),
+            }),
+            Err(e) => {
+                tracing::warn!(path = %meta_path.display(), error = %e, "skipping unreadable texture metadata");
+                None
+            }
+        }
+    }
+}
+
+impl Storage for DataDir {
+    fn location(&self) -> String {
+        self.root.display().to_string()
+    }
+
+    fn shared(&self) -> bool {
+        false
+    }
+
+    fn lock(&self) -> MutexGuard<'_, ()> {
+        self.lock.lock()
+    }
+
+    fn bytes(&self) -> io::Result<u64> {
         let mut total = 0u64;
         for entry in fs::read_dir(self.root.join("textures"))? {
             let entry = entry?;
@@ -172,19 +136,8 @@ impl Store {
         Ok(total)
     }
 
-    /// The directory of texture `id`.
-    pub fn dir(&self, id: &str) -> PathBuf {
-        self.root.join("textures").join(id)
-    }
-
-    /// Serialises directory-level changes.
-    pub fn lock(&self) -> MutexGuard<'_, ()> {
-        self.lock.lock()
-    }
-
-    /// Writes a new texture's exemplars then its metadata (replacing any
-    /// leftover directory of the same id). Caller holds [`Store::lock`].
-    pub fn create(&self, meta: &StoredMeta, planes: &Planes) -> io::Result<()> {
+    /// Replaces any leftover directory of the same id first.
+    fn create(&self, meta: &StoredMeta, planes: &Planes) -> io::Result<()> {
         let dir = self.dir(&meta.id);
         if dir.exists() && !remove_written(&dir)? {
             return Err(io::Error::other(format!(
@@ -193,69 +146,38 @@ impl Store {
             )));
         }
         fs::create_dir_all(&dir)?;
-        for (name, e) in planes.named() {
-            let png = |e: &Exemplar| {
-                solidtex_core::png::encode(e.width(), e.height(), &e.to_rgb_bytes())
-                    .map_err(io::Error::other)
-            };
-            write_atomic(&dir.join(format!("{name}.png")), &png(e)?)?;
-            if let Some(mask) = e.feature_mask_image() {
-                write_atomic(&dir.join(format!("{name}.mask.png")), &png(&mask)?)?;
-            }
+        for (name, png) in plane_files(planes)? {
+            write_atomic(&dir.join(name), &png)?;
         }
         self.write_meta(meta)?;
         sync_dir(&self.root.join("textures"))
     }
 
-    /// Replaces a texture's metadata atomically.
-    pub fn write_meta(&self, meta: &StoredMeta) -> io::Result<()> {
+    fn write_meta(&self, meta: &StoredMeta) -> io::Result<()> {
         let json = serde_json::to_vec_pretty(meta).map_err(io::Error::other)?;
         write_atomic(&self.dir(&meta.id).join("meta.json"), &json)
     }
 
-    /// Writes `candidates.stx` atomically.
-    pub fn write_candidates(&self, id: &str, c: &Candidates) -> io::Result<()> {
+    fn write_candidates(&self, id: &str, c: &Candidates) -> io::Result<()> {
         write_atomic_with(&self.dir(id).join("candidates.stx"), |w| {
-            c.save(w).map_err(|e| match e {
-                solidtex_core::Error::Io(e) => e,
-                other => io::Error::other(other.to_string()),
-            })
+            save_candidates(c, w)
         })
     }
 
-    /// Reads `candidates.stx`.
-    pub fn read_candidates(&self, id: &str) -> io::Result<Vec<u8>> {
+    fn read_candidates(&self, id: &str) -> io::Result<Vec<u8>> {
         fs::read(self.dir(id).join("candidates.stx"))
     }
 
-    /// Reads a texture's exemplars back, each with its feature mask if
-    /// one was stored.
-    pub fn read_planes(&self, meta: &StoredMeta) -> solidtex_core::Result<Planes> {
+    fn read_planes(&self, meta: &StoredMeta) -> solidtex_core::Result<Planes> {
         let dir = self.dir(&meta.id);
-        let open = |n: &str| {
-            let e = Exemplar::open(dir.join(format!("{n}.png")))?;
-            let mask = dir.join(format!("{n}.mask.png"));
-            if mask.exists() {
-                e.with_mask_image(&Exemplar::open(mask)?)
-            } else {
-                Ok(e)
-            }
-        };
-        if meta.exemplar.planes == 1 {
-            Ok(Planes::Single(open("exemplar")?))
-        } else {
-            Ok(Planes::Triple(Box::new([
-                open("xy")?,
-                open("yz")?,
-                open("zx")?,
-            ])))
-        }
+        planes_from(meta, |name| match fs::read(dir.join(name)) {
+            Ok(b) => Ok(Some(b)),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e),
+        })
     }
 
-    /// Removes a texture's directory. Caller holds [`Store::lock`]. Once
-    /// this returns `Ok` the texture is gone from the disk; on an error
-    /// nothing changed.
-    pub fn remove(&self, id: &str) -> io::Result<()> {
+    fn remove(&self, id: &str) -> io::Result<()> {
         let dir = self.dir(id);
         if !dir.exists() {
             return Ok(());
@@ -280,36 +202,29 @@ impl Store {
         Ok(())
     }
 
-    /// Every texture with readable metadata. A directory whose metadata
-    /// cannot be read is reported and skipped.
-    pub fn scan(&self) -> io::Result<Vec<Found>> {
+    fn scan(&self) -> io::Result<Vec<Found>> {
         let mut out = Vec::new();
         for entry in fs::read_dir(self.root.join("textures"))? {
             let entry = entry?;
             if !entry.file_type()?.is_dir() || !valid_id(&entry.file_name().to_string_lossy()) {
                 continue;
             }
-            let dir = entry.path();
-            let meta_path = dir.join("meta.json");
-            let meta = fs::read(&meta_path)
-                .map_err(|e| e.to_string())
-                .and_then(|b| serde_json::from_slice::<StoredMeta>(&b).map_err(|e| e.to_string()));
-            match meta {
-                Ok(meta) if meta.version == META_VERSION && dir.ends_with(&meta.id) => {
-                    out.push(Found { meta, dir })
-                }
-                Ok(meta) => tracing::warn!(
-                    path = %meta_path.display(),
-                    version = meta.version,
-                    "skipping texture with foreign metadata"
-                ),
-                Err(e) => {
-                    tracing::warn!(path = %meta_path.display(), error = %e, "skipping unreadable texture metadata")
-                }
-            }
+            out.extend(self.read_found(&entry.path()));
         }
-        out.sort_by(|a, b| (a.meta.created, &a.meta.id).cmp(&(b.meta.created, &b.meta.id)));
+        oldest_first(&mut out);
         Ok(out)
+    }
+
+    fn find(&self, id: &str) -> io::Result<Option<Found>> {
+        let dir = self.dir(id);
+        if !valid_id(id) || !dir.join("meta.json").exists() {
+            return Ok(None);
+        }
+        Ok(self.read_found(&dir))
+    }
+
+    fn ids(&self) -> io::Result<Vec<String>> {
+        Ok(self.scan()?.into_iter().map(|f| f.meta.id).collect())
     }
 }
 
@@ -430,33 +345,9 @@ pub fn sync_dir(dir: &Path) -> io::Result<()> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::StoredStatus;
+    use super::super::tests::{meta, planes};
     use super::*;
-
-    fn meta(id: &str, status: StoredStatus) -> StoredMeta {
-        StoredMeta {
-            version: META_VERSION,
-            id: id.into(),
-            name: Some("marble.png".into()),
-            content_hash: id.into(),
-            created: 5,
-            exemplar: ExemplarInfo {
-                width: 16,
-                height: 16,
-                planes: 1,
-                feature_masks: 0,
-            },
-            params: Map::new(),
-            status,
-            reason: None,
-            precompute_seconds: None,
-            precompute_peak_bytes: None,
-        }
-    }
-
-    fn planes() -> Planes {
-        let rgb: Vec<u8> = (0..16 * 16 * 3).map(|i| (i * 7) as u8).collect();
-        Planes::Single(Exemplar::from_rgb(16, 16, &rgb).unwrap())
-    }
 
     #[test]
     fn atomic_write_replaces() {
@@ -486,7 +377,7 @@ mod tests {
     #[test]
     fn create_scan_remove() {
         let d = tempfile::tempdir().unwrap();
-        let s = Store::open(d.path()).unwrap();
+        let s = DataDir::open(d.path()).unwrap();
         let m = meta("abc", StoredStatus::Pending);
         s.create(&m, &planes()).unwrap();
         let found = s.scan().unwrap();
@@ -501,7 +392,7 @@ mod tests {
     #[test]
     fn open_clears_debris() {
         let d = tempfile::tempdir().unwrap();
-        let s = Store::open(d.path()).unwrap();
+        let s = DataDir::open(d.path()).unwrap();
         s.create(&meta("keep", StoredStatus::Ready), &planes())
             .unwrap();
         fs::write(s.dir("keep").join(".candidates.stx.1.tmp"), b"half").unwrap();
@@ -509,7 +400,7 @@ mod tests {
         fs::write(s.dir("nometa").join("exemplar.png"), b"x").unwrap();
         fs::create_dir_all(d.path().join("textures").join("x.deleting.tmp")).unwrap();
         drop(s);
-        let s = Store::open(d.path()).unwrap();
+        let s = DataDir::open(d.path()).unwrap();
         let ids: Vec<String> = s.scan().unwrap().into_iter().map(|f| f.meta.id).collect();
         assert_eq!(ids, vec!["keep".to_string()]);
         assert!(!s.dir("keep").join(".candidates.stx.1.tmp").exists());
@@ -519,7 +410,7 @@ mod tests {
     #[test]
     fn unreadable_meta_is_skipped() {
         let d = tempfile::tempdir().unwrap();
-        let s = Store::open(d.path()).unwrap();
+        let s = DataDir::open(d.path()).unwrap();
         fs::create_dir_all(s.dir("bad")).unwrap();
         fs::write(s.dir("bad").join("meta.json"), b"{not json").unwrap();
         assert!(s.scan().unwrap().is_empty());
