@@ -33,4 +33,4 @@ S3S_FS="$TOOLS/bin/s3s-fs"
 command -v haproxy >/dev/null || { echo "no haproxy: run $0 --install first" >&2; exit 1; }
 [[ -x target/release/solidtex ]] || cargo build --release --bin solidtex
 # The whole test stops itself well inside CI's budget.
-S3S_FS="$S3S_FS" timeout --kill-after=10 600 python3 tests/cluster/cluster.py "$@"
+PYTHONDONTWRITEBYTECODE=1 S3S_FS="$S3S_FS" timeout --kill-after=10 600 python3 tests/cluster/cluster.py "$@"

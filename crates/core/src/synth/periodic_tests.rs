@@ -27,7 +27,8 @@ fn apart(params: SynthParams) -> Engine {
 }
 
 fn voxels(e: &Engine, points: &[[i64; 3]], lod: u32) -> Vec<[u8; 3]> {
-    e.points_rgb(points, lod).unwrap().0
+    let rgb = e.points_rgb(points, lod).unwrap().0;
+    rgb.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
 /// The variants whose position-dependent parts differ: slab blocks, the
