@@ -34,7 +34,7 @@
 //! synthesizes one period and copies it.
 
 use crate::error::{Error, Result};
-use crate::params::{Scheme, SynthParams};
+use crate::params::SynthParams;
 use serde::Deserialize;
 
 /// Largest period per axis, in finest voxels: a slice of one whole period
@@ -255,21 +255,6 @@ pub fn parse(text: &str) -> Result<[u32; 3]> {
         Some(&[p]) => Ok([p; 3]),
         Some(&[x, y, z]) => Ok([x, y, z]),
         _ => Err(Error::InvalidRequest(not_a_period(text))),
-    }
-}
-
-/// The scheme's cell walls at level `k` (none under the standard scheme):
-/// uniform M-voxel cells, or with a period the per-period layout.
-pub(crate) fn barrier_cells(
-    params: &SynthParams,
-    period: Option<&Period>,
-    k: usize,
-) -> Option<[Intervals; 3]> {
-    let m = params.grid as i64;
-    match (params.scheme, period) {
-        (Scheme::Standard, _) => None,
-        (Scheme::DualGrid, None) => Some([Intervals::Uniform(m); 3]),
-        (Scheme::DualGrid, Some(p)) => Some(p.cells(k, m)),
     }
 }
 
