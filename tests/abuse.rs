@@ -1,6 +1,8 @@
 //! The server against hostile or broken clients: idle and slow
-//! connections, wrong Host headers, malformed requests, and a data
-//! directory that is tampered with or shared.
+//! connections, wrong Host headers, malformed requests and images, bursts
+//! of large uploads, deletions during precomputes, clients that try to
+//! mint metric labels, and a data directory that is tampered with or
+//! shared.
 
 mod common;
 mod server_support;
@@ -11,6 +13,8 @@ mod connections;
 mod consistency;
 #[path = "abuse/data_dir.rs"]
 mod data_dir;
+#[path = "abuse/decoding.rs"]
+mod decoding;
 #[path = "abuse/deletion.rs"]
 mod deletion;
 #[path = "abuse/errors.rs"]

@@ -155,3 +155,122 @@ fn bad_images_give_clear_errors() {
         Err(Error::SizeMismatch(_))
     ));
 }
+
+#[test]
+fn pngs_and_jpegs_of_every_kind_decode_as_the_image_crate_reads_them() {
+    for name in [
+        "baseline.jpg",
+        "progressive.jpg",
+        "restarts.jpg",
+        "grey.jpg",
+        "cmyk.jpg",
+        "palette.png",
+        "rgba.png",
+        "interlaced.png",
+        "grey16.png",
+    ] {
+        let bytes = image_fixture(name);
+        let e = Exemplar::decode(&bytes).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let reference = image::load_from_memory(&bytes).unwrap().to_rgb8();
+        assert_eq!((e.width(), e.height()), reference.dimensions(), "{name}");
+        // 16-bit samples are cut to their high byte, where the image
+        // crate rounds: one level apart at most.
+        let most = e
+            .to_rgb_bytes()
+            .iter()
+            .zip(reference.as_raw())
+            .map(|(a, b)| a.abs_diff(*b))
+            .max()
+            .unwrap();
+        assert!(most <= u8::from(name == "grey16.png"), "{name}: {most}");
+    }
+}
+
+#[test]
+fn images_that_end_early_or_claim_more_than_they_hold_are_refused() {
+    // The first half of a 128² JPEG, which a lenient decoder fills with
+    // grey, and of each kind of file.
+    let rgb = decode_png(&exemplar_png(128, 5)).2;
+    let jpeg = encode_jpeg(128, 128, &rgb);
+    assert!(Exemplar::decode(&jpeg).is_ok());
+    let mut files = vec![("128².jpg", jpeg.clone())];
+    for name in [
+        "baseline.jpg",
+        "progressive.jpg",
+        "interlaced.png",
+        "palette.png",
+    ] {
+        files.push((name, image_fixture(name)));
+    }
+    for (name, bytes) in files {
+        let half = &bytes[..bytes.len() / 2];
+        for r in [
+            Exemplar::decode(half),
+            Exemplar::decode_fitting(half).map(|r| r.0),
+        ] {
+            assert!(matches!(r, Err(Error::MalformedImage(_))), "{name}: {r:?}");
+        }
+    }
+    // A header claiming 6000² in a file of a few kilobytes is refused
+    // before anything is decoded or allocated.
+    let lying = claim_jpeg_size(jpeg.clone(), 6000, 6000);
+    for r in [
+        Exemplar::decode_fitting(&lying).map(|_| ()),
+        Exemplar::decode_peak_bytes(&lying).map(|_| ()),
+    ] {
+        match r {
+            Err(Error::MalformedImage(m)) => assert!(m.contains("claims 6000x6000"), "{m}"),
+            other => panic!("{other:?}"),
+        }
+    }
+    // One claiming a little more than it holds is decoded, and found short.
+    let taller = claim_jpeg_size(jpeg, 128, 200);
+    assert!(matches!(
+        Exemplar::decode(&taller),
+        Err(Error::MalformedImage(_))
+    ));
+}
+
+#[test]
+fn an_exif_orientation_is_applied() {
+    for (plain, turned) in [
+        ("baseline.jpg", "rotated.jpg"),
+        ("interlaced.png", "rotated.png"),
+    ] {
+        let plain = Exemplar::decode(&image_fixture(plain)).unwrap();
+        let turned = Exemplar::decode(&image_fixture(turned)).unwrap();
+        assert_eq!((plain.width(), plain.height()), (80, 48));
+        // Orientation 6: displayed turned a quarter clockwise.
+        assert_eq!(turned, plain.rotated(90));
+    }
+}
+
+#[test]
+fn a_large_photo_is_downscaled_close_to_a_full_size_resize() {
+    let (w, h) = (1800u32, 1200u32);
+    let rgb: Vec<u8> = (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w, i / w);
+            let stripe = ((x / 7 + y / 11) % 2) as u8 * 90;
+            [(x / 8) as u8, (y / 6) as u8, stripe + ((x ^ y) % 40) as u8]
+        })
+        .collect();
+    let full = image::RgbImage::from_raw(w, h, rgb.clone()).unwrap();
+    let reference = image::imageops::resize(&full, 512, 341, image::imageops::FilterType::Lanczos3);
+    for (name, bytes) in [
+        ("png", encode_png(w, h, &rgb)),
+        ("jpeg", encode_jpeg(w, h, &rgb)),
+    ] {
+        let (e, original) = Exemplar::decode_fitting(&bytes).unwrap();
+        assert_eq!(original, Some((w, h)));
+        assert_eq!((e.width(), e.height()), (512, 341));
+        let got = e.to_rgb_bytes();
+        let mean = got
+            .iter()
+            .zip(reference.as_raw())
+            .map(|(a, b)| f64::from(a.abs_diff(*b)))
+            .sum::<f64>()
+            / got.len() as f64;
+        assert!(mean < 4.0, "{name}: mean difference {mean}");
+    }
+}

@@ -7,11 +7,11 @@
 mod common;
 mod server_support;
 
-use common::generated_exemplar;
+use common::{encode_jpeg, generated_exemplar, image_fixture};
 use serde_json::Value;
 use server_support::*;
 
-use solidtex_core::{AnalysisParams, Candidates, ExemplarSet};
+use solidtex_core::{AnalysisParams, Candidates, Exemplar, ExemplarSet};
 use solidtex_server::peak_alloc::{Meter, PeakAlloc};
 
 #[global_allocator]
@@ -84,6 +84,61 @@ fn the_estimate_bounds_the_measured_peak() {
             estimate >= peak && estimate <= 3 * peak,
             "{params:?}: estimated {estimate}, measured {peak}"
         );
+    }
+}
+
+/// Decodes `bytes` as an upload is decoded, on a thread of its own whose
+/// allocations `meter` counts; returns the peak.
+fn decode_peak(meter: &'static Meter, bytes: &[u8]) -> u64 {
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            meter.attach();
+            let baseline = meter.reset();
+            Exemplar::decode_fitting(bytes).unwrap();
+            meter.peak_above(baseline)
+        })
+        .join()
+        .unwrap()
+    })
+}
+
+#[test]
+fn the_decode_estimate_bounds_the_measured_peak_and_a_png_is_never_held_whole() {
+    let meter = Meter::leaked();
+    let (w, h) = (6000u32, 4000u32);
+    let rgb: Vec<u8> = (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w, i / w);
+            [(x / 24) as u8, (y / 16) as u8, ((x ^ y) % 97) as u8]
+        })
+        .collect();
+    let full = u64::from(w) * u64::from(h) * 3;
+    let jpeg = encode_jpeg(w, h, &rgb);
+    let png = encode_png(w, h, &rgb);
+    drop(rgb);
+    let cases = [
+        ("6000x4000.png", png),
+        ("6000x4000.jpg", jpeg),
+        ("progressive.jpg", image_fixture("progressive.jpg")),
+        ("interlaced.png", image_fixture("interlaced.png")),
+        ("cmyk.jpg", image_fixture("cmyk.jpg")),
+    ];
+    for (name, bytes) in cases {
+        let estimate = Exemplar::decode_peak_bytes(&bytes).unwrap();
+        let peak = decode_peak(meter, &bytes);
+        println!("{name}: estimated {estimate}, measured {peak}");
+        assert!(
+            peak > 0 && estimate >= peak,
+            "{name}: estimated {estimate}, measured {peak}"
+        );
+        assert!(
+            estimate <= 2 * peak + (8 << 20),
+            "{name}: estimated {estimate}, measured {peak}"
+        );
+        if name == "6000x4000.png" {
+            // Read row by row: far below the image at full size.
+            assert!(peak < full / 4, "{name}: {peak} of {full}");
+        }
     }
 }
 

@@ -2,7 +2,8 @@
 //! texture optimisation over the whole block (crates/core/src/reference),
 //! written as raw RGB8 with its three middle slices and an oblique cut.
 
-use super::source::{open_exemplar, write_atomically, write_png};
+use super::source::{open_exemplar, write_png};
+use solidtex_server::write_atomic;
 use clap::Args;
 use solidtex_core::reference::{ReferenceParams, synthesize};
 use solidtex_core::{ExemplarSet, Layout, Orientation};
@@ -96,7 +97,7 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
     })?;
     let s = block.size;
     let raw = a.output.join(format!("reference_{s}.raw"));
-    write_atomically(&raw, &block.rgb)?;
+    write_atomic(&raw, &block.rgb)?;
     eprintln!(
         "wrote {} (a periodic {s}³ block, RGB8, x fastest) in {:.1} s",
         raw.display(),

@@ -7,15 +7,8 @@ use crate::server_support::*;
 use serde_json::Value;
 
 async fn variant(c: &reqwest::Client, s: &TestServer, id: &str, body: String) -> (u16, Value) {
-    let r = c
-        .post(s.url(&format!("/v1/textures/{id}/variants")))
-        .header("content-type", "application/json")
-        .body(body)
-        .send()
-        .await
-        .unwrap();
-    let status = r.status().as_u16();
-    (status, r.json().await.unwrap())
+    let url = s.url(&format!("/v1/textures/{id}/variants"));
+    post_body(c, &url, "application/json", body).await
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

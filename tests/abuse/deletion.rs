@@ -26,12 +26,7 @@ async fn deleting_a_texture_stops_its_running_precompute() {
     // Well into its analysis and search.
     tokio::time::sleep(Duration::from_millis(1500)).await;
     assert_eq!(pending(), 1.0);
-    let r = c
-        .delete(s.url(&format!("/v1/textures/{id}")))
-        .send()
-        .await
-        .unwrap();
-    assert_eq!(r.status().as_u16(), 204);
+    assert_eq!(delete(&c, &s.url(&format!("/v1/textures/{id}"))).await, 204);
     let deleted = Instant::now();
     while s.state.registry.precompute_reserved().0 > 0 || pending() > 0.0 {
         assert!(

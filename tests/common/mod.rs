@@ -58,6 +58,45 @@ pub fn encode_png(w: u32, h: u32, rgb: &[u8]) -> Vec<u8> {
     solidtex_core::png::encode(w, h, rgb).unwrap()
 }
 
+/// An image file of `tests/fixtures/images` (see its README).
+pub fn image_fixture(name: &str) -> Vec<u8> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/images")
+        .join(name);
+    std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Encodes RGB8 as a baseline JPEG.
+pub fn encode_jpeg(w: u32, h: u32, rgb: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90)
+        .encode(rgb, w, h, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    out
+}
+
+/// Rewrites the size in a JPEG's frame header without touching the data.
+pub fn claim_jpeg_size(mut jpeg: Vec<u8>, w: u16, h: u16) -> Vec<u8> {
+    let sof = jpeg
+        .windows(2)
+        .position(|m| m[0] == 0xff && matches!(m[1], 0xc0..=0xc2))
+        .expect("a frame header");
+    jpeg[sof + 5..sof + 7].copy_from_slice(&h.to_be_bytes());
+    jpeg[sof + 7..sof + 9].copy_from_slice(&w.to_be_bytes());
+    jpeg
+}
+
+/// A photo of `w`×`h` pixels in large flat blocks, as RGB8: its PNG is
+/// about a thousandth of its pixels' bytes.
+pub fn blocky_rgb(w: u32, h: u32) -> Vec<u8> {
+    (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w / 500, i / w / 500);
+            [(x * 20) as u8, (y * 20) as u8, ((x + y) * 10) as u8]
+        })
+        .collect()
+}
+
 /// Decodes a PNG to (width, height, RGB8).
 pub fn decode_png(bytes: &[u8]) -> (u32, u32, Vec<u8>) {
     let img = image::load_from_memory(bytes).unwrap().to_rgb8();

@@ -4,7 +4,10 @@
 #![allow(dead_code)]
 
 #[allow(unused_imports)]
-pub use crate::common::{decode_png, encode_png, exemplar_png, grain_png};
+pub use crate::common::{
+    blocky_rgb, claim_jpeg_size, decode_png, encode_jpeg, encode_png, exemplar_png, grain_png,
+    image_fixture,
+};
 use serde_json::Value;
 use solidtex_server::{ServeArgs, Server};
 use std::net::SocketAddr;
@@ -226,11 +229,96 @@ pub fn metric(text: &str, sample: &str) -> f64 {
 
 /// Scrapes `/metrics`.
 pub async fn metrics(c: &reqwest::Client, s: &TestServer) -> String {
-    c.get(s.url("/metrics"))
+    text_at(c, &s.url("/metrics")).await
+}
+
+/// GETs a URL and reads its body as text, whatever the status.
+pub async fn text_at(c: &reqwest::Client, url: &str) -> String {
+    c.get(url).send().await.unwrap().text().await.unwrap()
+}
+
+/// POSTs `body` as `content_type`; returns (status, JSON body).
+pub async fn post_body(
+    c: &reqwest::Client,
+    url: &str,
+    content_type: &str,
+    body: impl Into<reqwest::Body>,
+) -> (u16, Value) {
+    let r = c
+        .post(url)
+        .header("content-type", content_type)
+        .body(body)
         .send()
         .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap()
+        .unwrap();
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap())
+}
+
+/// DELETEs a URL; returns the status.
+pub async fn delete(c: &reqwest::Client, url: &str) -> u16 {
+    c.delete(url).send().await.unwrap().status().as_u16()
+}
+
+/// The real binary, `solidtex serve`, on a free loopback port with its
+/// data in `data_dir` and the `SOLIDTEX_*` variables of `env`; killed when
+/// dropped.
+pub struct BinaryServer {
+    /// `http://127.0.0.1:PORT`
+    pub base: String,
+    child: std::process::Child,
+}
+
+impl BinaryServer {
+    /// Starts it and waits for its `listening on` line.
+    pub fn start(data_dir: &Path, env: &[(&str, &str)]) -> BinaryServer {
+        use std::io::BufRead;
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_solidtex"));
+        cmd.arg("serve")
+            .env("SOLIDTEX_ADDR", "127.0.0.1:0")
+            .env("SOLIDTEX_DATA_DIR", data_dir)
+            .env("SOLIDTEX_LOG", "warn")
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null());
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        let mut child = cmd.spawn().unwrap();
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let base = line
+            .trim()
+            .strip_prefix("solidtex listening on ")
+            .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+            .to_string();
+        BinaryServer { base, child }
+    }
+
+    /// Absolute URL of `path`.
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{}", self.base, path)
+    }
+
+    /// Its `/metrics` text.
+    pub async fn metrics(&self, c: &reqwest::Client) -> String {
+        text_at(c, &self.url("/metrics")).await
+    }
+}
+
+impl Drop for BinaryServer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The server's bound on its resident memory in a `/metrics` text: the
+/// sum of the parts of `solidtex_memory_bound_bytes`.
+pub fn memory_bound(text: &str) -> f64 {
+    text.lines()
+        .filter(|l| l.starts_with("solidtex_memory_bound_bytes{"))
+        .filter_map(|l| l.rsplit_once(' ')?.1.parse::<f64>().ok())
+        .sum()
 }

@@ -24,6 +24,7 @@ pub mod period;
 pub mod png;
 pub mod reference;
 mod request;
+mod simd;
 mod synth;
 mod texture;
 

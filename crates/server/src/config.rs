@@ -143,6 +143,16 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_PRECOMPUTE_BYTES", default_value = "6G", value_parser = parse_bytes)]
     pub max_precompute_bytes: u64,
 
+    /// Memory the decodes of uploaded images may take at once, by the
+    /// estimates their headers give (a PNG is read row by row and takes a
+    /// few MB whatever its size; a JPEG about 3 bytes per pixel, a 24
+    /// megapixel photo about 80 MB, progressive ones up to twice that). An
+    /// upload waits for room, up to `--max-queue-wait`, then gets 503; one
+    /// whose own estimate is over it gets 413 `image_too_large` (suffixes
+    /// K, M, G accepted).
+    #[arg(long, env = "SOLIDTEX_MAX_DECODE_BYTES", default_value = "512M", value_parser = parse_positive_bytes)]
+    pub max_decode_bytes: u64,
+
     /// Register the bundled exemplar under the id `default` at start.
     #[arg(long, env = "SOLIDTEX_DEFAULT_TEXTURE", default_value_t = true, action = clap::ArgAction::Set)]
     pub default_texture: bool,
@@ -245,6 +255,7 @@ impl ServeArgs {
             max_stored_bytes: 4 << 30,
             max_resident_bytes: 2 << 30,
             max_precompute_bytes: 6 << 30,
+            max_decode_bytes: 512 << 20,
             default_texture: false,
             token: None,
             cors_origins: Vec::new(),
@@ -397,6 +408,7 @@ mod tests {
             "--max-stored-bytes",
             "--max-resident-bytes",
             "--max-precompute-bytes",
+            "--max-decode-bytes",
         ];
         for flag in flags {
             let c = Cli::try_parse_from(["x", flag, "60M"])
@@ -407,6 +419,7 @@ mod tests {
                 "--max-upload-bytes" => c.max_upload_bytes,
                 "--max-stored-bytes" => c.max_stored_bytes,
                 "--max-resident-bytes" => c.max_resident_bytes,
+                "--max-decode-bytes" => c.max_decode_bytes,
                 _ => c.max_precompute_bytes,
             };
             assert_eq!(got, 60 << 20, "{flag}");

@@ -2,12 +2,13 @@
 //! `code` and a message, always sent as `{"error": {"code", "message"}}`.
 //!
 //! Engine errors and the server's own domain errors ([`SpecError`],
-//! [`RegistryError`], [`JobError`]) map onto this by kind, here and nowhere
+//! [`RegistryError`], [`JobError`], [`DecodeError`]) map onto this by kind, here and nowhere
 //! else; anything the HTTP layer itself rejects (routing, parsing) is built
 //! here too, and
 //! [`json_errors`] rewrites the few plain-text rejections of the framework,
 //! so that no error leaves the server in another shape.
 
+use crate::decodes::DecodeError;
 use crate::jobs::JobError;
 use crate::panics::panic_message;
 use crate::registry::RegistryError;
@@ -215,6 +216,28 @@ impl From<RegistryError> for ApiError {
             }
             E::StorageFull(message) => ApiError::storage_full(message),
             E::Internal(message) => ApiError::internal(message),
+        }
+    }
+}
+
+impl From<DecodeError> for ApiError {
+    fn from(e: DecodeError) -> Self {
+        match e {
+            DecodeError::TooLarge { needed, bound } => {
+                let mib = |b: u64| b.div_ceil(1 << 20);
+                ApiError::new(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    "image_too_large",
+                    format!(
+                        "decoding these images takes about {} MiB of memory, more than the {} \
+                         MiB this server allows decodes (--max-decode-bytes); send a smaller \
+                         image (larger than 512 pixels it is downscaled anyway)",
+                        mib(needed),
+                        mib(bound)
+                    ),
+                )
+            }
+            DecodeError::Busy => ApiError::overloaded("image decoding is busy"),
         }
     }
 }
@@ -461,6 +484,20 @@ mod tests {
         assert_eq!(e.message, "synthesis queue is full; retry later");
         let e: ApiError = JobError::OverBudget { budget: 9 }.into();
         assert_eq!((e.status, e.code), (StatusCode::BAD_REQUEST, "over_budget"));
+        let e: ApiError = DecodeError::TooLarge {
+            needed: 3 << 20,
+            bound: 1 << 20,
+        }
+        .into();
+        assert_eq!(
+            (e.status, e.code),
+            (StatusCode::PAYLOAD_TOO_LARGE, "image_too_large")
+        );
+        let e: ApiError = DecodeError::Busy.into();
+        assert_eq!(
+            (e.status, e.code, e.retry_after),
+            (StatusCode::SERVICE_UNAVAILABLE, "overloaded", Some(1))
+        );
         let e: ApiError = JobError::Failed("boom".into()).into();
         assert_eq!(e.status, StatusCode::INTERNAL_SERVER_ERROR);
         let e: ApiError = SpecError::InvalidParams("p".into()).into();

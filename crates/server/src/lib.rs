@@ -13,7 +13,8 @@
 //! - [`store`]: where textures are kept: the data directory, written
 //!   atomically and durably, or an S3-compatible object store.
 //! - [`registry`]: textures, their status and background precomputes.
-//! - [`jobs`]: the bounded synthesis queue (backpressure → 503).
+//! - [`jobs`]: the bounded synthesis queue (backpressure → 503);
+//!   [`decodes`]: the bound on decoding uploaded images.
 //! - [`listen`]: connections: header and idle timeouts, a connection cap;
 //!   [`conn_io`]: their sockets as hyper sees them.
 //! - [`routes`]: the router, handlers and middleware.
@@ -29,6 +30,7 @@
 
 pub mod config;
 pub(crate) mod conn_io;
+pub(crate) mod decodes;
 pub(crate) mod error;
 pub(crate) mod host;
 pub(crate) mod jobs;
@@ -46,6 +48,7 @@ pub(crate) mod store;
 
 pub use config::{LogFormat, ServeArgs};
 pub use error::ApiError;
+pub use store::local::write_atomic;
 
 use anyhow::Context;
 use registry::Registry;
@@ -148,9 +151,15 @@ impl Server {
             metrics.clone(),
         )
         .with_work_budget(args.max_request_work);
+        let decodes = decodes::Decodes::new(
+            args.max_decode_bytes,
+            std::thread::available_parallelism().map_or(2, |n| n.get()),
+            Duration::from_secs_f64(args.max_queue_wait),
+        );
         let state = Arc::new(Shared {
             registry,
             jobs,
+            decodes,
             metrics,
             brick_size: args.brick_size,
             chunk_size: args.chunk_size,

@@ -8,6 +8,8 @@
 //! (at most `--max-resident-bytes`); the estimated peaks of the
 //! precomputes running now (at most `--max-precompute-bytes`); every job
 //! slot at its most (`--max-jobs` times a job's working set and answer);
+//! the decodes of uploaded images at their bound (`--max-decode-bytes`:
+//! they are brief, and what they free stays resident for about a second);
 //! the process's own footprint; and the allocator's slack over the heap.
 //! Not counted: answers already computed and still being written to slow
 //! clients.
@@ -47,6 +49,8 @@ pub struct Inputs {
     pub precompute_bytes: u64,
     /// `--max-jobs`.
     pub max_jobs: u64,
+    /// `--max-decode-bytes`.
+    pub decode_bytes: u64,
     /// Voxels one answer may hold: the smaller of `--max-request-voxels`
     /// and `--max-request-work` (a request's own voxels are part of what
     /// it synthesizes).
@@ -54,14 +58,15 @@ pub struct Inputs {
 }
 
 /// The parts of the bound; their sum is the bound.
-pub fn bound(i: &Inputs) -> [Part; 6] {
+pub fn bound(i: &Inputs) -> [Part; 7] {
     let job = JOB_WORKING_BYTES.saturating_add(i.answer_voxels.saturating_mul(JOB_BYTES_PER_VOXEL));
     let jobs = i.max_jobs.saturating_mul(job);
     let heap = i
         .cache_max_bytes
         .saturating_add(i.candidates_bytes)
         .saturating_add(i.precompute_bytes)
-        .saturating_add(jobs);
+        .saturating_add(jobs)
+        .saturating_add(i.decode_bytes);
     [
         Part {
             name: "base",
@@ -83,6 +88,10 @@ pub fn bound(i: &Inputs) -> [Part; 6] {
             name: "jobs",
             bytes: jobs,
         },
+        Part {
+            name: "decodes",
+            bytes: i.decode_bytes,
+        },
         // Size classes and freed pages the allocator has not returned yet
         // (it returns them after about a second, see `main.rs`).
         Part {
@@ -103,11 +112,13 @@ mod tests {
             candidates_bytes: 64 << 20,
             precompute_bytes: 0,
             max_jobs: 2,
+            decode_bytes: 32 << 20,
             answer_voxels: 1 << 20,
         });
         let get = |n: &str| parts.iter().find(|p| p.name == n).unwrap().bytes;
         assert_eq!(get("jobs"), 2 * (JOB_WORKING_BYTES + 18 * (1 << 20)));
-        let heap = (256u64 << 20) + (64 << 20) + get("jobs");
+        assert_eq!(get("decodes"), 32 << 20);
+        let heap = (256u64 << 20) + (64 << 20) + get("jobs") + (32 << 20);
         assert_eq!(get("allocator"), heap / 8);
         let total: u64 = parts.iter().map(|p| p.bytes).sum();
         assert_eq!(total, BASE_BYTES + heap + heap / 8);

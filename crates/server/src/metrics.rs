@@ -59,7 +59,8 @@ pub struct StageLabels {
 /// Labels of the memory bound's parts.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct PartLabels {
-    /// `base`, `cache`, `candidates`, `precomputes`, `jobs`, `allocator`.
+    /// `base`, `cache`, `candidates`, `precomputes`, `jobs`, `decodes`,
+    /// `allocator`.
     pub part: String,
 }
 

@@ -3,8 +3,8 @@
 //! One exemplar may serve all three planes (xy, yz, zx) or each plane gets
 //! its own; all three must then have equal size.
 
+use super::decode::{self, Header};
 use crate::error::{Error, Result};
-use std::io::Cursor;
 
 /// Smallest accepted exemplar side in pixels.
 pub const MIN_SIDE: u32 = 16;
@@ -121,48 +121,50 @@ impl Exemplar {
         })
     }
 
-    /// Decodes a PNG or JPEG image of 16 to 512 pixels per side. The header
-    /// is checked before any pixel is allocated, so a decompression bomb is
-    /// rejected cheaply.
+    /// Decodes a PNG or JPEG image of 16 to 512 pixels per side (as
+    /// displayed: its EXIF orientation applied). The header is checked
+    /// before any pixel is allocated, so a decompression bomb is rejected
+    /// cheaply; data that ends early is an error.
     pub fn decode(bytes: &[u8]) -> Result<Self> {
-        let (w, h) = dimensions(bytes)?;
-        check_side(w, h)?;
-        let img = decode_rgb(bytes, w, h)?;
-        Self::from_rgb(img.width(), img.height(), img.as_raw())
+        let header = Header::read(bytes)?;
+        check_side(header.width, header.height)?;
+        Self::from_decoded(decode::decode(bytes, &header, None)?)
     }
 
     /// Like [`Exemplar::decode`], but a photo larger than [`MAX_SIDE`] (up to
     /// [`MAX_PHOTO_SIDE`] per side) is downscaled to fit, keeping its aspect
-    /// ratio. Returns the original size when it was downscaled, so that the
-    /// caller can say so.
+    /// ratio, without holding it at full size where its format allows
+    /// (see [`decode`]). Returns the original size when it was downscaled,
+    /// so that the caller can say so.
     pub fn decode_fitting(bytes: &[u8]) -> Result<(Self, Option<(u32, u32)>)> {
-        let (w, h) = dimensions(bytes)?;
-        if w <= MAX_SIDE && h <= MAX_SIDE {
-            return Ok((Self::decode(bytes)?, None));
+        let header = Header::read(bytes)?;
+        let (w, h) = (header.width, header.height);
+        match fitted_size(&header)? {
+            None => Ok((Self::decode(bytes)?, None)),
+            Some(fit) => {
+                let e = Self::from_decoded(decode::decode(bytes, &header, Some(fit))?)?;
+                Ok((e, Some((w, h))))
+            }
         }
-        if w > MAX_PHOTO_SIDE || h > MAX_PHOTO_SIDE {
-            // Photos up to MAX_PHOTO_SIDE are downscaled; larger ones are not.
-            return Err(Error::ImageSize {
-                width: w,
-                height: h,
-                min: MIN_SIDE,
-                max: MAX_PHOTO_SIDE,
-            });
-        }
-        let img = decode_rgb(bytes, w, h)?;
-        // The longer side becomes MAX_SIDE; rounding keeps the aspect ratio.
-        let long = u64::from(w.max(h));
-        let fit = |s: u32| ((u64::from(s) * u64::from(MAX_SIDE) + long / 2) / long) as u32;
-        let (fw, fh) = (fit(w), fit(h));
-        // Too thin to keep MIN_SIDE once downscaled: say what was sent.
-        check_side(fw, fh).map_err(|_| Error::ImageSize {
-            width: w,
-            height: h,
-            min: MIN_SIDE,
-            max: MAX_SIDE,
-        })?;
-        let small = image::imageops::resize(&img, fw, fh, image::imageops::FilterType::Lanczos3);
-        Ok((Self::from_rgb(fw, fh, small.as_raw())?, Some((w, h))))
+    }
+
+    /// The most heap bytes [`Exemplar::decode_fitting`] takes to decode
+    /// `bytes`, from its header alone; an error when the header is
+    /// unreadable or the size is refused (as the decode would refuse it).
+    pub fn decode_peak_bytes(bytes: &[u8]) -> Result<u64> {
+        let header = Header::read(bytes)?;
+        let fit = match fitted_size(&header)? {
+            Some(fit) => fit,
+            None => {
+                check_side(header.width, header.height)?;
+                (header.width, header.height)
+            }
+        };
+        Ok(header.peak_bytes(fit))
+    }
+
+    fn from_decoded(d: decode::Decoded) -> Result<Self> {
+        Self::from_rgb(d.width, d.height, &d.rgb)
     }
 
     /// Reads and decodes an image file.
@@ -248,37 +250,31 @@ fn grid<T>(width: usize, height: usize, f: impl Fn(usize, usize) -> T) -> Vec<T>
         .collect()
 }
 
-/// The image's size from its header alone.
-fn dimensions(bytes: &[u8]) -> Result<(u32, u32)> {
-    let reader = image::ImageReader::new(Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|e| Error::MalformedImage(e.to_string()))?;
-    if reader.format().is_none() {
-        return Err(Error::MalformedImage(
-            "unrecognised image format (expected PNG or JPEG)".into(),
-        ));
+/// The size a photo larger than [`MAX_SIDE`] is downscaled to (its longer
+/// side [`MAX_SIDE`], the aspect ratio kept), `None` for an image that fits
+/// already; an error for one over [`MAX_PHOTO_SIDE`], or too thin to keep
+/// [`MIN_SIDE`] once downscaled.
+fn fitted_size(header: &Header) -> Result<Option<(u32, u32)>> {
+    let (w, h) = (header.width, header.height);
+    if w <= MAX_SIDE && h <= MAX_SIDE {
+        return Ok(None);
     }
-    reader
-        .into_dimensions()
-        .map_err(|e| Error::MalformedImage(e.to_string()))
-}
-
-/// Decodes to RGB8 an image whose header said `width`×`height` (already
-/// checked against a side limit); the decoder may allocate no more.
-fn decode_rgb(bytes: &[u8], width: u32, height: u32) -> Result<image::RgbImage> {
-    let mut reader = image::ImageReader::new(Cursor::new(bytes))
-        .with_guessed_format()
-        .map_err(|e| Error::MalformedImage(e.to_string()))?;
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(width);
-    limits.max_image_height = Some(height);
-    // RGBA8 of that size, with room for the decoder's own buffers.
-    limits.max_alloc = Some(u64::from(width) * u64::from(height) * 4 + (16 << 20));
-    reader.limits(limits);
-    Ok(reader
-        .decode()
-        .map_err(|e| Error::MalformedImage(e.to_string()))?
-        .to_rgb8())
+    let refused = |max| Error::ImageSize {
+        width: w,
+        height: h,
+        min: MIN_SIDE,
+        max,
+    };
+    if w > MAX_PHOTO_SIDE || h > MAX_PHOTO_SIDE {
+        // Photos up to MAX_PHOTO_SIDE are downscaled; larger ones are not.
+        return Err(refused(MAX_PHOTO_SIDE));
+    }
+    let long = u64::from(w.max(h));
+    let fit = |s: u32| ((u64::from(s) * u64::from(MAX_SIDE) + long / 2) / long) as u32;
+    let (fw, fh) = (fit(w), fit(h));
+    // Too thin to keep MIN_SIDE once downscaled: say what was sent.
+    check_side(fw, fh).map_err(|_| refused(MAX_SIDE))?;
+    Ok(Some((fw, fh)))
 }
 
 fn check_side(width: u32, height: u32) -> Result<()> {

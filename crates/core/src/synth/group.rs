@@ -91,11 +91,8 @@ impl Engine {
         let mut peeked: HashMap<([i64; 3], usize), Option<Tile>> = HashMap::default();
         let chain = plan::backward(
             targets,
-            self.steps_at(k),
-            self.radius,
+            self.schedule(k),
             self.field.is_some(),
-            plan::Classes::at(&self.params, k),
-            self.barrier_cells(k).as_ref(),
             |pass, forward, voxels| {
                 if acc.dry {
                     return Vec::new();
@@ -179,8 +176,7 @@ impl Engine {
         triples: Grid<[u32; 3]>,
         acc: &Acc,
     ) -> (Grid<[u32; 3]>, HashMap<[i64; 3], u64>) {
-        let steps = self.steps_at(k);
-        let barrier_cells = self.barrier_cells(k);
+        let schedule = self.schedule(k);
         // Voxels corrected in the current pass: their values after it,
         // cached once it ends.
         let mut ended: HashMap<[i64; 3], u64> = HashMap::default();
@@ -188,26 +184,26 @@ impl Engine {
         let corrector = Corrector::new(&self.cands, k, &self.params, self.field.as_deref());
         let mut step_start: Option<(usize, Work)> = None;
         let mut current_pass = 0;
-        let classes = plan::Classes::at(&self.params, k).count() as usize;
+        let classes = schedule.subpasses_per_pass();
         for (forward, (si, voxels)) in chain.subpasses.iter().enumerate() {
             cancel::check(&acc.cancel);
             if forward / classes != current_pass {
                 // The values after the pass just done.
-                let done = self.version_after_pass(k, current_pass);
+                let done = schedule.version_after_pass(current_pass);
                 self.publish_ended(k, done, &ended, &work.triples);
                 ended.clear();
                 current_pass = forward / classes;
             }
-            if barrier_cells.is_some() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
+            if schedule.window.has_walls() && step_start.as_ref().is_none_or(|s| s.0 != *si) {
                 step_start = Some((*si, work.clone()));
             }
-            let offset = steps[*si].offset;
+            let offset = schedule.steps[*si].offset;
             let start = step_start.as_ref().map(|s| &s.1);
             let w = &work;
             let new: Vec<(usize, [u32; 3], [f32; 3])> = voxels
                 .par_iter()
                 .map(|&p| {
-                    let barrier = barrier_cells.as_ref().map(|c| plan::cell_of(c, p, offset));
+                    let barrier = schedule.window.latest_within(p, offset);
                     let t = match (start, barrier) {
                         (Some(st), Some(cell)) => corrector.correct(w, Some((st, &cell)), p),
                         _ => corrector.correct(w, None, p),

@@ -4,14 +4,19 @@
 //! Each level k (0 = finest) holds a coordinate triple per voxel. Version 0
 //! of a level comes from the jittered candidate slab (coarsest synthesized
 //! level) or from upsampling the parent level; correction steps refine it.
-//! A correction's history window says which version of each neighbour it
-//! reads:
+//! A correction's history window ([`history`]) says which version of each
+//! neighbour it reads:
 //!
 //! - **standard** (Dong et al.): the latest version of every neighbour, so
 //!   the dependency set grows by N/2 with every subpass;
-//! - **dual grid** (Zhang et al.): ⌈P/2⌉ passes on a grid of M³ cells, then
-//!   ⌊P/2⌋ on the grid shifted by M/2; a neighbour across the cell wall is
-//!   read at the version the step started from, which bounds the set.
+//! - **dual grid** (Zhang et al., [`dual_grid`]): ⌈P/2⌉ passes on a grid of
+//!   M³ cells, then ⌊P/2⌋ on the grid shifted by M/2; a neighbour across the
+//!   cell wall is read at the version the step started from, which bounds
+//!   the set.
+//!
+//! Each level's [`schedule::LevelSchedule`] (steps, subpass classes, history
+//! window, reach) is built once with the texture and read by the planner,
+//! the synthesis and the estimator alike.
 //!
 //! A request is answered from final-version tiles (level-aligned cubes of
 //! [`TILE`] voxels) kept in the shared [`cache::TileCache`]. Missing tiles of
@@ -27,21 +32,24 @@ pub mod cache;
 pub mod cancel;
 mod colour;
 pub mod correction;
+pub mod dual_grid;
 pub mod estimate;
 pub mod grid;
 mod group;
+pub mod history;
 pub mod init;
 mod inspect;
 #[cfg(test)]
 mod periodic_tests;
 pub mod plan;
+pub mod schedule;
 mod stats;
 
 use crate::candidates::Candidates;
 use crate::error::Result;
 use crate::field::FrameField;
-use crate::params::{Scheme, SynthParams};
-use crate::period::{Intervals, Period};
+use crate::params::SynthParams;
+use crate::period::Period;
 use crate::request::{CutPlane, Filter, Region};
 use cache::{Claim, Tile, TileCache, TileKey};
 use colour::{colour, rgb8, triple_rgb8};
@@ -49,6 +57,7 @@ use grid::{Box3, Grid};
 pub use inspect::SlabViews;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap as HashMap;
+use schedule::LevelSchedule;
 pub use stats::SynthStats;
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -66,16 +75,6 @@ type Wanted = BTreeMap<[i64; 3], u64>;
 /// voxels, so smaller groups cost little time and save much resident
 /// memory on large slices (docs/quality.md, "Cost of a correction").
 const MAX_GROUP_TILES: usize = 4096;
-
-/// One correction step of a level: cells of side M shifted by `offset`,
-/// corrected `passes` times.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct Step {
-    /// Grid shift (0 for the primary grid, M/2 for the dual grid).
-    pub offset: i64,
-    /// Passes in this step.
-    pub passes: u32,
-}
 
 /// Counters gathered while serving one request.
 pub(crate) struct Acc {
@@ -128,40 +127,14 @@ pub(crate) struct Engine {
     cache: Arc<TileCache>,
     key: u64,
     init_level: usize,
-    radius: i64,
     /// The solid's period, if it has one.
     period: Option<Period>,
     /// Whether a tile and its copies a period away share one cache key
     /// (always, but in the tests that synthesize copies apart to check
     /// that they come out the same).
     share_copies: bool,
-    steps: Vec<Step>,
-    /// Steps of the finest levels (see [`SynthParams::finest_passes`] and
-    /// [`SynthParams::fine_levels`]).
-    finest_steps: Vec<Step>,
-    /// How far each level's chain reaches, finest first.
-    reach: Vec<plan::Reach>,
-}
-
-/// Correction steps for `passes` passes under the texture's scheme.
-fn steps_for(params: &SynthParams, passes: u32) -> Vec<Step> {
-    match params.scheme {
-        Scheme::DualGrid => [
-            Step {
-                offset: 0,
-                passes: passes.div_ceil(2),
-            },
-            Step {
-                offset: params.grid as i64 / 2,
-                passes: passes / 2,
-            },
-        ]
-        .into_iter()
-        .filter(|s| s.passes > 0)
-        .collect(),
-        Scheme::Standard if passes > 0 => vec![Step { offset: 0, passes }],
-        Scheme::Standard => Vec::new(),
-    }
+    /// How each level is corrected, finest first.
+    schedules: Vec<LevelSchedule>,
 }
 
 impl Engine {
@@ -182,16 +155,19 @@ impl Engine {
         let mut bytes = cands.digest().to_le_bytes().to_vec();
         bytes.extend_from_slice(&serde_json::to_vec(&params).expect("params serialise"));
         let key = crate::hash::fingerprint(&bytes);
-        let steps = steps_for(&params, params.passes);
-        let finest_steps = steps_for(&params, params.finest_passes);
         // The appearance tables are built with the texture, not by its
         // first request.
         (0..cands.level_count())
             .into_par_iter()
             .for_each(|k| _ = cands.level(k).sparse_tables(cands.dims(), k));
-        let mut engine = Engine {
-            init_level: cands.level_count() - 1,
-            radius: correction::REACH,
+        let init_level = cands.level_count() - 1;
+        let schedules = (0..=init_level)
+            .map(|k| {
+                LevelSchedule::of_level(&params, period.as_ref(), k, init_level, correction::REACH)
+            })
+            .collect();
+        Ok(Engine {
+            init_level,
             period,
             share_copies: true,
             cands,
@@ -199,39 +175,13 @@ impl Engine {
             field,
             cache,
             key,
-            steps,
-            finest_steps,
-            reach: Vec::new(),
-        };
-        // The walk that finds a level's reach assumes uniform cells; the
-        // per-period cells of a periodic solid are bounded by the reach
-        // without walls.
-        let uniform_cell = match (engine.params.scheme, engine.period) {
-            (Scheme::DualGrid, None) => Some(engine.params.grid as i64),
-            _ => None,
-        };
-        engine.reach = (0..=engine.init_level)
-            .map(|k| {
-                known_reach(
-                    engine.steps_at(k),
-                    engine.radius,
-                    plan::Classes::at(&engine.params, k),
-                    uniform_cell,
-                )
-            })
-            .collect();
-        Ok(engine)
+            schedules,
+        })
     }
 
     /// The texture's field, ready to read.
     pub(crate) fn field(&self) -> Option<&FrameField> {
         self.field.as_deref()
-    }
-
-    /// The dual grid's cells at level `k`, or `None` under the standard
-    /// scheme.
-    fn barrier_cells(&self, k: usize) -> Option<[Intervals; 3]> {
-        crate::period::barrier_cells(&self.params, self.period.as_ref(), k)
     }
 
     /// The period whose copies of a tile share its key.
@@ -257,7 +207,7 @@ impl Engine {
 
     /// How far a correction reads, in voxels of its level.
     pub(crate) fn radius(&self) -> i64 {
-        self.radius
+        correction::REACH
     }
 
     pub(crate) fn shared_candidates(&self) -> &Arc<Candidates> {
@@ -276,15 +226,9 @@ impl Engine {
         self.init_level as u32
     }
 
-    /// Correction steps applied at level `k`.
-    pub(crate) fn steps_at(&self, k: usize) -> &[Step] {
-        if k == self.init_level && !self.params.correct_init_level {
-            &[]
-        } else if k < self.params.fine_levels as usize {
-            &self.finest_steps
-        } else {
-            &self.steps
-        }
+    /// How level `k` is corrected.
+    pub(crate) fn schedule(&self, k: usize) -> &LevelSchedule {
+        &self.schedules[k]
     }
 
     fn tile_of(p: [i64; 3]) -> [i64; 3] {
@@ -440,14 +384,8 @@ impl Engine {
     /// of level `k` in tile `cell`: the version after `pass + 1` passes, or
     /// the final version after the last pass.
     fn after_pass_key(&self, k: usize, pass: usize, cell: [i64; 3]) -> TileKey {
-        self.version_key(k, self.version_after_pass(k, pass), cell)
-    }
-
-    /// The version of level `k` after pass `pass`: `pass + 1`, or 0 (final)
-    /// after the last pass.
-    fn version_after_pass(&self, k: usize, pass: usize) -> usize {
-        let total: usize = self.steps_at(k).iter().map(|s| s.passes as usize).sum();
-        if pass + 1 < total { pass + 1 } else { 0 }
+        let version = self.schedule(k).version_after_pass(pass);
+        self.version_key(k, version, cell)
     }
 
     /// Key of the version after `done` correction passes of level `k` (0:
@@ -496,12 +434,9 @@ impl Engine {
             cache: Arc::new(TileCache::new(usize::MAX)),
             key: self.key,
             init_level: self.init_level,
-            radius: self.radius,
             period: self.period,
             share_copies: self.share_copies,
-            steps: self.steps.clone(),
-            finest_steps: self.finest_steps.clone(),
-            reach: self.reach.clone(),
+            schedules: self.schedules.clone(),
         }
     }
 
@@ -514,7 +449,7 @@ impl Engine {
         limit: u64,
     ) -> estimate::WorkEstimate {
         let piece = estimate::Piece::region(r.origin, r.size);
-        estimate::estimate(piece, &self.reach[self.chain(lod)], MAX_GROUP_TILES, limit)
+        estimate::estimate(piece, &self.reach_from(lod), MAX_GROUP_TILES, limit)
     }
 
     /// An upper bound of what [`Engine::plan_cut`] counts.
@@ -533,7 +468,7 @@ impl Engine {
             plane.height,
             filter == Filter::Trilinear,
         );
-        estimate::estimate(piece, &self.reach[self.chain(lod)], MAX_GROUP_TILES, limit)
+        estimate::estimate(piece, &self.reach_from(lod), MAX_GROUP_TILES, limit)
     }
 
     /// An upper bound of what [`Engine::plan_points`] counts: the sum of
@@ -545,7 +480,7 @@ impl Engine {
         lod: u32,
         limit: u64,
     ) -> estimate::WorkEstimate {
-        let reach = &self.reach[self.chain(lod)];
+        let reach = &self.reach_from(lod);
         let mut out = estimate::WorkEstimate {
             per_level: vec![0; reach.len()],
             total: 0,
@@ -571,6 +506,14 @@ impl Engine {
         out
     }
 
+    /// How far the chain of each level reaches, from level `lod` on.
+    fn reach_from(&self, lod: u32) -> Vec<plan::Reach> {
+        self.schedules[self.chain(lod)]
+            .iter()
+            .map(|s| s.reach)
+            .collect()
+    }
+
     /// Exact voxel-level dependency chain of a few voxels (see
     /// [`plan::exact_chain`]).
     /// `radius` is the neighbourhood's half side (the analysis's own unless
@@ -581,15 +524,11 @@ impl Engine {
         lod: u32,
         radius: i64,
     ) -> Vec<plan::LevelPlan> {
-        let levels: Vec<plan::LevelSteps> = self
-            .chain(lod)
-            .map(|k| plan::LevelSteps {
-                steps: self.steps_at(k).to_vec(),
-                order: plan::Classes::at(&self.params, k),
-                cells: self.barrier_cells(k),
-            })
+        let schedules: Vec<LevelSchedule> = self.schedules[self.chain(lod)]
+            .iter()
+            .map(|s| s.with_radius(radius))
             .collect();
-        plan::exact_chain(voxels, levels.len(), &levels, radius, self.field.is_some())
+        plan::exact_chain(voxels, &schedules, self.field.is_some())
     }
 
     pub(crate) fn region_rgb(&self, r: &Region, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
@@ -664,27 +603,6 @@ impl Engine {
         };
         Ok((rgb, acc.stats()))
     }
-}
-
-/// [`plan::reach`] of a level's steps, computed once per process for each
-/// set of steps: textures with the same synthesis parameters share it.
-fn known_reach(
-    steps: &[Step],
-    radius: i64,
-    order: plan::Classes,
-    cell: Option<i64>,
-) -> plan::Reach {
-    type Key = (Vec<Step>, i64, plan::Classes, Option<i64>);
-    static KNOWN: std::sync::LazyLock<parking_lot::Mutex<HashMap<Key, plan::Reach>>> =
-        std::sync::LazyLock::new(Default::default);
-    let key = (steps.to_vec(), radius, order, cell);
-    let lock = || KNOWN.lock();
-    if let Some(r) = lock().get(&key) {
-        return *r;
-    }
-    let r = plan::reach(steps, radius, order, cell);
-    lock().insert(key, r);
-    r
 }
 
 /// The voxels of tile `cell` whose bits are set in `mask`, with their

@@ -33,8 +33,10 @@ fn split(mut cells: Vec<[i64; 3]>, max: usize, out: &mut Vec<Vec<[i64; 3]>>) {
     split(right, max, out);
 }
 
-use super::Step;
+use super::dual_grid::Step;
 use super::grid::{Box3, Grid};
+use super::history::HistoryWindow;
+use super::schedule::LevelSchedule;
 use crate::params::SynthParams;
 use crate::period::Intervals;
 use rayon::prelude::*;
@@ -365,31 +367,13 @@ impl LevelChain {
     }
 }
 
-/// The cell of the dual grid shifted by `offset` that holds `v`, under the
-/// cells `cells` (along x, y and z).
-#[inline]
-pub fn cell_of(cells: &[Intervals; 3], v: [i64; 3], offset: i64) -> Box3 {
-    // Spelled out: an array `map` here is compiled out of line.
-    let (ix, iy, iz) = (
-        cells[0].index_of(v[0] - offset),
-        cells[1].index_of(v[1] - offset),
-        cells[2].index_of(v[2] - offset),
-    );
-    Box3::new(
-        [
-            cells[0].start(ix) + offset,
-            cells[1].start(iy) + offset,
-            cells[2].start(iz) + offset,
-        ],
-        [cells[0].size(ix), cells[1].size(iy), cells[2].size(iz)],
-    )
-}
-
-/// Walks the correction steps of one level backwards from `targets` (voxels
-/// needed at the final version), following each correction's history
-/// window: a neighbour is needed at the previous subpass's version, or, when
-/// `cells` are given and the neighbour lies across the step's cell wall, at
-/// the version the step started from (Zhang et al.'s barrier).
+/// Walks the correction steps of one level's `schedule` backwards from
+/// `targets` (voxels needed at the final version), following each
+/// correction's [history window](super::history): a neighbour is needed at
+/// the previous subpass's version, or, across the wall of the step's cell
+/// of the dual grid, at the version the step started from (Zhang et al.'s
+/// barrier). `cube`: corrections read the whole cube around them (see
+/// [`shape`]).
 ///
 /// A voxel's correction in a pass produces its value at the end of that
 /// pass (its final value in the last pass), so `known_after(pass, subpass,
@@ -402,11 +386,30 @@ pub fn cell_of(cells: &[Intervals; 3], v: [i64; 3], offset: i64) -> Box3 {
 /// the earlier step's last pass.
 pub fn backward(
     targets: &[[i64; 3]],
+    schedule: &LevelSchedule,
+    cube: bool,
+    known_after: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
+) -> LevelChain {
+    let s = schedule;
+    walk_back(
+        targets,
+        &s.steps,
+        s.radius,
+        cube,
+        s.classes,
+        &s.window,
+        known_after,
+    )
+}
+
+/// [`backward`] over the parts of a schedule.
+fn walk_back(
+    targets: &[[i64; 3]],
     steps: &[Step],
     radius: i64,
     cube: bool,
     order: Classes,
-    cells: Option<&[Intervals; 3]>,
+    window: &HistoryWindow,
     mut known_after: impl FnMut(usize, usize, &mut Vec<[i64; 3]>) -> Vec<[i64; 3]>,
 ) -> LevelChain {
     let classes = order.count();
@@ -445,13 +448,10 @@ pub fn backward(
             // The voxels of one subpass are independent: they mark their
             // reads in parallel. A voxel whose reads all lie inside its
             // barrier cell (most of them) marks them by index offsets.
-            corrected
-                .par_iter()
-                .with_min_len(1024)
-                .for_each(|&v| match cells {
+            corrected.par_iter().with_min_len(1024).for_each(|&v| {
+                match window.latest_within(v, step.offset) {
                     None => need.mark_around(v, &reads),
-                    Some(cells) => {
-                        let cell_box = cell_of(cells, v, step.offset);
+                    Some(cell_box) => {
                         let (lo, hi) = (cell_box.lo, cell_box.hi);
                         if (0..3).all(|a| v[a] - radius >= lo[a] && v[a] + radius < hi[a]) {
                             need.mark_around(v, &reads);
@@ -465,7 +465,8 @@ pub fn backward(
                             }
                         });
                     }
-                });
+                }
+            });
             subpasses.push((si, corrected));
         }
         need.recount();
@@ -483,43 +484,23 @@ pub fn backward(
     LevelChain { need, subpasses }
 }
 
-/// How one level is corrected, as the planner walks it.
-#[derive(Clone, Debug)]
-pub struct LevelSteps {
-    /// The correction steps (empty: no correction).
-    pub steps: Vec<Step>,
-    /// The subpasses of each pass.
-    pub order: Classes,
-    /// The dual grid's cells, or `None` for the standard scheme.
-    pub cells: Option<[Intervals; 3]>,
-}
-
 /// Exact voxel-level dependency sets of a request (Dong et al.'s
 /// "Mask ⊗ Neighborhood" chain, with Zhang et al.'s history windows),
 /// level by level from the finest: for each level, the version-0 voxels and
-/// the corrections needed. `per_level[k]` says how level k is corrected.
+/// the corrections needed, under `schedules[k]` for the k-th level from the
+/// request's.
 pub fn exact_chain(
     request: &[[i64; 3]],
-    levels: usize,
-    per_level: &[LevelSteps],
-    radius: i64,
+    schedules: &[LevelSchedule],
     cube: bool,
 ) -> Vec<LevelPlan> {
     let mut points: Vec<[i64; 3]> = request.to_vec();
     let mut out = Vec::new();
-    for level in per_level.iter().take(levels) {
+    for schedule in schedules {
         if points.is_empty() {
             break;
         }
-        let chain = backward(
-            &points,
-            &level.steps,
-            radius,
-            cube,
-            level.order,
-            level.cells.as_ref(),
-            |_, _, _| Vec::new(),
-        );
+        let chain = backward(&points, schedule, cube, |_, _, _| Vec::new());
         out.push(LevelPlan {
             voxels: chain.need.count(),
             corrections: chain.corrections(),
@@ -601,16 +582,10 @@ pub fn reach(steps: &[Step], radius: i64, order: Classes, cell: Option<i64>) -> 
                 }
             }
             // The cube reads no further along an axis than the planes.
-            let cells = cell.map(|m| [Intervals::Uniform(m); 3]);
-            let need = backward(
-                &layer,
-                steps,
-                radius,
-                false,
-                order,
-                cells.as_ref(),
-                |_, _, _| Vec::new(),
-            )
+            let window = HistoryWindow::of(cell.map(|m| [Intervals::Uniform(m); 3]));
+            let need = walk_back(&layer, steps, radius, false, order, &window, |_, _, _| {
+                Vec::new()
+            })
             .need
             .bounds();
             out.lo[a] = out.lo[a].max(at - need.lo[a]);
@@ -753,16 +728,14 @@ mod tests {
         ];
         let blocks = |s: Vec<Vec<Step>>, cells| -> Vec<_> {
             s.into_iter()
-                .map(|steps| LevelSteps {
-                    steps,
-                    order: Classes::Blocks(2),
-                    cells,
+                .map(|steps| {
+                    LevelSchedule::new(steps, Classes::Blocks(2), HistoryWindow::of(cells), 2)
                 })
                 .collect()
         };
         let twelve = Some([Intervals::Uniform(12); 3]);
-        let dual = exact_chain(&[[5, 5, 5]], 3, &blocks(steps, twelve), 2, false);
-        let standard = exact_chain(&[[5, 5, 5]], 3, &blocks(standard_steps, None), 2, false);
+        let dual = exact_chain(&[[5, 5, 5]], &blocks(steps, twelve), false);
+        let standard = exact_chain(&[[5, 5, 5]], &blocks(standard_steps, None), false);
         let total = |v: &[LevelPlan]| v.iter().map(|l| l.voxels).sum::<u64>();
         assert!(total(&dual) < total(&standard), "{dual:?} vs {standard:?}");
     }
@@ -795,17 +768,16 @@ mod tests {
                     for x in 0..period {
                         let p = [x, y, z];
                         let cells = cell.map(|m| [Intervals::Uniform(m); 3]);
-                        let b = backward(
-                            &[p],
-                            &steps,
+                        let schedule = LevelSchedule {
+                            steps: steps.clone(),
+                            classes: order,
+                            window: HistoryWindow::of(cells),
                             radius,
-                            false,
-                            order,
-                            cells.as_ref(),
-                            |_, _, _| Vec::new(),
-                        )
-                        .need
-                        .bounds();
+                            reach: r,
+                        };
+                        let b = backward(&[p], &schedule, false, |_, _, _| Vec::new())
+                            .need
+                            .bounds();
                         for (a, c) in p.into_iter().enumerate() {
                             met.lo[a] = met.lo[a].max(c - b.lo[a]);
                             met.hi[a] = met.hi[a].max(b.hi[a] - 1 - c);

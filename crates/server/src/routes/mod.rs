@@ -17,6 +17,7 @@ mod voxels;
 
 pub use volumes::{WINDOW_LOG2, window};
 
+use super::decodes::Decodes;
 use super::error::{ApiError, echo, json_errors, panic_response};
 use super::host::AllowedHosts;
 use super::jobs::Jobs;
@@ -68,6 +69,8 @@ pub struct Shared {
     pub registry: Arc<Registry>,
     /// The synthesis job queue.
     pub(crate) jobs: Jobs,
+    /// The bound on decoding uploaded images.
+    pub(crate) decodes: Decodes,
     /// Metrics.
     pub metrics: Arc<Metrics>,
     /// Edge of served bricks.

@@ -52,6 +52,7 @@ pub async fn metrics(State(s): State<AppState>) -> Response {
         candidates_bytes: s.registry.resident_candidate_bytes(),
         precompute_bytes: s.registry.precompute_reserved().0,
         max_jobs: s.jobs.max_jobs() as u64,
+        decode_bytes: s.decodes.max_bytes(),
         answer_voxels: s.max_request_voxels.min(s.max_request_work),
     };
     for part in memory::bound(&inputs) {

@@ -132,6 +132,69 @@ enum RawPlanes {
     Triple([Bytes; 3], [Option<Bytes>; 3]),
 }
 
+impl RawPlanes {
+    /// Every image with the name of its form field.
+    fn images(&self) -> Vec<(String, &Bytes)> {
+        let named: Vec<(&str, &Bytes, &Option<Bytes>)> = match self {
+            RawPlanes::Single(b, m) => vec![("image", b, m)],
+            RawPlanes::Triple(planes, masks) => ["xy", "yz", "zx"]
+                .into_iter()
+                .zip(planes)
+                .zip(masks)
+                .map(|((name, b), m)| (name, b, m))
+                .collect(),
+        };
+        let mut out = Vec::new();
+        for (name, image, mask) in named {
+            out.push((name.to_string(), image));
+            if let Some(m) = mask {
+                out.push((mask_field(name), m));
+            }
+        }
+        out
+    }
+
+    /// The most heap bytes decoding every image takes (they are decoded
+    /// one after the other, and each result is small), from their headers;
+    /// an error names the image whose header is refused.
+    fn decode_peak_bytes(&self) -> Result<u64, ApiError> {
+        let mut total = 0u64;
+        for (name, bytes) in self.images() {
+            check_not_empty(&name, bytes)?;
+            let peak = Exemplar::decode_peak_bytes(bytes).map_err(|e| named(&name, e))?;
+            total = total.saturating_add(peak);
+        }
+        Ok(total)
+    }
+}
+
+/// The form field of the feature mask of the image in field `name`.
+fn mask_field(name: &str) -> String {
+    if name == "image" {
+        "feature_mask".to_string()
+    } else {
+        format!("feature_mask_{name}")
+    }
+}
+
+fn check_not_empty(name: &str, bytes: &[u8]) -> Result<(), ApiError> {
+    if bytes.is_empty() {
+        return Err(ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "malformed_image",
+            format!("{name}: empty image"),
+        ));
+    }
+    Ok(())
+}
+
+/// An engine error about the image of form field `name`.
+fn named(name: &str, e: solidtex_core::Error) -> ApiError {
+    let mut a = ApiError::from(e);
+    a.message = format!("{name}: {}", a.message);
+    a
+}
+
 /// Longest texture name kept, in characters.
 const MAX_NAME_CHARS: usize = 120;
 
@@ -186,9 +249,15 @@ pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response,
         }
     };
     let params = TextureParams::from_flat(&flat)?;
-    let (spec, notes) = tokio::task::spawn_blocking(move || decode(raw, params))
-        .await
-        .map_err(|e| ApiError::internal(e.to_string()))??;
+    // Room for the decodes, by what the headers say they will take, before
+    // any pixel is decoded.
+    let admitted = s.decodes.admit(raw.decode_peak_bytes()?).await?;
+    let (spec, notes) = tokio::task::spawn_blocking(move || {
+        let _admitted = admitted;
+        decode(raw, params)
+    })
+    .await
+    .map_err(|e| ApiError::internal(e.to_string()))??;
     let submitted = s.registry.submit(None, spec, name).await?;
     let (entry, status) = match submitted {
         Submitted::Known(e) => (e, StatusCode::CREATED),
@@ -375,18 +444,8 @@ async fn read_multipart(
 /// Decodes one uploaded image; a photo larger than the exemplar limit is
 /// downscaled, and a note says so.
 fn decode_one(name: &str, bytes: &[u8], notes: &mut Vec<String>) -> Result<Exemplar, ApiError> {
-    if bytes.is_empty() {
-        return Err(ApiError::new(
-            StatusCode::BAD_REQUEST,
-            "malformed_image",
-            format!("{name}: empty image"),
-        ));
-    }
-    let (e, original) = Exemplar::decode_fitting(bytes).map_err(|e| {
-        let mut a = ApiError::from(e);
-        a.message = format!("{name}: {}", a.message);
-        a
-    })?;
+    check_not_empty(name, bytes)?;
+    let (e, original) = Exemplar::decode_fitting(bytes).map_err(|e| named(name, e))?;
     if let Some((w, h)) = original {
         notes.push(format!(
             "{name}: downscaled from {w}x{h} to {}x{} (exemplars are at most {} pixels per side)",
@@ -408,17 +467,9 @@ fn decode_masked(
 ) -> Result<Exemplar, ApiError> {
     let e = decode_one(name, bytes, notes)?;
     let Some(mask) = mask else { return Ok(e) };
-    let field = if name == "image" {
-        "feature_mask".to_string()
-    } else {
-        format!("feature_mask_{name}")
-    };
+    let field = mask_field(name);
     let image = decode_one(&field, mask, &mut Vec::new())?;
-    e.with_mask_image(&image).map_err(|e| {
-        let mut a = ApiError::from(e);
-        a.message = format!("{field}: {}", a.message);
-        a
-    })
+    e.with_mask_image(&image).map_err(|e| named(&field, e))
 }
 
 fn decode(raw: RawPlanes, params: TextureParams) -> Result<(TextureSpec, Vec<String>), ApiError> {
