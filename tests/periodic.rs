@@ -157,7 +157,7 @@ async fn periods_that_do_not_fit_are_refused_at_upload() {
     for (period, want) in [
         ("16", Ok([16, 16, 16])),
         ("4096,16,32", Ok([4096, 16, 32])),
-        ("%5B32,48,64%5D", Ok([32, 48, 64])),
+        ("0016", Ok([16, 16, 16])),
         ("0", Err("out_of_range")),
         ("4097", Err("out_of_range")),
         ("4112", Err("out_of_range")),
@@ -167,6 +167,13 @@ async fn periods_that_do_not_fit_are_refused_at_upload() {
         ("16,16", Err("invalid_params")),
         ("-16", Err("invalid_params")),
         ("wide", Err("invalid_params")),
+        // Outside the one text grammar openapi.yaml documents.
+        ("%5B32,48,64%5D", Err("invalid_params")),
+        ("32,%2048,%2064", Err("invalid_params")),
+        ("%2016", Err("invalid_params")),
+        ("null", Err("invalid_params")),
+        ("1e2", Err("invalid_params")),
+        ("99999999999", Err("out_of_range")),
     ] {
         let (status, v) = upload(
             &c,

@@ -216,40 +216,45 @@ impl Intervals {
     }
 }
 
-/// Reads a period as one number for all three axes (`128`), three
-/// (`[128, 128, 64]`), or either as text (`"128"`, `"128,128,64"`), which
-/// is how query strings and the command line give it.
+/// Reads a period as JSON gives it: one number for all three axes (`128`),
+/// an array of three (`[128, 128, 64]`), each deserialized as numbers, or
+/// text in the one grammar of [`parse`] (`"128"`, `"128,128,64"`).
 pub(crate) fn deserialize<'de, D: serde::Deserializer<'de>>(
     d: D,
 ) -> std::result::Result<Option<[u32; 3]>, D::Error> {
     use serde::de::Error as _;
-    match serde_json::Value::deserialize(d)? {
-        serde_json::Value::Null => Ok(None),
-        serde_json::Value::String(s) => parse(&s).map(Some).map_err(D::Error::custom),
-        v => parse(&v.to_string()).map(Some).map_err(D::Error::custom),
-    }
+    let value = serde_json::Value::deserialize(d)?;
+    let sides = match &value {
+        serde_json::Value::Null => return Ok(None),
+        serde_json::Value::String(s) => return parse(s).map(Some).map_err(D::Error::custom),
+        serde_json::Value::Number(_) => u32::deserialize(&value).map(|p| [p; 3]),
+        serde_json::Value::Array(_) => <[u32; 3]>::deserialize(&value),
+        _ => return Err(D::Error::custom(not_a_period(&value))),
+    };
+    sides
+        .map(Some)
+        .map_err(|e| D::Error::custom(format!("{}: {e}", not_a_period(&value))))
 }
 
-/// A period as text: `128`, `128,128,64` or `[128, 128, 64]`.
+fn not_a_period(given: impl std::fmt::Display) -> String {
+    format!("period `{given}` is not one whole number or three (x,y,z)")
+}
+
+/// A period as text, the form of query strings and the command line:
+/// one side (`128`) or three (`128,128,64`), decimal digits and commas
+/// only — `^[0-9]+(,[0-9]+,[0-9]+)?$`, no brackets, signs or spaces. A
+/// side too long for a number reads as the largest, which the range
+/// check refuses.
 pub fn parse(text: &str) -> Result<[u32; 3]> {
-    let bad = || {
-        Error::InvalidRequest(format!(
-            "period `{text}` is not one whole number or three (x,y,z)"
-        ))
+    let side = |s: &str| {
+        (!s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()))
+            .then(|| s.parse::<u32>().unwrap_or(u32::MAX))
     };
-    let inner = text.trim();
-    let inner = inner
-        .strip_prefix('[')
-        .and_then(|t| t.strip_suffix(']'))
-        .unwrap_or(inner);
-    let sides: Vec<u32> = inner
-        .split(',')
-        .map(|s| s.trim().parse::<u32>().map_err(|_| bad()))
-        .collect::<Result<_>>()?;
-    match sides[..] {
-        [p] => Ok([p; 3]),
-        [x, y, z] => Ok([x, y, z]),
-        _ => Err(bad()),
+    let sides: Option<Vec<u32>> = text.split(',').map(side).collect();
+    match sides.as_deref() {
+        Some(&[p]) => Ok([p; 3]),
+        Some(&[x, y, z]) => Ok([x, y, z]),
+        _ => Err(Error::InvalidRequest(not_a_period(text))),
     }
 }
 
@@ -295,15 +300,45 @@ mod tests {
     #[test]
     fn periods_read_as_one_number_or_three() {
         assert_eq!(parse("128").unwrap(), [128; 3]);
-        assert_eq!(parse("64,32, 96").unwrap(), [64, 32, 96]);
-        assert_eq!(parse("[64,32,96]").unwrap(), [64, 32, 96]);
-        for bad in ["", "1,2", "-32", "a", "1,2,3,4", "1.5"] {
+        assert_eq!(parse("0128").unwrap(), [128; 3]);
+        assert_eq!(parse("64,32,96").unwrap(), [64, 32, 96]);
+        assert_eq!(parse("99999999999").unwrap(), [u32::MAX; 3]);
+        // Exactly `^[0-9]+(,[0-9]+,[0-9]+)?$`, the pattern openapi.yaml
+        // documents.
+        for bad in [
+            "",
+            "1,2",
+            "-32",
+            "+32",
+            "a",
+            "1,2,3,4",
+            "1.5",
+            "1e2",
+            " 128",
+            "128 ",
+            "64,32, 96",
+            "[64,32,96]",
+            "64,,96",
+            "null",
+            "1,2,3,",
+        ] {
             assert!(parse(bad).is_err(), "{bad}");
         }
         let p: SynthParams = serde_json::from_str(r#"{"period": [64, 32, 96]}"#).unwrap();
         assert_eq!(p.period, Some([64, 32, 96]));
         let p: SynthParams = serde_json::from_str(r#"{"period": 64}"#).unwrap();
         assert_eq!(p.period, Some([64; 3]));
+        for bad in [
+            r#"{"period": [64, 32]}"#,
+            r#"{"period": -64}"#,
+            r#"{"period": 64.5}"#,
+            r#"{"period": "[64,64,32]"}"#,
+            r#"{"period": true}"#,
+            r#"{"period": {"x": 64}}"#,
+        ] {
+            let e = serde_json::from_str::<SynthParams>(bad).unwrap_err();
+            assert!(e.to_string().contains("period"), "{bad}: {e}");
+        }
         let p: SynthParams = serde_json::from_str(r#"{"period": "64,64,32"}"#).unwrap();
         assert_eq!(p.period, Some([64, 64, 32]));
         let json = serde_json::to_string(&p).unwrap();

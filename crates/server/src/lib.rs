@@ -50,6 +50,7 @@ pub(crate) mod store;
 
 pub use config::{LogFormat, ServeArgs};
 pub use error::ApiError;
+pub use store::local::write_atomic;
 
 use anyhow::Context;
 use registry::Registry;

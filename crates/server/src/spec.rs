@@ -181,14 +181,15 @@ impl TextureParams {
 
     /// Parameters from query-string pairs: each value is read as a JSON
     /// scalar when it is one (`seed=7`, `jitter=0.5`, `correct_init_level=false`)
-    /// and as a string otherwise (`scheme=dual-grid`).
+    /// and as a string otherwise (`scheme=dual-grid`). A key of
+    /// [`TEXT_KEYS`] stays a string whatever it holds.
     pub fn flat_from_pairs<'a>(
         pairs: impl Iterator<Item = (&'a str, &'a str)>,
     ) -> Map<String, Value> {
         pairs
             .map(|(k, v)| {
                 let value = match serde_json::from_str::<Value>(v) {
-                    Ok(j) if !j.is_object() && !j.is_array() => j,
+                    Ok(j) if !j.is_object() && !j.is_array() && !TEXT_KEYS.contains(&k) => j,
                     _ => Value::String(v.to_string()),
                 };
                 (k.to_string(), value)
@@ -213,6 +214,11 @@ impl TextureParams {
         m
     }
 }
+
+/// Query parameters with a text grammar of their own, which their own
+/// parser reads strictly: JSON's reading would let `period=null` or
+/// `period=%2016` through, outside the pattern openapi.yaml documents.
+const TEXT_KEYS: &[&str] = &["period"];
 
 /// Synthesis keys added after the first stored layout, with the value that
 /// behaves as textures stored without them did (`finest_passes` and
@@ -793,6 +799,18 @@ mod tests {
         assert_eq!(p.synth.jitter, 0.5);
         assert!(!p.synth.correct_init_level);
         assert_eq!(p.synth.contrast, 1.25);
+        // A period is text in a query, read by its own strict grammar.
+        let period = |v| {
+            TextureParams::from_flat(&TextureParams::flat_from_pairs(
+                [("levels", "3"), ("period", v)].into_iter(),
+            ))
+            .map(|p| p.synth.period)
+        };
+        assert_eq!(period("16").unwrap(), Some([16; 3]));
+        assert_eq!(period("16,32,48").unwrap(), Some([16, 32, 48]));
+        for bad in ["null", " 16", "16 ", "[16,16,16]", "1.6e1"] {
+            assert!(period(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]
