@@ -1,7 +1,8 @@
 //! `solidtex bench`: times precomputation, synthesis and the service.
 
-use super::source::write_atomically;
+use anyhow::Context;
 use clap::Args;
+use solidtex_server::write_atomic;
 use std::path::PathBuf;
 
 #[derive(Args)]
@@ -82,7 +83,8 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             .collect::<Vec<_>>()
             .join(" ");
         let page = bench::markdown::page(&results, &bench::machine::current(), &command);
-        write_atomically(path, page.as_bytes())?;
+        write_atomic(path, page.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }
     if a.json {

@@ -1,9 +1,10 @@
 //! `solidtex precompute`: 3D candidates of an exemplar into a `.stx` file.
 
-use super::source::{open_exemplar, precompute, write_atomically};
+use super::source::{open_exemplar, precompute};
 use anyhow::{Context, bail};
 use clap::Args;
 use solidtex_core::{AnalysisParams, Candidates, Exemplar, ExemplarSet, Layout, Orientation};
+use solidtex_server::write_atomic;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -77,7 +78,7 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
     let total = t0.elapsed().as_secs_f64();
     let peak = solidtex_server::peak_alloc::peak_above(baseline);
     let bytes = c.to_bytes();
-    write_atomically(&a.output, &bytes)?;
+    write_atomic(&a.output, &bytes).with_context(|| format!("writing {}", a.output.display()))?;
     print_report(&c, &a.output, total, bytes.len(), a.verbose)?;
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
     outln!(

@@ -1,8 +1,10 @@
 //! `solidtex region`: a box of voxels as raw RGB8 (x fastest, then y, then z).
 
-use super::source::{SourceArgs, load_source, summary, write_atomically};
+use super::source::{SourceArgs, load_source, summary};
+use anyhow::Context;
 use clap::Args;
 use solidtex_core::{Region, Request};
+use solidtex_server::write_atomic;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -42,7 +44,7 @@ pub fn run(a: RegionArgs) -> anyhow::Result<()> {
     };
     let t0 = Instant::now();
     let (rgb, stats) = tex.render(&Request::region(region)?, a.src.lod)?;
-    write_atomically(&a.output, &rgb)?;
+    write_atomic(&a.output, &rgb).with_context(|| format!("writing {}", a.output.display()))?;
     let [w, h, d] = region.size;
     eprintln!(
         "{}",

@@ -1,8 +1,10 @@
 //! `solidtex volume`: a cube as raw RGB8 plus its three orthogonal middle slices.
 
-use super::source::{SourceArgs, load_source, summary, write_atomically, write_png};
+use super::source::{SourceArgs, load_source, summary, write_png};
+use anyhow::Context;
 use clap::Args;
 use solidtex_core::{Axis, Region, Request, Window};
+use solidtex_server::write_atomic;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -32,7 +34,7 @@ pub fn run(a: VolumeArgs) -> anyhow::Result<()> {
         a.src.lod,
     )?;
     let raw = a.output.join(format!("volume_{s}.raw"));
-    write_atomically(&raw, &rgb)?;
+    write_atomic(&raw, &rgb).with_context(|| format!("writing {}", raw.display()))?;
     eprintln!(
         "{} (and its three middle slices)",
         summary(

@@ -24,6 +24,7 @@ mod params;
 pub mod period;
 pub mod png;
 mod request;
+mod simd;
 mod synth;
 mod texture;
 

@@ -180,7 +180,8 @@ pub struct ServeArgs {
     pub default_texture: bool,
 
     /// Seconds a voxel request waits for a texture that is still being
-    /// precomputed before it is answered 409 with Retry-After.
+    /// precomputed before it is answered 409 with Retry-After, and a
+    /// request waits for a start to load the stored textures before 503.
     #[arg(long, env = "SOLIDTEX_PENDING_WAIT", default_value_t = 15.0, value_parser = parse_pending_wait)]
     pub pending_wait: f64,
 

@@ -5,6 +5,7 @@
 //! multiply-adds instead of 3·N² per comparison.
 
 use crate::analysis::stack::{GaussianStack, spacing};
+use crate::simd;
 use nalgebra::{DMatrix, SymmetricEigen};
 use rayon::prelude::*;
 
@@ -135,7 +136,7 @@ fn covariance_upper(samples: &[f32], input: usize, mean: &[f64]) -> Vec<f64> {
         rows.push((w[0], chunk));
         rest = tail;
     }
-    let avx = has_avx();
+    let avx = simd::avx();
     rows.into_par_iter().for_each(|(first, chunk)| {
         #[cfg(target_arch = "x86_64")]
         if avx {
@@ -229,7 +230,7 @@ impl Projector {
             }
         }
         let mut wide = Vec::new();
-        if has_avx() {
+        if simd::avx() {
             wide = vec![[0f32; 8]; pca.dims.div_ceil(8) * pca.input];
             for d in 0..pca.dims {
                 for i in 0..pca.input {
@@ -256,53 +257,11 @@ impl Projector {
             // SAFETY: `wide` is only filled when the CPU has AVX.
             #[allow(unsafe_code)]
             unsafe {
-                self.project_wide(v, out)
+                simd::project_avx(&self.wide, &self.offsets, self.input, self.dims, v, out)
             };
             return;
         }
         self.project_narrow(v, out);
-    }
-
-    /// [`Projector::project`] in blocks of eight outputs, one AVX register
-    /// per accumulator lane. Each output still has eight lane
-    /// accumulators, the same summation tree and no fused multiply-adds,
-    /// so the floats are those of the narrow path.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
-    #[allow(unsafe_code)]
-    fn project_wide(&self, v: &[f32], out: &mut [f32]) {
-        use std::arch::x86_64::*;
-        let v = &v[..self.input];
-        let (chunks, tail) = v.as_chunks::<8>();
-        // SAFETY: every load reads eight floats of an `[f32; 8]` or of
-        // `offsets` (padded to whole blocks of eight), and the store
-        // writes a local `[f32; 8]`.
-        let load = |w: &[f32; 8]| unsafe { _mm256_loadu_ps(w.as_ptr()) };
-        for (b, rows) in self.wide.chunks_exact(self.input).enumerate() {
-            let (row_chunks, row_tail) = rows.as_chunks::<8>();
-            let mut acc = [_mm256_setzero_ps(); 8];
-            for (x, w) in chunks.iter().zip(row_chunks) {
-                for l in 0..8 {
-                    acc[l] =
-                        _mm256_add_ps(acc[l], _mm256_mul_ps(_mm256_set1_ps(x[l]), load(&w[l])));
-                }
-            }
-            let mut rest = _mm256_setzero_ps();
-            for (&x, w) in tail.iter().zip(row_tail) {
-                rest = _mm256_add_ps(rest, _mm256_mul_ps(_mm256_set1_ps(x), load(w)));
-            }
-            let pairs = |i: usize, j: usize| _mm256_add_ps(acc[i], acc[j]);
-            let tree = _mm256_add_ps(
-                _mm256_add_ps(pairs(0, 4), pairs(1, 5)),
-                _mm256_add_ps(pairs(2, 6), pairs(3, 7)),
-            );
-            let offsets: &[f32; 8] = self.offsets[8 * b..8 * b + 8].try_into().expect("padded");
-            let sum = _mm256_sub_ps(_mm256_add_ps(tree, rest), load(offsets));
-            let mut lanes = [0f32; 8];
-            unsafe { _mm256_storeu_ps(lanes.as_mut_ptr(), sum) };
-            let n = (self.dims - 8 * b).min(8);
-            out[8 * b..8 * b + n].copy_from_slice(&lanes[..n]);
-        }
     }
 
     /// [`Projector::project`] in blocks of four outputs (SSE registers).
@@ -334,14 +293,6 @@ impl Projector {
             }
         }
     }
-}
-
-/// Whether the CPU runs AVX instructions.
-pub(crate) fn has_avx() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::arch::is_x86_feature_detected!("avx");
-    #[cfg(not(target_arch = "x86_64"))]
-    false
 }
 
 /// Sum of `term` over paired elements with eight independent accumulators,

@@ -889,7 +889,7 @@ mod tests {
                 }
             }
             let got = tables.project(&q);
-            worst = worst.max(tables::wide_distance(&got, &tables.triple_vector(t)));
+            worst = worst.max(crate::simd::distance(&got, &tables.triple_vector(t)));
         }
         // Shares are rounded one by one (three and the bias), so a triple's
         // vector is within 2 units per dimension of the direct projection;

@@ -6,8 +6,11 @@
 //! three pairwise strip differences).
 
 use super::geometry::Dims;
-use crate::analysis::appearance::{Pca, has_avx, sq_dist};
+use crate::analysis::appearance::{Pca, sq_dist};
 use crate::analysis::stack::{GaussianStack, spacing};
+use crate::simd;
+#[cfg(target_arch = "x86_64")]
+use crate::simd::strip_dist_avx;
 use crate::synth::cancel::CancelFlag;
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
@@ -159,7 +162,7 @@ fn best_pairs(
     macro_rules! with_blocks {
         ($b:literal) => {{
             #[cfg(target_arch = "x86_64")]
-            if has_avx() {
+            if simd::avx() {
                 // SAFETY: the CPU runs AVX instructions (checked above).
                 return unsafe { best_pairs_avx::<$b>(p, c, qs, rs, strips, keep) };
             }
@@ -298,28 +301,6 @@ fn unpack_all(best: BinaryHeap<u128>, p: usize, c: u32) -> Vec<Scored> {
         .collect()
 }
 
-/// [`sq_dist`] of two strips in one AVX register: the same eight lane
-/// accumulators and summation tree, no fused multiply-adds, so the same
-/// float.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-#[allow(unsafe_code)]
-#[inline]
-fn strip_dist_avx<const B: usize>(a: &[[f32; 8]; B], b: &[[f32; 8]; B]) -> f32 {
-    use std::arch::x86_64::*;
-    // SAFETY: each load reads the eight floats of an `[f32; 8]`.
-    let load = |w: &[f32; 8]| unsafe { _mm256_loadu_ps(w.as_ptr()) };
-    let mut acc = _mm256_setzero_ps();
-    for (x, y) in a.iter().zip(b) {
-        let d = _mm256_sub_ps(load(x), load(y));
-        acc = _mm256_add_ps(acc, _mm256_mul_ps(d, d));
-    }
-    // Lanes l and l + 4 first, then ((0 + 1) + (2 + 3)).
-    let s = _mm_add_ps(_mm256_castps256_ps128(acc), _mm256_extractf128_ps::<1>(acc));
-    let t = _mm_add_ps(s, _mm_movehdup_ps(s));
-    _mm_cvtss_f32(_mm_add_ss(t, _mm_movehl_ps(t, t))) + 0.0
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -426,7 +407,7 @@ mod tests {
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn avx_strip_distance_is_the_same_float() {
-        assert!(has_avx(), "the x86_64 machines this runs on have AVX");
+        assert!(simd::avx(), "the x86_64 machines this runs on have AVX");
         avx_distance_matches::<2>();
         avx_distance_matches::<3>();
         avx_distance_matches::<4>();

@@ -295,7 +295,9 @@ fn remove_written(dir: &Path) -> io::Result<bool> {
     Ok(true)
 }
 
-/// Writes `bytes` to `path` atomically and durably.
+/// Writes `bytes` to `path` atomically and durably: readers see the old
+/// file or the new one, never half of it. The one such helper, for the
+/// data directory and the command line's outputs alike.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     write_atomic_with(path, |w| w.write_all(bytes))
 }
@@ -307,9 +309,12 @@ pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> io::Result<()> {
-    let dir = path
-        .parent()
-        .ok_or_else(|| io::Error::other("path has no parent"))?;
+    // A bare file name lives in the current directory.
+    let dir = match path.parent() {
+        Some(d) if d.as_os_str().is_empty() => Path::new("."),
+        Some(d) => d,
+        None => return Err(io::Error::other("path has no parent")),
+    };
     let name = path
         .file_name()
         .ok_or_else(|| io::Error::other("path has no file name"))?

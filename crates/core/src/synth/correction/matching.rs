@@ -35,17 +35,16 @@
 //! The best by distance of the quantised 12-location vectors wins.
 
 use super::tables::{
-    BestCandidates, DIAGONALS, SPARSE_DIMS, SparseTables, WIDE_RANGE, WideVector,
-    appearance_stride, best_distances, wide_distance,
+    BestCandidates, DIAGONALS, SPARSE_DIMS, SparseTables, WIDE_RANGE, WideVector, appearance_stride,
 };
 use super::{
     CENTRE, Local, Near, Work, disagreement, gather_local, gather_near, in_plane_slot, near_slot,
-    prefetch,
 };
 use crate::analysis::stack::spacing;
 use crate::candidates::geometry::{AXES, Dims};
 use crate::candidates::{Candidates, Level};
 use crate::params::SynthParams;
+use crate::simd::{self, best_distances, prefetch};
 
 /// Slots of the set of proposed pixels (keys tagged by plane): more than
 /// [`MAX_PROPOSED`], so probing always ends.
@@ -137,13 +136,6 @@ struct QueryMap {
     columns: Vec<[f32; SPARSE_DIMS]>,
     /// The affine part, with the byte bias of the stored vectors.
     constant: [f32; SPARSE_DIMS],
-}
-
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    return std::arch::is_x86_feature_detected!("avx2");
-    #[cfg(not(target_arch = "x86_64"))]
-    false
 }
 
 impl QueryMap {
@@ -248,7 +240,7 @@ impl<'a> AppearanceCorrector<'a> {
             consistency: params.consistency * scale * scale,
             map: QueryMap::new(level, tables, params.contrast),
             distinct: spacing(k) >= 4,
-            avx2: has_avx2(),
+            avx2: simd::avx2(),
         }
     }
 
@@ -530,7 +522,7 @@ impl<'a> AppearanceCorrector<'a> {
         // Coherent triples last: with the proposals' best known, few are
         // close enough to need their penalty worked out.
         for (&t, &s) in coherent.iter().zip(&shares) {
-            let dist = wide_distance(&self.tables.sum_shares(s), &query);
+            let dist = simd::distance(&self.tables.sum_shares(s), &query);
             if dist <= best.0 {
                 // Saturating: a large `consistency` can push the penalty to u32::MAX.
                 let dist =

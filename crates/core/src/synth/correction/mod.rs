@@ -19,6 +19,7 @@ use crate::candidates::Candidates;
 use crate::candidates::geometry::{AXES, Dims, offset_triple};
 use crate::field::{Frame, FrameField, round};
 use crate::params::SynthParams;
+use crate::simd::prefetch;
 use matching::AppearanceCorrector;
 use rayon::prelude::*;
 
@@ -399,21 +400,6 @@ impl Default for Near {
 /// its direct neighbours. The dependency planner and the barrier test
 /// share it.
 pub const REACH: i64 = 1;
-
-/// Asks the CPU to start loading the first cache line of `data`.
-#[inline(always)]
-#[allow(unsafe_code)]
-fn prefetch<T>(data: &[T]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        // SAFETY: SSE is part of the x86_64 baseline, and a prefetch is a
-        // hint that never faults, whatever the address.
-        unsafe { _mm_prefetch::<_MM_HINT_T0>(data.as_ptr().cast()) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = data;
-}
 
 #[cfg(test)]
 mod tests {

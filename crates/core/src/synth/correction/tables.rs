@@ -15,6 +15,7 @@
 use crate::analysis::appearance::{AppearanceLevel, Pca, Projector};
 use crate::candidates::PlaneCandidates;
 use crate::candidates::geometry::Dims;
+use crate::simd;
 use rayon::prelude::*;
 
 /// Dimensions of a quantised sparse neighbourhood vector: one SSE register.
@@ -318,34 +319,7 @@ impl SparseTables {
     /// [`SparseTables::shares_of`]).
     #[inline(always)]
     pub fn sum_shares(&self, [a, b, c]: [&WideVector; 3]) -> WideVector {
-        // A correction scores 19 of these: the same sums, in registers (and
-        // no array `map`, which is compiled out of line).
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::*;
-            // SAFETY: SSE2 is part of the x86_64 baseline; every vector is
-            // 32 bytes, 32-byte aligned.
-            #[allow(unsafe_code)]
-            unsafe {
-                let mut out = WideVector([0; SPARSE_DIMS]);
-                let (lo, hi) = (_mm_set1_epi16(WIDE_RANGE.0), _mm_set1_epi16(WIDE_RANGE.1));
-                for half in 0..2 {
-                    let at =
-                        |v: &WideVector| _mm_load_si128(v.0.as_ptr().cast::<__m128i>().add(half));
-                    let sum = _mm_add_epi16(
-                        _mm_add_epi16(at(a), at(b)),
-                        _mm_add_epi16(at(c), at(&self.bias)),
-                    );
-                    let clamped = _mm_min_epi16(_mm_max_epi16(sum, lo), hi);
-                    _mm_store_si128(out.0.as_mut_ptr().cast::<__m128i>().add(half), clamped);
-                }
-                out
-            }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        WideVector(std::array::from_fn(|j| {
-            (a.0[j] + b.0[j] + c.0[j] + self.bias.0[j]).clamp(WIDE_RANGE.0, WIDE_RANGE.1)
-        }))
+        simd::sum_clamped([a, b, c, &self.bias], WIDE_RANGE)
     }
 
     /// The vector of 12 concatenated locations (xy, yz, zx; [`DIAGONALS`]
@@ -409,150 +383,6 @@ fn for_unweighted(pca: &Pca, block: usize, weights: [f32; 3]) -> Pca {
     out
 }
 
-/// Squared distance between a vector and a query.
-#[inline(always)]
-pub fn wide_distance(a: &WideVector, q: &WideVector) -> u32 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::*;
-        // SAFETY: SSE2 is part of the x86_64 baseline; both vectors are
-        // 32 bytes, 32-byte aligned.
-        #[allow(unsafe_code)]
-        unsafe {
-            let pa = a.0.as_ptr().cast::<__m128i>();
-            let pq = q.0.as_ptr().cast::<__m128i>();
-            let lo = _mm_sub_epi16(_mm_load_si128(pa), _mm_load_si128(pq));
-            let hi = _mm_sub_epi16(_mm_load_si128(pa.add(1)), _mm_load_si128(pq.add(1)));
-            horizontal_sum(_mm_add_epi32(
-                _mm_madd_epi16(lo, lo),
-                _mm_madd_epi16(hi, hi),
-            ))
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        scalar_distance(&a.0, q)
-    }
-}
-
-/// Squared distances of a pixel's [`BEST_CANDIDATES`] stored vectors to a
-/// query, four at once; `AVX2` says the caller runs with AVX2 enabled.
-#[inline(always)]
-pub fn best_distances<const AVX2: bool>(
-    v: &[SparseVector; BEST_CANDIDATES],
-    q: &WideVector,
-) -> [u32; BEST_CANDIDATES] {
-    #[cfg(target_arch = "x86_64")]
-    {
-        #[allow(unsafe_code)]
-        if AVX2 {
-            // SAFETY: callers pass AVX2 only when the CPU has it.
-            unsafe { best_distances_avx2(v, q) }
-        } else {
-            // SAFETY: SSE2 is part of the x86_64 baseline.
-            unsafe { best_distances_sse2(v, q) }
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        v.map(|a| scalar_distance(&a.map(|x| x as i16), q))
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-#[inline]
-#[allow(unsafe_code)]
-fn best_distances_avx2(
-    v: &[SparseVector; BEST_CANDIDATES],
-    q: &WideVector,
-) -> [u32; BEST_CANDIDATES] {
-    use std::arch::x86_64::*;
-    // SAFETY: the loads read the 16 bytes of each vector (unaligned) and
-    // the 32 bytes of the 32-byte aligned query; the store writes 16 bytes
-    // of a local `[u32; 4]`.
-    unsafe {
-        let query = _mm256_load_si256(q.0.as_ptr().cast());
-        let squares = |bytes: &SparseVector| {
-            let e = _mm256_sub_epi16(
-                _mm256_cvtepu8_epi16(_mm_loadu_si128(bytes.as_ptr().cast())),
-                query,
-            );
-            _mm256_madd_epi16(e, e)
-        };
-        let [a, b, c, d] = [0, 1, 2, 3].map(|i| squares(&v[i]));
-        // Pairwise sums within each 128-bit half: after two rounds, half h
-        // holds (a, b, c, d) summed over its lanes.
-        let abcd = _mm256_hadd_epi32(_mm256_hadd_epi32(a, b), _mm256_hadd_epi32(c, d));
-        let sum = _mm_add_epi32(
-            _mm256_castsi256_si128(abcd),
-            _mm256_extracti128_si256::<1>(abcd),
-        );
-        let mut out = [0u32; BEST_CANDIDATES];
-        _mm_storeu_si128(out.as_mut_ptr().cast(), sum);
-        out
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-#[allow(unsafe_code)]
-unsafe fn best_distances_sse2(
-    v: &[SparseVector; BEST_CANDIDATES],
-    q: &WideVector,
-) -> [u32; BEST_CANDIDATES] {
-    use std::arch::x86_64::*;
-    // SAFETY: SSE2 is part of the x86_64 baseline; the loads read the 16
-    // bytes of each vector (unaligned) and the 32 bytes of the 32-byte
-    // aligned query; the store writes 16 bytes of a local `[u32; 4]`.
-    unsafe {
-        let pq = q.0.as_ptr().cast::<__m128i>();
-        let (q_lo, q_hi) = (_mm_load_si128(pq), _mm_load_si128(pq.add(1)));
-        let zero = _mm_setzero_si128();
-        let squares = |bytes: &SparseVector| {
-            let x = _mm_loadu_si128(bytes.as_ptr().cast());
-            let lo = _mm_sub_epi16(_mm_unpacklo_epi8(x, zero), q_lo);
-            let hi = _mm_sub_epi16(_mm_unpackhi_epi8(x, zero), q_hi);
-            _mm_add_epi32(_mm_madd_epi16(lo, lo), _mm_madd_epi16(hi, hi))
-        };
-        let [a, b, c, d] = [0, 1, 2, 3].map(|i| squares(&v[i]));
-        // Transpose-and-add: lane i of the result sums vector i's lanes.
-        let ab = _mm_add_epi32(_mm_unpacklo_epi32(a, b), _mm_unpackhi_epi32(a, b));
-        let cd = _mm_add_epi32(_mm_unpacklo_epi32(c, d), _mm_unpackhi_epi32(c, d));
-        let sum = _mm_add_epi32(_mm_unpacklo_epi64(ab, cd), _mm_unpackhi_epi64(ab, cd));
-        let mut out = [0u32; BEST_CANDIDATES];
-        _mm_storeu_si128(out.as_mut_ptr().cast(), sum);
-        out
-    }
-}
-
-/// The sum of four lanes.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-#[allow(unsafe_code)]
-unsafe fn horizontal_sum(v: std::arch::x86_64::__m128i) -> u32 {
-    use std::arch::x86_64::*;
-    // SAFETY: SSE2 is part of the x86_64 baseline.
-    unsafe {
-        let v = _mm_add_epi32(v, _mm_shuffle_epi32::<0b01_00_11_10>(v));
-        let v = _mm_add_epi32(v, _mm_shuffle_epi32::<0b10_11_00_01>(v));
-        _mm_cvtsi128_si32(v) as u32
-    }
-}
-
-/// The distances above without SIMD: what they are tested against, and
-/// what other CPUs run.
-#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
-fn scalar_distance(a: &[i16; SPARSE_DIMS], q: &WideVector) -> u32 {
-    a.iter()
-        .zip(&q.0)
-        .map(|(&x, &y)| {
-            let e = x as i32 - y as i32;
-            (e * e) as u32
-        })
-        .sum()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -594,40 +424,6 @@ mod tests {
                 .filter(|&&b| b == 0 || b == 255)
                 .count();
             assert!(clipped * 100 < c.dims().len() * BEST_CANDIDATES * SPARSE_DIMS * 3);
-        }
-    }
-
-    #[test]
-    fn distances_are_sums_of_squares_over_the_whole_range() {
-        let mut state = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1);
-            (state >> 33) as u32
-        };
-        let (lo, hi) = (WIDE_RANGE.0 as i32, WIDE_RANGE.1 as i32);
-        for round in 0..2000 {
-            let mut wide = |extreme: bool| {
-                WideVector(std::array::from_fn(|_| {
-                    let v = if extreme {
-                        [lo, hi][next() as usize % 2]
-                    } else {
-                        lo + (next() % (hi - lo + 1) as u32) as i32
-                    };
-                    v as i16
-                }))
-            };
-            let (a, q) = (wide(round % 3 == 0), wide(round % 5 == 0));
-            assert_eq!(wide_distance(&a, &q), scalar_distance(&a.0, &q));
-            let four: [SparseVector; BEST_CANDIDATES] =
-                std::array::from_fn(|_| std::array::from_fn(|_| next() as u8));
-            let expected = four.map(|v| scalar_distance(&v.map(|x| x as i16), &q));
-            assert_eq!(best_distances::<false>(&four, &q), expected);
-            #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2") {
-                assert_eq!(best_distances::<true>(&four, &q), expected);
-            }
         }
     }
 }
