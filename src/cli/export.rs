@@ -3,11 +3,12 @@
 //! or raw RGB8 (the atlas and the raw voxels with a JSON sidecar that says
 //! how to read them). The bytes are the server's for the same export.
 
-use super::source::{SourceArgs, load_source, progress_bar, summary, write_atomically};
+use super::source::{SourceArgs, load_source, progress_bar, summary};
 use anyhow::Context;
 use clap::Args;
 use solidtex_core::Region;
 use solidtex_core::export::{Export, Format, Mips};
+use solidtex_server::write_atomic;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -84,11 +85,11 @@ pub fn run(a: ExportArgs) -> anyhow::Result<()> {
         bar.set_position(done * 1000 / total.max(1));
     })?;
     bar.finish_and_clear();
-    write_atomically(&output, &bytes)?;
+    write_atomic(&output, &bytes).with_context(|| format!("writing {}", output.display()))?;
     if matches!(export.format, Format::Atlas | Format::Raw) {
         let sidecar = output.with_extension("json");
         let json = serde_json::to_vec_pretty(&export.describe(&tex))?;
-        write_atomically(&sidecar, &json)?;
+        write_atomic(&sidecar, &json).with_context(|| format!("writing {}", sidecar.display()))?;
         eprintln!("wrote its layout to {}", sidecar.display());
     }
     let [w, h, d] = region.size;
