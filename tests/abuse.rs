@@ -1,8 +1,8 @@
 //! The server against hostile or broken clients: idle and slow
 //! connections, wrong Host headers, malformed requests and images, bursts
 //! of large uploads, deletions during precomputes, clients that try to
-//! mint metric labels, and a data directory that is tampered with or
-//! shared.
+//! mint metric labels, a data directory that is tampered with or
+//! shared, and a restart over many textures.
 
 mod common;
 mod server_support;
@@ -25,3 +25,5 @@ mod hosts;
 mod labels;
 #[path = "abuse/raw.rs"]
 mod raw;
+#[path = "abuse/start.rs"]
+mod start;

@@ -113,6 +113,7 @@ async fn router_serves_every_documented_route() {
     let server = Server::bind(&server_support::test_args(dir.path()))
         .await
         .unwrap();
+    server.loaded().await;
     let app = router(server.state());
     let codes_of = |body: &[u8]| -> String {
         serde_json::from_slice::<Value>(body)
@@ -156,6 +157,7 @@ async fn served_document_is_the_file() {
     let server = Server::bind(&server_support::test_args(dir.path()))
         .await
         .unwrap();
+    server.loaded().await;
     let app = router(server.state());
     let req = Request::builder()
         .uri("/openapi.yaml")

@@ -45,6 +45,9 @@ impl TestServer {
     /// Binds and runs a server.
     pub async fn start(args: ServeArgs) -> TestServer {
         let server = Server::bind(&args).await.expect("server binds");
+        // The tests ask for what the data directory held as soon as they
+        // start; the start in the background is tested on its own.
+        server.loaded().await;
         let addr = server.local_addr().unwrap();
         assert!(addr.ip().is_loopback());
         let state = server.state();

@@ -206,6 +206,9 @@ impl From<RegistryError> for ApiError {
                 ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "texture_loading", message)
                     .retry_after(1)
             }
+            E::Starting => {
+                ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "starting", message).retry_after(1)
+            }
             E::Pending { .. } => {
                 ApiError::new(StatusCode::CONFLICT, "texture_pending", message).retry_after(1)
             }
@@ -458,6 +461,11 @@ mod tests {
         assert_eq!(
             (e.status, e.code, e.retry_after),
             (StatusCode::SERVICE_UNAVAILABLE, "texture_loading", Some(1))
+        );
+        let e: ApiError = RegistryError::Starting.into();
+        assert_eq!(
+            (e.status, e.code, e.retry_after),
+            (StatusCode::SERVICE_UNAVAILABLE, "starting", Some(1))
         );
         let e: ApiError = RegistryError::QueueFull.into();
         assert_eq!(e.message, "precompute queue is full; retry later");

@@ -23,8 +23,10 @@
 //! - [`metrics`], [`process`], [`error`], [`query`], [`peak_alloc`]: the supporting
 //!   pieces.
 //!
-//! [`Server::bind`] loads the data directory before it accepts anything, so
-//! ready textures are served from the first request on; [`Server::run`]
+//! [`Server::bind`] lists the data directory and listens; its textures are
+//! loaded in the background, each served as soon as it is loaded, and a
+//! request for one not loaded yet waits for the start to finish (up to
+//! `--pending-wait`, then 503 `starting`); [`Server::run`]
 //! stops accepting when its shutdown future resolves and returns once the
 //! requests in flight have been answered.
 
@@ -32,6 +34,7 @@ pub mod config;
 pub(crate) mod conn_io;
 pub(crate) mod decodes;
 pub(crate) mod error;
+pub(crate) mod exports;
 pub(crate) mod host;
 pub(crate) mod jobs;
 pub(crate) mod listen;
@@ -122,28 +125,24 @@ impl Server {
             )
             .with_storage_limits(args.max_textures as usize, args.max_stored_bytes)
             .with_memory_limit(args.max_resident_bytes)
-            .with_precompute_memory(args.max_precompute_bytes, meter),
+            .with_precompute_memory(args.max_precompute_bytes, meter)
+            .with_startup_wait(Duration::from_secs_f64(args.pending_wait)),
         );
-        let todo = {
+        // Listed before anything is served, so that an unreadable storage
+        // stops the start; loaded in the background, so that liveness and
+        // the textures loaded so far answer at once.
+        let found = {
             let r = registry.clone();
-            tokio::task::spawn_blocking(move || r.recover())
+            tokio::task::spawn_blocking(move || r.scan())
                 .await?
                 .context("reading the data directory")?
         };
-        registry.resume(todo);
-        registry.follow_deletes(Duration::from_secs_f64(args.store_poll));
-        if args.default_texture {
-            let spec = TextureSpec {
-                planes: Planes::Single(solidtex_core::bundled::exemplar()),
-                params: TextureParams::default(),
-            };
-            registry
-                .submit(Some(DEFAULT_ID), spec, Some(DEFAULT_ID.to_string()))
-                .await
-                .map_err(|e| {
-                    anyhow::anyhow!("registering the default texture: {}", ApiError::from(e))
-                })?;
-        }
+        tokio::spawn(bring_back(
+            registry.clone(),
+            found,
+            args.default_texture,
+            Duration::from_secs_f64(args.store_poll),
+        ));
         let jobs = jobs::Jobs::new(
             args.max_jobs,
             args.queue,
@@ -165,6 +164,13 @@ impl Server {
             chunk_size: args.chunk_size,
             max_request_voxels: args.max_request_voxels,
             max_request_work: args.max_request_work,
+            exports: Arc::new(exports::Exports::new(
+                args.export_queue,
+                args.max_export_work,
+                args.max_export_bytes,
+            )),
+            max_export_voxels: args.max_export_voxels,
+            max_export_work: args.max_export_work,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
             token: args.token.clone().filter(|t| !t.is_empty()),
             cors_origins,
@@ -176,8 +182,7 @@ impl Server {
         tracing::info!(
             addr = %listener.local_addr()?,
             store = %state.registry.location(),
-            textures = state.registry.list().len(),
-            "server ready"
+            "server listening; stored textures loading"
         );
         let limits = listen::Limits {
             header_timeout: Duration::from_secs_f64(args.header_timeout),
@@ -193,6 +198,13 @@ impl Server {
             state,
             limits,
         })
+    }
+
+    /// Resolves once every stored texture is brought back and the bundled
+    /// one registered (what `/readyz` waits for besides the bundled
+    /// texture's precompute).
+    pub async fn loaded(&self) {
+        self.state.registry.wait_recovered().await;
     }
 
     /// The bound address (useful with port 0).
@@ -222,6 +234,43 @@ impl Server {
         listen::serve(self.listener, app, self.limits, metrics, shutdown).await;
         Ok(())
     }
+}
+
+/// Brings back the stored textures `found`, then registers the bundled
+/// exemplar (when `default_texture`) and follows deletions by other
+/// servers every `store_poll`.
+async fn bring_back(
+    registry: Arc<Registry>,
+    found: Vec<store::Found>,
+    default_texture: bool,
+    store_poll: Duration,
+) {
+    let t0 = std::time::Instant::now();
+    let r = registry.clone();
+    match tokio::task::spawn_blocking(move || r.recover(found)).await {
+        Ok(todo) => registry.resume(todo),
+        Err(e) => tracing::error!(error = %e, "bringing back the stored textures failed"),
+    }
+    registry.follow_deletes(store_poll);
+    if default_texture {
+        let spec = TextureSpec {
+            planes: Planes::Single(solidtex_core::bundled::exemplar()),
+            params: TextureParams::default(),
+        };
+        if let Err(e) = registry
+            .submit(Some(DEFAULT_ID), spec, Some(DEFAULT_ID.to_string()))
+            .await
+        {
+            // `/readyz` answers `default_missing` from now on.
+            tracing::error!(error = %ApiError::from(e), "could not register the default texture");
+        }
+    }
+    registry.set_recovered();
+    tracing::info!(
+        textures = registry.list().len(),
+        seconds = t0.elapsed().as_secs_f64(),
+        "stored textures loaded"
+    );
 }
 
 /// The storage `args` name: the data directory, or a shared bucket.

@@ -64,6 +64,9 @@ pub(crate) enum RegistryError {
     /// No more textures are kept until some are deleted.
     #[error("{0}")]
     StorageFull(String),
+    /// The stored textures are still being brought back after a start.
+    #[error("the server is starting: its stored textures are still being loaded")]
+    Starting,
     /// Something failed inside the server (the data directory, a task).
     #[error("{0}")]
     Internal(String),
@@ -363,6 +366,18 @@ pub struct Registry {
     meter: Option<&'static Meter>,
     /// Serialises taking up textures found in a shared storage.
     adopting: Mutex<()>,
+    /// True once every stored texture found at start is brought back.
+    recovered: tokio::sync::watch::Sender<bool>,
+    /// How long a request for a texture not brought back yet, or an
+    /// upload, waits for the start to finish before it is answered 503.
+    startup_wait: std::time::Duration,
+}
+
+/// A stored texture read and checked, its candidates not loaded yet.
+struct Restoring {
+    entry: Arc<Entry>,
+    status: StoredStatus,
+    reason: Option<String>,
 }
 
 /// Granularity of the precompute memory bound.
@@ -432,7 +447,47 @@ impl Registry {
             precompute_reserved_peak: AtomicU64::new(0),
             meter: None,
             adopting: Mutex::new(()),
+            recovered: tokio::sync::watch::Sender::new(false),
+            startup_wait: std::time::Duration::ZERO,
         }
+    }
+
+    /// The same registry, letting requests wait up to `wait` for the
+    /// stored textures to be brought back after a start.
+    pub(crate) fn with_startup_wait(mut self, wait: std::time::Duration) -> Registry {
+        self.startup_wait = wait;
+        self
+    }
+
+    /// Whether every texture stored at start has been brought back.
+    pub(crate) fn recovered(&self) -> bool {
+        *self.recovered.borrow()
+    }
+
+    /// Waits until every texture stored at start has been brought back.
+    pub async fn wait_recovered(&self) {
+        let mut rx = self.recovered.subscribe();
+        // The sender lives as long as `self`: this cannot fail.
+        let _ = rx.wait_for(|done| *done).await;
+    }
+
+    /// Waits up to the start-up wait for the stored textures to be brought
+    /// back; [`RegistryError::Starting`] when they are not by then.
+    pub(crate) async fn await_recovered(&self) -> Result<(), RegistryError> {
+        if self.recovered() {
+            return Ok(());
+        }
+        let _ = tokio::time::timeout(self.startup_wait, self.wait_recovered()).await;
+        if self.recovered() {
+            Ok(())
+        } else {
+            Err(RegistryError::Starting)
+        }
+    }
+
+    /// Marks the stored textures as brought back, waking those waiting.
+    pub(crate) fn set_recovered(&self) {
+        self.recovered.send_replace(true);
     }
 
     /// The same registry, running precomputes only while their estimated
@@ -629,8 +684,12 @@ impl Registry {
         spec: TextureSpec,
         name: Option<String>,
     ) -> Result<Submitted, RegistryError> {
-        let hash = spec.content_hash();
         let fixed_id = id.is_some();
+        // An upload may be a texture not brought back yet: known, not new.
+        if !fixed_id {
+            self.await_recovered().await?;
+        }
+        let hash = spec.content_hash();
         let id = id.map(str::to_string).unwrap_or_else(|| hash.clone());
         let (w, h) = spec.planes.size();
         let planes = spec.planes.named().len() as u64;
@@ -1045,31 +1104,62 @@ impl Registry {
             .inc();
     }
 
-    /// Brings back every texture of the storage (blocking): ready ones
-    /// are loaded from their `.stx` without recomputation, interrupted or
-    /// unreadable ones are queued for a new precompute (or marked failed
-    /// when their exemplars are gone), failed ones stay failed. Returns the
-    /// entries to precompute; start them with [`Registry::resume`].
-    pub(crate) fn recover(&self) -> std::io::Result<Vec<Arc<Entry>>> {
-        let mut todo = Vec::new();
-        for found in self.store.scan()? {
-            if let Some((entry, precompute)) = self.restore(found) {
-                if precompute {
-                    todo.push(entry.clone());
-                }
-                self.insert(entry);
+    /// The textures of the storage (blocking), to bring back with
+    /// [`Registry::recover`].
+    pub(crate) fn scan(&self) -> std::io::Result<Vec<Found>> {
+        self.store.scan()
+    }
+
+    /// Brings back the textures `found` (blocking): ready ones are loaded
+    /// from their `.stx` without recomputation, interrupted or unreadable
+    /// ones are queued for a new precompute (or marked failed when their
+    /// exemplars are gone), failed ones stay failed. Each is served as soon
+    /// as it is loaded. Of the textures that share candidates, the first
+    /// reads them and the others (variants, whose sketches are solved as
+    /// they load) follow in parallel. Returns the entries to precompute;
+    /// start them with [`Registry::resume`].
+    pub(crate) fn recover(&self, found: Vec<Found>) -> Vec<Arc<Entry>> {
+        use rayon::prelude::*;
+        let mut groups: Vec<Vec<Restoring>> = Vec::new();
+        for r in found.into_iter().filter_map(|f| self.prepare(f)) {
+            let analysis = &r.entry.analysis_hash;
+            match groups
+                .iter_mut()
+                .find(|g| &g[0].entry.analysis_hash == analysis)
+            {
+                Some(g) => g.push(r),
+                None => groups.push(vec![r]),
             }
+        }
+        let todo = Mutex::new(Vec::new());
+        let bring_back = |r: Restoring| {
+            let (entry, precompute) = self.finish(r);
+            if precompute {
+                todo.lock().push(entry.clone());
+            }
+            self.insert(entry);
             // A data directory larger than the memory bound loads one
             // texture at a time past it.
             self.keep_within_memory("");
-        }
-        self.update_gauges();
-        Ok(todo)
+            self.update_gauges();
+        };
+        groups.into_par_iter().for_each(|mut first| {
+            let others = first.split_off(1);
+            first.into_iter().for_each(bring_back);
+            others.into_par_iter().for_each(bring_back);
+        });
+        todo.into_inner()
     }
 
     /// The entry of one stored texture, and whether it needs a precompute;
     /// `None` when it cannot be served.
-    fn restore(&self, Found { meta, location }: Found) -> Option<(Arc<Entry>, bool)> {
+    fn restore(&self, found: Found) -> Option<(Arc<Entry>, bool)> {
+        self.prepare(found).map(|r| self.finish(r))
+    }
+
+    /// A stored texture's metadata and exemplars read and checked against
+    /// its id; `None` when it cannot be served.
+    fn prepare(&self, Found { meta, location }: Found) -> Option<Restoring> {
         let params = match TextureParams::from_stored(&meta.params) {
             Ok(p) => p,
             Err(e) => {
@@ -1097,12 +1187,16 @@ impl Registry {
                     .named(meta.name.clone()),
                 );
                 let why = format!("stored exemplars unreadable: {e}");
-                entry.set_status(Status::Failed(why));
+                entry.set_status(Status::Failed(why.clone()));
                 let _ = self.store.write_meta(&StoredMeta {
                     exemplar: meta.exemplar,
                     ..entry.meta()
                 });
-                return Some((entry, false));
+                return Some(Restoring {
+                    entry,
+                    status: StoredStatus::Failed,
+                    reason: Some(why),
+                });
             }
         };
         let spec = TextureSpec { planes, params };
@@ -1134,34 +1228,47 @@ impl Registry {
         *entry.precompute_seconds.lock() = meta.precompute_seconds;
         *entry.precompute_peak.lock() = meta.precompute_peak_bytes;
         *entry.stored_since.lock() = Some(Instant::now());
+        Some(Restoring {
+            entry,
+            status: meta.status,
+            reason: meta.reason,
+        })
+    }
+
+    /// Loads a checked stored texture's candidates, or says it needs a
+    /// precompute.
+    fn finish(&self, r: Restoring) -> (Arc<Entry>, bool) {
+        let Restoring {
+            entry,
+            status,
+            reason,
+        } = r;
         let mut precompute = false;
-        match meta.status {
+        match status {
             StoredStatus::Ready => match self.load_ready(&entry) {
                 Ok((c, t)) => {
                     entry.set_progress("done", 1.0);
                     entry.on_disk.store(true, Ordering::Relaxed);
                     entry.set_ready(c, t);
                     self.metrics.textures_loaded.inc();
-                    tracing::info!(id = %meta.id, "texture loaded");
+                    tracing::info!(id = %entry.id, "texture loaded");
                 }
                 Err(e) => {
-                    tracing::warn!(id = %meta.id, error = %e, "stored candidates unusable; recomputing");
+                    tracing::warn!(id = %entry.id, error = %e, "stored candidates unusable; recomputing");
                     precompute = true;
                 }
             },
             StoredStatus::Pending => {
-                tracing::info!(id = %meta.id, "precompute was interrupted; recomputing");
+                tracing::info!(id = %entry.id, "precompute was interrupted; recomputing");
                 precompute = true;
             }
             StoredStatus::Failed => {
                 entry.set_status(Status::Failed(
-                    meta.reason
-                        .clone()
-                        .unwrap_or_else(|| "precompute failed".into()),
+                    reason.unwrap_or_else(|| "precompute failed".into()),
                 ));
             }
         }
-        Some((entry, precompute))
+        (entry, precompute)
     }
 
     fn load_ready(&self, entry: &Entry) -> Result<(Arc<Candidates>, Texture), String> {
@@ -1214,6 +1321,12 @@ impl Registry {
     ) -> Result<Option<Arc<Entry>>, RegistryError> {
         if let Some(e) = self.get(id) {
             return Ok(Some(e));
+        }
+        if !self.recovered() {
+            self.await_recovered().await?;
+            if let Some(e) = self.get(id) {
+                return Ok(Some(e));
+            }
         }
         if !self.store.shared() || !super::spec::valid_id(id) {
             return Ok(None);

@@ -18,15 +18,18 @@ pub async fn healthz() -> Json<serde_json::Value> {
     Json(json!({ "status": "ok" }))
 }
 
-/// `GET /readyz`: 200 once the bundled texture (when registered) is ready
-/// and the synthesis queue has room; 503 otherwise, also when the bundled
-/// texture was deleted.
+/// `GET /readyz`: 200 once the stored textures are loaded, the bundled
+/// texture (when registered) is ready and the synthesis queue has room;
+/// 503 otherwise, also when the bundled texture was deleted.
 pub async fn readyz(State(s): State<AppState>) -> Response {
     let default = s.registry.get(crate::DEFAULT_ID);
     let starting = default
         .as_ref()
         .is_some_and(|e| matches!(e.status(), Status::Pending));
-    let (code, status) = if s.default_texture && default.is_none() {
+    let (code, status) = if !s.registry.recovered() {
+        // The stored textures (and the bundled one) are still loading.
+        (StatusCode::SERVICE_UNAVAILABLE, "loading")
+    } else if s.default_texture && default.is_none() {
         // Deleted: this server no longer serves what it was started for.
         (StatusCode::SERVICE_UNAVAILABLE, "default_missing")
     } else if starting {

@@ -71,18 +71,20 @@ fn layout_view(l: &Layout) -> Value {
     })
 }
 
-/// `GET /v1/textures`.
+/// `GET /v1/textures`: once the stored textures are loaded (a list of
+/// some of them would read as if the others were gone).
 pub(super) async fn list(
     State(s): State<AppState>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Json<Value> {
+) -> Result<Json<Value>, ApiError> {
+    s.registry.await_recovered().await?;
     let all: Vec<Value> = s
         .registry
         .list()
         .iter()
         .map(|e| view(e, s.brick_size))
         .collect();
-    Json(json!({ "textures": all }))
+    Ok(Json(json!({ "textures": all })))
 }
 
 fn checked_id(id: &str) -> Result<(), ApiError> {
