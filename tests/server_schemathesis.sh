@@ -6,7 +6,8 @@
 #
 # The server listens on a free loopback port with a fresh data directory and
 # a small per-request budget (so boundary values such as 4096² slices are
-# answered 400 `too_large` quickly instead of synthesizing for minutes).
+# answered 400 `too_large` quickly instead of synthesizing for minutes;
+# exports likewise).
 # `positive_data_acceptance` is left out: the schema cannot say that an
 # upload must be a 16–512 px PNG, so a schema-valid body may rightly be
 # answered 400.
@@ -17,7 +18,7 @@ BIN=${1:-${CARGO_TARGET_DIR:-target}/release/solidtex}
 command -v schemathesis >/dev/null || python3 -m pip install --quiet 'schemathesis==4.*'
 
 DATA=$(mktemp -d)
-"$BIN" serve --addr 127.0.0.1:0 --data-dir "$DATA/data" --max-request-voxels 4096 \
+"$BIN" serve --addr 127.0.0.1:0 --data-dir "$DATA/data" --max-request-voxels 4096 --max-export-voxels 4096 \
     --brick-size 16 --chunk-size 16 --log warn >"$DATA/stdout" 2>"$DATA/stderr" &
 PID=$!
 cleanup() {

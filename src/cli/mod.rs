@@ -5,6 +5,7 @@
 mod bench;
 mod cut;
 mod eval;
+mod export;
 mod inspect;
 mod loadtest;
 mod plan;
@@ -39,6 +40,9 @@ enum Command {
     Cut(cut::CutArgs),
     /// Synthesize a full cube plus three orthogonal middle slices.
     Volume(volume::VolumeArgs),
+    /// Write a box of the solid, or one period, as KTX2, a PNG slice
+    /// atlas, NRRD or raw voxels.
+    Export(export::ExportArgs),
     /// Count voxels and corrections per level for a slice or region, for
     /// the standard and dual-grid schemes, and the single-voxel chain.
     Plan(plan::PlanArgs),
@@ -89,6 +93,7 @@ fn run_command(cli: Cli) -> anyhow::Result<()> {
         Command::Cut(a) => cut::run(a),
         Command::Volume(a) => volume::run(a),
         Command::Reference(a) => reference::run(a),
+        Command::Export(a) => export::run(a),
     }
 }
 

@@ -150,7 +150,7 @@ pub fn summary(what: &str, path: &Path, t0: Instant, stats: &SynthStats) -> Stri
     )
 }
 
-fn progress_bar() -> ProgressBar {
+pub fn progress_bar() -> ProgressBar {
     let bar = ProgressBar::new(1000);
     bar.set_style(
         ProgressStyle::with_template("{spinner} {msg:12} [{bar:40}] {percent}% {elapsed}")

@@ -5,7 +5,10 @@
 #    against region.raw;
 #  - viewer.test.mjs: the browser viewer in headless Chromium;
 #  - viewer_zoom.test.mjs: how soon the viewer shows a cold view sharp;
-#  - neuroglancer.test.mjs: Neuroglancer itself rendering the texture.
+#  - neuroglancer.test.mjs: Neuroglancer itself rendering the texture;
+#  - test_exports.py: pynrrd and numpy reading the NRRD and raw exports;
+#  - exports.test.mjs: ktx-parse and three.js (KTX2Loader in Chromium)
+#    reading the KTX2 exports, and the shader example's seams.
 #
 #   tests/clients/run.sh [path/to/solidtex]
 #   tests/clients/run.sh --install     # only install the clients
@@ -29,11 +32,15 @@ if ! cmp -s tests/clients/requirements.txt "$C/venv/requirements.txt"; then
     cp tests/clients/requirements.txt "$C/venv/requirements.txt"
 fi
 
-# playwright-core drives the system's Chromium (it downloads no browser).
-if [ ! -d "$C/node/node_modules/playwright-core" ]; then
+# playwright-core drives the system's Chromium (it downloads no browser);
+# three.js and ktx-parse read the KTX2 exports.
+NODE_PACKAGES="playwright-core@1.65.1 three@0.187.0 ktx-parse@2.0.0"
+if [ "$(cat "$C/node/packages.txt" 2>/dev/null)" != "$NODE_PACKAGES" ]; then
     mkdir -p "$C/node"
+    # shellcheck disable=SC2086
     (cd "$C/node" && echo '{"private": true}' >package.json &&
-        npm_config_cache=$C/npm-cache npm install --no-audit --no-fund --silent playwright-core@1.65.1)
+        npm_config_cache=$C/npm-cache npm install --no-audit --no-fund --silent $NODE_PACKAGES)
+    echo "$NODE_PACKAGES" >"$C/node/packages.txt"
 fi
 if [ ! -x /usr/bin/chromium ]; then
     SUDO=
@@ -48,7 +55,8 @@ export SOLIDTEX_BIN=${1:-${SOLIDTEX_BIN:-${CARGO_TARGET_DIR:-target}/release/sol
 [ -x "$SOLIDTEX_BIN" ] || cargo build --release --bin solidtex
 SOLIDTEX_BIN=$(realpath "$SOLIDTEX_BIN")
 export CLIENTS_NODE_DIR=$C/node CLIENTS_ARTEFACTS=$C/artefacts
-(cd tests/clients && "$C/venv/bin/python" -m pytest -q -p no:cacheprovider test_formats.py)
+(cd tests/clients && "$C/venv/bin/python" -m pytest -q -p no:cacheprovider test_formats.py test_exports.py)
 node tests/clients/viewer.test.mjs
 node tests/clients/viewer_zoom.test.mjs
 PYTHON=$C/venv/bin/python node tests/clients/neuroglancer.test.mjs
+node tests/clients/exports.test.mjs

@@ -35,7 +35,7 @@ def get(url, timeout=300):
 class Server:
     """A running server with one ready texture (`self.id`)."""
 
-    def __init__(self, chunk_size=16, levels=3):
+    def __init__(self, chunk_size=16, levels=3, params=""):
         self.dir = tempfile.TemporaryDirectory(prefix="solidtex-clients-")
         self.log = open(os.path.join(self.dir.name, "server.log"), "w")
         self.proc = subprocess.Popen(
@@ -58,7 +58,7 @@ class Server:
             raise RuntimeError(f"server did not start: {line!r}")
         self.base = line[len(prefix):].strip()
         req = urllib.request.Request(
-            f"{self.base}/v1/textures?levels={levels}",
+            f"{self.base}/v1/textures?levels={levels}{params}",
             data=EXEMPLAR.read_bytes(),
             headers={"Content-Type": "image/png"},
             method="POST",

@@ -17,6 +17,7 @@ pub mod bundled;
 mod candidates;
 mod error;
 pub mod eval;
+pub mod export;
 mod field;
 pub mod hash;
 mod params;

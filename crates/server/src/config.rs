@@ -114,6 +114,28 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_REQUEST_WORK", default_value_t = 4 << 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_request_work: u64,
 
+    /// Most voxels in one export (`/v1/textures/{id}/export`); larger ones
+    /// get 400 `too_large`. At most 256³.
+    #[arg(long, env = "SOLIDTEX_MAX_EXPORT_VOXELS", default_value_t = 1 << 24, value_parser = clap::value_parser!(u64).range(1..=1 << 24))]
+    pub max_export_voxels: u64,
+
+    /// Most voxels one export may synthesize, all pyramid levels together
+    /// (as `--max-request-work` for other requests): predicted over it,
+    /// 400 `over_budget`. The default admits a 256³ export at lod 0 of a
+    /// 128² exemplar, a few minutes on two cores.
+    #[arg(long, env = "SOLIDTEX_MAX_EXPORT_WORK", default_value_t = 96 << 20, value_parser = clap::value_parser!(u64).range(1..))]
+    pub max_export_work: u64,
+
+    /// Exports waiting behind the one that runs; more get 503.
+    #[arg(long, env = "SOLIDTEX_EXPORT_QUEUE", default_value_t = 8)]
+    pub export_queue: u32,
+
+    /// Bytes of finished export files kept in memory for their clients to
+    /// fetch (suffixes K, M, G accepted); older ones are made again when
+    /// asked for.
+    #[arg(long, env = "SOLIDTEX_MAX_EXPORT_BYTES", default_value = "1G", value_parser = parse_bytes)]
+    pub max_export_bytes: u64,
+
     /// Uploaded textures kept at most; more uploads get 507 `storage_full`
     /// until some are deleted (the bundled texture is not counted).
     #[arg(long, env = "SOLIDTEX_MAX_TEXTURES", default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..))]
@@ -252,6 +274,10 @@ impl ServeArgs {
             chunk_size: 32,
             max_request_voxels: 16 << 20,
             max_request_work: 4 << 20,
+            max_export_voxels: 1 << 24,
+            max_export_work: 96 << 20,
+            export_queue: 8,
+            max_export_bytes: 1 << 30,
             max_textures: 256,
             max_stored_bytes: 4 << 30,
             max_resident_bytes: 2 << 30,

@@ -34,6 +34,7 @@ pub mod config;
 pub(crate) mod conn_io;
 pub(crate) mod decodes;
 pub(crate) mod error;
+pub(crate) mod exports;
 pub(crate) mod host;
 pub(crate) mod jobs;
 pub(crate) mod listen;
@@ -163,6 +164,13 @@ impl Server {
             chunk_size: args.chunk_size,
             max_request_voxels: args.max_request_voxels,
             max_request_work: args.max_request_work,
+            exports: Arc::new(exports::Exports::new(
+                args.export_queue,
+                args.max_export_work,
+                args.max_export_bytes,
+            )),
+            max_export_voxels: args.max_export_voxels,
+            max_export_work: args.max_export_work,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
             token: args.token.clone().filter(|t| !t.is_empty()),
             cors_origins,

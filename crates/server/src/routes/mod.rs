@@ -7,6 +7,7 @@
 //! queue, and shape responses; no synthesis logic lives here.
 
 mod answer;
+mod exports;
 mod frames;
 mod ops;
 mod params;
@@ -59,6 +60,10 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/textures/{id}/zarr/zarr.json"),
     ("GET", "/v1/textures/{id}/zarr/{lod}/zarr.json"),
     ("GET", "/v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}"),
+    ("GET", "/v1/textures/{id}/export"),
+    ("GET", "/v1/textures/{id}/export.json"),
+    ("GET", "/v1/exports/{eid}"),
+    ("GET", "/v1/exports/{eid}/file"),
     ("GET", "/"),
     ("GET", "/viewer.js"),
 ];
@@ -81,6 +86,12 @@ pub struct Shared {
     pub(crate) max_request_voxels: u64,
     /// Most voxels one request may synthesize (see `ServeArgs`).
     pub(crate) max_request_work: u64,
+    /// Exports running and made.
+    pub(crate) exports: Arc<crate::exports::Exports>,
+    /// Most voxels in one export.
+    pub(crate) max_export_voxels: u64,
+    /// Most voxels one export may synthesize.
+    pub(crate) max_export_work: u64,
     /// Largest accepted upload, bytes.
     pub(crate) max_upload_bytes: usize,
     /// Bearer token that mutating routes and `/metrics` require, if any.
@@ -116,7 +127,7 @@ pub const HYPER_MAX_HEADERS: usize = 2 * MAX_HEADERS;
 pub type AppState = Arc<Shared>;
 
 /// Response headers a browser may read across origins.
-const EXPOSED: [&str; 8] = [
+const EXPOSED: [&str; 10] = [
     "etag",
     "retry-after",
     "location",
@@ -125,6 +136,8 @@ const EXPOSED: [&str; 8] = [
     "x-solidtex-depth",
     "x-solidtex-origin",
     "x-solidtex-lod",
+    "content-disposition",
+    "x-solidtex-predicted-voxels",
 ];
 
 /// The complete service.
@@ -175,6 +188,10 @@ pub fn router(state: AppState) -> Router {
             "/v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}",
             get(volumes::zarr_chunk),
         )
+        .route("/v1/textures/{id}/export", get(exports::export))
+        .route("/v1/textures/{id}/export.json", get(exports::describe))
+        .route("/v1/exports/{eid}", get(exports::status))
+        .route("/v1/exports/{eid}/file", get(exports::file))
         .route("/", get(viewer::page))
         .route("/viewer.js", get(viewer::script));
     with_middleware(routes, state)
