@@ -3,10 +3,10 @@
 //! written as raw RGB8 with its three middle slices and an oblique cut.
 
 use super::source::{open_exemplar, write_png};
-use solidtex_server::write_atomic;
 use clap::Args;
 use solidtex_core::reference::{ReferenceParams, synthesize};
 use solidtex_core::{ExemplarSet, Layout, Orientation};
+use solidtex_server::write_atomic;
 use std::path::PathBuf;
 use std::time::Instant;
 
