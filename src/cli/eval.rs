@@ -32,7 +32,9 @@ pub struct EvalArgs {
     /// Also score the standard scheme.
     #[arg(long)]
     standard: bool,
-    /// Also score the quality preset (minutes of precompute per exemplar).
+    /// Also score the lazy synthesis started from the reference
+    /// (`initialisation=reference`) and the quality preset (minutes of
+    /// precompute per exemplar).
     #[arg(long)]
     quality: bool,
     /// Also score the global reference: slices through a periodic block
@@ -82,8 +84,8 @@ pub struct Score {
     pub exemplar: String,
     /// xy, yz, zx or oblique.
     pub orientation: String,
-    /// dual-grid (the default), standard, quality, slab-only, reference or
-    /// shuffled.
+    /// dual-grid (the default), standard, reference-init, quality,
+    /// slab-only, reference or shuffled.
     pub method: String,
     /// Mean nearest-patch distance, slice → exemplar (lower is better).
     pub coherence: f64,
@@ -176,7 +178,8 @@ fn reference_slices(block: &Block, side: u32) -> Vec<(&'static str, Vec<u8>)> {
 pub struct Extra {
     /// The standard scheme.
     pub standard: bool,
-    /// The quality preset ([`AnalysisParams::quality`]).
+    /// The reference initialisation and the quality preset
+    /// ([`AnalysisParams::quality`]).
     pub quality: bool,
     /// The global reference, a periodic block of this side.
     pub reference: Option<u32>,
@@ -249,6 +252,17 @@ pub fn evaluate(
         ));
     }
     if extra.quality {
+        methods.push((
+            "reference-init",
+            analyse(&AnalysisParams {
+                initialisation: Initialisation::Reference,
+                ..AnalysisParams::default()
+            })?,
+            SynthParams {
+                scheme: Scheme::DualGrid,
+                ..params.clone()
+            },
+        ));
         methods.push((
             "quality",
             analyse(&AnalysisParams::quality())?,
@@ -376,7 +390,10 @@ pub fn print(scores: &[Score]) -> std::io::Result<()> {
 /// The scores in which a corrected row (`dual-grid`, `standard`, `quality`) is worse
 /// than the slab-only row of the same exemplar and plane.
 fn losses_to_slab(scores: &[Score], s: &Score) -> Vec<&'static str> {
-    if !matches!(s.method.as_str(), "dual-grid" | "standard" | "quality") {
+    if !matches!(
+        s.method.as_str(),
+        "dual-grid" | "standard" | "reference-init" | "quality"
+    ) {
         return Vec::new();
     }
     let Some(slab) = scores.iter().find(|r| {

@@ -83,7 +83,11 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
         levels: a.levels,
         orientation: a.orientation,
         feature_weight: a.feature_weight,
-        initialisation: a.initialisation,
+        initialisation: if a.quality {
+            Initialisation::Reference
+        } else {
+            a.initialisation
+        },
         reference_level: if a.quality {
             AnalysisParams::quality().reference_level
         } else {

@@ -147,13 +147,12 @@ pub fn small_candidates() -> Arc<Candidates> {
     .clone()
 }
 
-/// The fixture's candidates for Dong et al.'s slab initialisation, for
-/// the tests of the slab itself.
-pub fn slab_candidates() -> Arc<Candidates> {
+/// The fixture's candidates for the reference initialisation.
+pub fn reference_candidates() -> Arc<Candidates> {
     static C: OnceLock<Arc<Candidates>> = OnceLock::new();
     C.get_or_init(|| {
         let params = AnalysisParams {
-            initialisation: solidtex_core::Initialisation::Slab,
+            initialisation: solidtex_core::Initialisation::Reference,
             ..small_params()
         };
         let set = ExemplarSet::single(small_exemplar());
@@ -162,10 +161,10 @@ pub fn slab_candidates() -> Arc<Candidates> {
     .clone()
 }
 
-/// [`texture_with`] over [`slab_candidates`].
-pub fn slab_texture_with(params: SynthParams, cache_bytes: usize) -> Texture {
+/// [`texture_with`] over [`reference_candidates`].
+pub fn reference_texture_with(params: SynthParams, cache_bytes: usize) -> Texture {
     Texture::new(
-        slab_candidates(),
+        reference_candidates(),
         params,
         Arc::new(TileCache::new(cache_bytes)),
     )

@@ -39,7 +39,10 @@ pub struct AnalysisParams {
     /// the channel keep their ids.
     #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
     pub feature_weight: f32,
-    /// What the lazy synthesis starts from (see [`Initialisation`]).
+    /// What the lazy synthesis starts from (see [`Initialisation`]). Not
+    /// written when the slab, so textures that start from it keep their
+    /// ids.
+    #[serde(skip_serializing_if = "Initialisation::is_slab")]
     pub initialisation: Initialisation,
     /// The finest level at which the reference is kept as a block of
     /// triples, when the synthesis starts from it: every level from this
@@ -65,10 +68,18 @@ pub enum Initialisation {
     /// features the block holds). Its structure is three-dimensional
     /// from the start, so the correction refines a solid that already
     /// continues the exemplar in every plane.
-    #[default]
     Reference,
-    /// The candidate slab of Dong et al., tiled and jittered.
+    /// The candidate slab of Dong et al., tiled and jittered (the
+    /// default: docs/quality.md measures the two).
+    #[default]
     Slab,
+}
+
+impl Initialisation {
+    /// Whether this is the slab (the default, not written).
+    pub fn is_slab(&self) -> bool {
+        *self == Initialisation::Slab
+    }
 }
 
 impl std::fmt::Display for Initialisation {
@@ -127,6 +138,7 @@ impl AnalysisParams {
     /// [`AnalysisParams::reference_level`]).
     pub fn quality() -> AnalysisParams {
         AnalysisParams {
+            initialisation: Initialisation::Reference,
             reference_level: Some(0),
             ..AnalysisParams::default()
         }

@@ -46,7 +46,10 @@ fn keys_of<T: Serialize + Default>() -> Vec<String> {
 /// included (no feature-distance channel writes no `feature_weight`).
 fn analysis_keys() -> Vec<String> {
     let mut keys = keys_of::<AnalysisParams>();
-    keys.push("feature_weight".to_string());
+    // Left out of the defaults' JSON, which omits them at their defaults.
+    for key in ["feature_weight", "initialisation", "reference_level"] {
+        keys.push(key.to_string());
+    }
     keys
 }
 
@@ -1023,10 +1026,15 @@ mod tests {
         old.remove("initialisation");
         let loaded = TextureParams::from_stored(&old).unwrap();
         assert_eq!(loaded.analysis.initialisation, Initialisation::Slab);
-        assert_eq!(
-            TextureParams::default().analysis.initialisation,
-            Initialisation::Reference
+        // The slab is the default and is not written: ids stay.
+        assert!(
+            !TextureParams::default()
+                .to_flat()
+                .contains_key("initialisation")
         );
+        let reference = TextureParams::from_json(r#"{"initialisation": "reference"}"#).unwrap();
+        assert_eq!(reference.analysis.initialisation, Initialisation::Reference);
+        assert_eq!(reference.to_flat()["initialisation"], "reference");
     }
 
     #[test]

@@ -556,6 +556,7 @@ mod tests {
     fn the_reference_blocks_read_as_written_and_broken_ones_are_refused() {
         let params = AnalysisParams {
             levels: 2,
+            initialisation: crate::Initialisation::Reference,
             reference_level: Some(0),
             ..AnalysisParams::default()
         };

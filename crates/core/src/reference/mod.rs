@@ -919,7 +919,7 @@ mod tests {
             .flat_map(|i| {
                 let (x, y) = (i % w, i / w);
                 let v = if (x / 4 + y / 8) % 2 == 0 { 40 } else { 200 };
-                [v, (v / 2) as u8, 255 - v]
+                [v, v / 2, 255 - v]
             })
             .collect();
         ExemplarSet::single(Exemplar::from_rgb(w as u32, w as u32, &rgb).unwrap())
