@@ -276,6 +276,16 @@ async fn upload_is_idempotent_and_voxel_routes_agree() {
     .await;
     assert_eq!(st, 200);
     assert_eq!(decode_png(&cut_png).2, z_rgb);
+    // Without origin, u and v a cut is the xy plane through the origin:
+    // the z = 0 slice.
+    let (st, _, default_cut) = get(&c, &s.url(&format!("/v1/textures/{id}/cut.png?w=5&h=4"))).await;
+    let (st2, _, slice0) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/slices/z/0.png?w=5&h=4")),
+    )
+    .await;
+    assert_eq!((st, st2), (200, 200));
+    assert_eq!(decode_png(&default_cut).2, decode_png(&slice0).2);
     // An oblique trilinear cut has the asked size.
     let (st, _, obl) = get(&c, &s.url(&format!("/v1/textures/{id}/cut.png?origin=0.5,1,2&u=0.7,0.7,0&v=0,0.6,0.8&w=9&h=7&filter=trilinear"))).await;
     assert_eq!(st, 200);

@@ -5,16 +5,18 @@
 //! yz, zx and an oblique orientation (an axis slice against its plane's
 //! exemplar, turned where the orientation turned it), next to two baselines computed the
 //! same way: the slab initialisation without correction, and a per-pixel
-//! shuffle of the exemplar.
+//! shuffle of the exemplar; on request also the quality preset and the
+//! global reference (slices through its periodic block, wrapping).
 
 use super::source::{SynthArgs, open_exemplar};
 use clap::Args;
 use solidtex_core::eval::{
     RgbView, SliceScores, Structure, anisotropy, score_slice, shuffled_exemplar, structure,
 };
+use solidtex_core::reference::{self, Block, ReferenceParams};
 use solidtex_core::{
-    AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Request, Scheme,
-    SynthParams, Texture, TileCache, Window,
+    AnalysisParams, Axis, Candidates, CutPlane, Exemplar, ExemplarSet, Filter, Initialisation,
+    Request, Scheme, SynthParams, Texture, TileCache, Window,
 };
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -30,6 +32,14 @@ pub struct EvalArgs {
     /// Also score the standard scheme.
     #[arg(long)]
     standard: bool,
+    /// Also score the quality preset (minutes of precompute per exemplar).
+    #[arg(long)]
+    quality: bool,
+    /// Also score the global reference: slices through a periodic block
+    /// of this side (`solidtex reference`), wrapping where the slice is
+    /// larger. 64³ takes tens of seconds, 128³ minutes.
+    #[arg(long, value_name = "SIDE")]
+    reference: Option<u32>,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -48,13 +58,12 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
         let e = open_exemplar(path)?;
-        let scores = evaluate(
-            &name,
-            &e,
-            a.side,
-            a.standard,
-            &a.synth.params(Scheme::DualGrid),
-        )?;
+        let extra = Extra {
+            standard: a.standard,
+            quality: a.quality,
+            reference: a.reference,
+        };
+        let scores = evaluate(&name, &e, a.side, extra, &a.synth.params(Scheme::DualGrid))?;
         if !a.json {
             print(&scores)?;
         }
@@ -73,7 +82,8 @@ pub struct Score {
     pub exemplar: String,
     /// xy, yz, zx or oblique.
     pub orientation: String,
-    /// dual-grid, standard, slab-only or shuffled.
+    /// dual-grid (the default), standard, quality, slab-only, reference or
+    /// shuffled.
     pub method: String,
     /// Mean nearest-patch distance, slice → exemplar (lower is better).
     pub coherence: f64,
@@ -108,35 +118,91 @@ fn slices(tex: &Texture, side: u32) -> anyhow::Result<Vec<(&'static str, Vec<u8>
                 .0,
         ));
     }
-    let plane = CutPlane {
+    out.push((
+        "oblique",
+        tex.render(&Request::cut(oblique(side), Filter::Nearest)?, 0)?
+            .0,
+    ));
+    Ok(out)
+}
+
+/// The oblique plane every method is cut along.
+fn oblique(side: u32) -> CutPlane {
+    CutPlane {
         origin: [0.0, 0.0, 0.0],
         u: [0.8, 0.0, 0.6],
         v: [-0.36, 0.8, 0.48],
         width: side,
         height: side,
+    }
+}
+
+/// The same slices as [`slices`] through a periodic reference block,
+/// wrapping: its voxels are the finest level's.
+fn reference_slices(block: &Block, side: u32) -> Vec<(&'static str, Vec<u8>)> {
+    let n = block.size as i64;
+    let at = |p: [i64; 3]| {
+        let [x, y, z] = p.map(|c| c.rem_euclid(n));
+        let i = (((z * n + y) * n + x) * 3) as usize;
+        [block.rgb[i], block.rgb[i + 1], block.rgb[i + 2]]
     };
-    out.push((
-        "oblique",
-        tex.render(&Request::cut(plane, Filter::Nearest)?, 0)?.0,
-    ));
-    Ok(out)
+    let s = side as i64;
+    let image = |f: &dyn Fn(i64, i64) -> [i64; 3]| -> Vec<u8> {
+        (0..s)
+            .flat_map(|v| (0..s).map(move |u| (u, v)))
+            .flat_map(|(u, v)| at(f(u, v)))
+            .collect()
+    };
+    // As `slices`: through (3, 5, 21), u and v as the axis slices' own.
+    let plane = oblique(side);
+    vec![
+        ("xy", image(&|u, v| [3 + u, 5 + v, 21])),
+        ("yz", image(&|u, v| [21, 3 + u, 5 + v])),
+        ("zx", image(&|u, v| [5 + v, 21, 3 + u])),
+        (
+            "oblique",
+            image(&|u, v| {
+                let p = |k: usize| {
+                    (plane.origin[k] + u as f64 * plane.u[k] + v as f64 * plane.v[k]).floor() as i64
+                };
+                [p(0), p(1), p(2)]
+            }),
+        ),
+    ]
+}
+
+/// The methods scored beside the default and the two baselines.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Extra {
+    /// The standard scheme.
+    pub standard: bool,
+    /// The quality preset ([`AnalysisParams::quality`]).
+    pub quality: bool,
+    /// The global reference, a periodic block of this side.
+    pub reference: Option<u32>,
 }
 
 /// Scores one exemplar with every method; `params` are those of the
-/// dual-grid slices, and the other methods differ from them only in what
-/// defines the method (the scheme, or no correction).
+/// corrected slices, and the other methods differ from them only in what
+/// defines the method (the scheme, the initialisation, or no correction).
 pub fn evaluate(
     name: &str,
     exemplar: &Exemplar,
     side: u32,
-    schemes: bool,
+    extra: Extra,
     params: &SynthParams,
 ) -> anyhow::Result<Vec<Score>> {
-    let cands = Arc::new(Candidates::compute(
-        &ExemplarSet::single(exemplar.clone()),
-        &AnalysisParams::default(),
-        &|_, _| {},
-    )?);
+    let set = ExemplarSet::single(exemplar.clone());
+    let analyse = |analysis: &AnalysisParams| -> anyhow::Result<Arc<Candidates>> {
+        Ok(Arc::new(Candidates::compute(&set, analysis, &|_, _| {})?))
+    };
+    let cands = analyse(&AnalysisParams::default())?;
+    // Dong et al.'s slab, uncorrected: the baseline every correction must
+    // beat, whatever the default starts from.
+    let slab = analyse(&AnalysisParams {
+        initialisation: Initialisation::Slab,
+        ..AnalysisParams::default()
+    })?;
     let ex_rgb = exemplar.to_rgb_bytes();
     let ex = RgbView {
         width: exemplar.width(),
@@ -155,6 +221,7 @@ pub fn evaluate(
     let mut methods = vec![
         (
             "dual-grid",
+            cands.clone(),
             SynthParams {
                 scheme: Scheme::DualGrid,
                 ..params.clone()
@@ -162,6 +229,7 @@ pub fn evaluate(
         ),
         (
             "slab-only",
+            slab,
             SynthParams {
                 passes: 0,
                 finest_passes: 0,
@@ -170,11 +238,22 @@ pub fn evaluate(
             },
         ),
     ];
-    if schemes {
+    if extra.standard {
         methods.push((
             "standard",
+            cands.clone(),
             SynthParams {
                 scheme: Scheme::Standard,
+                ..params.clone()
+            },
+        ));
+    }
+    if extra.quality {
+        methods.push((
+            "quality",
+            analyse(&AnalysisParams::quality())?,
+            SynthParams {
+                scheme: Scheme::DualGrid,
                 ..params.clone()
             },
         ));
@@ -199,9 +278,22 @@ pub fn evaluate(
             components: st.components,
         })
     };
-    for (method, params) in methods {
-        let tex = Texture::new(cands.clone(), params, Arc::new(TileCache::new(1 << 30)))?;
-        for (p, (orientation, rgb)) in slices(&tex, side)?.into_iter().enumerate() {
+    let mut rendered = Vec::new();
+    for (method, cands, params) in methods {
+        let tex = Texture::new(cands, params, Arc::new(TileCache::new(1 << 30)))?;
+        rendered.push((method, slices(&tex, side)?));
+    }
+    if let Some(size) = extra.reference {
+        let layout = cands.layout();
+        let rp = ReferenceParams {
+            size,
+            ..ReferenceParams::default()
+        };
+        let block = reference::synthesize(analysed, layout.arrangement.weights, &rp, |_| {})?;
+        rendered.push(("reference", reference_slices(&block, side)));
+    }
+    for (method, planes) in rendered {
+        for (p, (orientation, rgb)) in planes.into_iter().enumerate() {
             let view = RgbView {
                 width: side,
                 height: side,
@@ -281,10 +373,10 @@ pub fn print(scores: &[Score]) -> std::io::Result<()> {
     Ok(())
 }
 
-/// The scores in which a corrected row (`dual-grid`, `standard`) is worse
+/// The scores in which a corrected row (`dual-grid`, `standard`, `quality`) is worse
 /// than the slab-only row of the same exemplar and plane.
 fn losses_to_slab(scores: &[Score], s: &Score) -> Vec<&'static str> {
-    if !matches!(s.method.as_str(), "dual-grid" | "standard") {
+    if !matches!(s.method.as_str(), "dual-grid" | "standard" | "quality") {
         return Vec::new();
     }
     let Some(slab) = scores.iter().find(|r| {
@@ -350,13 +442,39 @@ mod tests {
     }
 
     #[test]
+    fn reference_slices_cut_the_block_where_the_engine_slices_are_cut() {
+        // Each voxel's colour is its own coordinates, so a pixel says
+        // which voxel it came from.
+        let n = 8u32;
+        let rgb = (0..n * n * n)
+            .flat_map(|i| [(i % n) as u8, (i / n % n) as u8, (i / (n * n)) as u8])
+            .collect();
+        let block = Block { size: n, rgb };
+        let slices = reference_slices(&block, 12);
+        let pixel = |plane: usize, u: usize, v: usize| {
+            let img = &slices[plane].1;
+            let i = (v * 12 + u) * 3;
+            [img[i], img[i + 1], img[i + 2]]
+        };
+        let wrap = |c: i64| c.rem_euclid(8) as u8;
+        // xy through z = 21: (3 + u, 5 + v); yz: (21, 3 + u, 5 + v); zx: (5 + v, 21, 3 + u).
+        assert_eq!(pixel(0, 10, 4), [wrap(13), wrap(9), wrap(21)]);
+        assert_eq!(pixel(1, 10, 4), [wrap(21), wrap(13), wrap(9)]);
+        assert_eq!(pixel(2, 10, 4), [wrap(9), wrap(21), wrap(13)]);
+        assert_eq!(slices.len(), 4);
+        assert_eq!(slices[3].0, "oblique");
+        assert_eq!(pixel(3, 0, 0), [0, 0, 0]);
+    }
+
+    #[test]
     fn synthesis_parameters_reach_the_corrected_slices_only() {
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/tests/fixtures/exemplars/animal_leather.png"
         );
         let e = Exemplar::open(std::path::Path::new(path)).unwrap();
-        let score = |params: &SynthParams| evaluate("leather", &e, 24, false, params).unwrap();
+        let score =
+            |params: &SynthParams| evaluate("leather", &e, 24, Extra::default(), params).unwrap();
         let default = score(&SynthParams::default());
         let flat = score(&SynthParams {
             contrast: 1.0,

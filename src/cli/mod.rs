@@ -10,6 +10,7 @@ mod inspect;
 mod loadtest;
 mod plan;
 mod precompute;
+mod reference;
 mod region;
 mod slice;
 mod source;
@@ -49,6 +50,9 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Score synthesized slices against their exemplar, next to baselines.
     Eval(eval::EvalArgs),
+    /// Synthesize the global reference: a periodic block by texture
+    /// optimisation over the whole block (minutes, not lazy).
+    Reference(reference::ReferenceArgs),
     /// Run the HTTP voxel service.
     Serve(solidtex_server::ServeArgs),
     /// Measure a running server under concurrent voxel requests.
@@ -88,6 +92,7 @@ fn run_command(cli: Cli) -> anyhow::Result<()> {
         Command::Slice(a) => slice::run(a),
         Command::Cut(a) => cut::run(a),
         Command::Volume(a) => volume::run(a),
+        Command::Reference(a) => reference::run(a),
         Command::Export(a) => export::run(a),
     }
 }

@@ -3,7 +3,9 @@
 use super::source::{open_exemplar, precompute};
 use anyhow::{Context, bail};
 use clap::Args;
-use solidtex_core::{AnalysisParams, Candidates, Exemplar, ExemplarSet, Layout, Orientation};
+use solidtex_core::{
+    AnalysisParams, Candidates, Exemplar, ExemplarSet, Initialisation, Layout, Orientation,
+};
 use solidtex_server::write_atomic;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -46,6 +48,20 @@ pub struct PrecomputeArgs {
     /// relative to the luminance; 0 matches colour alone.
     #[arg(long, default_value_t = AnalysisParams::default().feature_weight)]
     feature_weight: f32,
+    /// What the synthesis starts from: reference (a periodic block of the
+    /// global reference, optimised here) or slab (Dong et al.'s candidate
+    /// slab).
+    #[arg(long, default_value_t = AnalysisParams::default().initialisation)]
+    initialisation: Initialisation,
+    /// The quality preset: the reference kept at every level, so the
+    /// finest level starts from the reference's own solid (minutes of
+    /// precompute; docs/quality.md says for which exemplars).
+    #[arg(long, conflicts_with = "reference_level")]
+    quality: bool,
+    /// The finest level at which the reference is kept (0 = finest;
+    /// the coarsest alone by default).
+    #[arg(long)]
+    reference_level: Option<u32>,
     /// Also print each stage's time and each level's candidate statistics.
     #[arg(long)]
     verbose: bool,
@@ -67,6 +83,12 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
         levels: a.levels,
         orientation: a.orientation,
         feature_weight: a.feature_weight,
+        initialisation: a.initialisation,
+        reference_level: if a.quality {
+            AnalysisParams::quality().reference_level
+        } else {
+            a.reference_level
+        },
         ..AnalysisParams::default()
     };
     let (w, h) = (set.width(), set.height());

@@ -174,11 +174,12 @@ pub fn precompute(
         Stage::Search,
         Stage::Coherence,
         Stage::Finish,
+        Stage::Reference,
     ];
     let cb = |s: Stage, f: f32| {
         let i = stages.iter().position(|&x| x == s).unwrap_or(0);
         bar.set_message(format!("{s:?}").to_lowercase());
-        bar.set_position(((i as f32 + f) / 4.0 * 1000.0) as u64);
+        bar.set_position(((i as f32 + f) / stages.len() as f32 * 1000.0) as u64);
     };
     let c = Candidates::compute(set, params, &cb)?;
     bar.finish_and_clear();

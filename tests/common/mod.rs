@@ -147,6 +147,31 @@ pub fn small_candidates() -> Arc<Candidates> {
     .clone()
 }
 
+/// The fixture's candidates for Dong et al.'s slab initialisation, for
+/// the tests of the slab itself.
+pub fn slab_candidates() -> Arc<Candidates> {
+    static C: OnceLock<Arc<Candidates>> = OnceLock::new();
+    C.get_or_init(|| {
+        let params = AnalysisParams {
+            initialisation: solidtex_core::Initialisation::Slab,
+            ..small_params()
+        };
+        let set = ExemplarSet::single(small_exemplar());
+        Arc::new(Candidates::compute(&set, &params, &|_, _| {}).unwrap())
+    })
+    .clone()
+}
+
+/// [`texture_with`] over [`slab_candidates`].
+pub fn slab_texture_with(params: SynthParams, cache_bytes: usize) -> Texture {
+    Texture::new(
+        slab_candidates(),
+        params,
+        Arc::new(TileCache::new(cache_bytes)),
+    )
+    .unwrap()
+}
+
 pub fn texture_with(params: SynthParams, cache_bytes: usize) -> Texture {
     Texture::new(
         small_candidates(),

@@ -23,6 +23,7 @@ pub mod hash;
 mod params;
 pub mod period;
 pub mod png;
+pub mod reference;
 mod request;
 mod simd;
 mod synth;
@@ -34,7 +35,8 @@ pub use candidates::{Candidates, PrecomputeReport, Stage};
 pub use error::{CorruptKind, Error, Result};
 pub use field::{Along, Curve, Field, Sketch};
 pub use params::{
-    AnalysisParams, Arrangement, Correction, Orientation, Scheme, SlabTiling, Slices, SynthParams,
+    AnalysisParams, Arrangement, Correction, Initialisation, Orientation, Scheme, SlabTiling,
+    Slices, SynthParams,
 };
 pub use request::{
     Axis, COORD_LIMIT, Cut, CutPlane, Filter, MAX_REGION_VOXELS, MAX_SLICE_SIDE, Region, Request,

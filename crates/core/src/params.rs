@@ -39,6 +39,58 @@ pub struct AnalysisParams {
     /// the channel keep their ids.
     #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
     pub feature_weight: f32,
+    /// What the lazy synthesis starts from (see [`Initialisation`]).
+    pub initialisation: Initialisation,
+    /// The finest level at which the reference is kept as a block of
+    /// triples, when the synthesis starts from it: every level from this
+    /// one to the coarsest starts from its own block, so a request at a
+    /// level of detail at or above it corrects only that level. `None`
+    /// keeps the coarsest level's block alone (cheap to precompute; the
+    /// finer levels are upsampled and corrected as before); 0 keeps every
+    /// level's (the quality preset: the finest level is the reference's
+    /// own, at the cost of minutes of precompute and its blocks in the
+    /// `.stx`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_level: Option<u32>,
+}
+
+/// What the lazy synthesis's first version of a level is made from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum Initialisation {
+    /// A periodic block of the global reference (texture optimisation
+    /// over a whole block, [`crate::reference`]), optimised once at
+    /// precompute and tiled in Voronoi cells, each reading the block at
+    /// its own hashed offset (not jittered: a warp would break the thin
+    /// features the block holds). Its structure is three-dimensional
+    /// from the start, so the correction refines a solid that already
+    /// continues the exemplar in every plane.
+    #[default]
+    Reference,
+    /// The candidate slab of Dong et al., tiled and jittered.
+    Slab,
+}
+
+impl std::fmt::Display for Initialisation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Initialisation::Reference => "reference",
+            Initialisation::Slab => "slab",
+        })
+    }
+}
+
+impl std::str::FromStr for Initialisation {
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "reference" => Ok(Initialisation::Reference),
+            "slab" => Ok(Initialisation::Slab),
+            _ => Err(Error::InvalidRequest(format!(
+                "unknown initialisation `{s}` (expected reference or slab)"
+            ))),
+        }
+    }
 }
 
 impl Default for AnalysisParams {
@@ -54,6 +106,8 @@ impl Default for AnalysisParams {
             similar_fine: 2,
             orientation: Orientation::Auto,
             feature_weight: DEFAULT_FEATURE_WEIGHT,
+            initialisation: Initialisation::default(),
+            reference_level: None,
         }
     }
 }
@@ -68,6 +122,27 @@ fn is_zero(v: &f32) -> bool {
 }
 
 impl AnalysisParams {
+    /// The quality preset: the reference kept at every level, so the
+    /// finest level starts from the reference's own solid (see
+    /// [`AnalysisParams::reference_level`]).
+    pub fn quality() -> AnalysisParams {
+        AnalysisParams {
+            reference_level: Some(0),
+            ..AnalysisParams::default()
+        }
+    }
+
+    /// The levels that start from a block of the reference, finest first
+    /// (empty for the slab).
+    pub fn reference_levels(&self) -> std::ops::RangeInclusive<u32> {
+        let coarsest = self.levels - 1;
+        match self.initialisation {
+            Initialisation::Reference => self.reference_level.unwrap_or(coarsest)..=coarsest,
+            #[allow(clippy::reversed_empty_ranges)]
+            Initialisation::Slab => 1..=0,
+        }
+    }
+
     /// [`AnalysisParams::validate`], and that the parameters can use what
     /// `exemplars` bring: a feature mask needs the feature-distance channel
     /// (`feature_weight` above 0), which is the only thing that reads it.
@@ -100,6 +175,14 @@ impl AnalysisParams {
             a.validate()?;
         }
         range("feature_weight", self.feature_weight, 0.0, 4.0)?;
+        if let Some(level) = self.reference_level {
+            range("reference_level", level, 0, self.levels - 1)?;
+            if self.initialisation != Initialisation::Reference {
+                return Err(Error::InvalidRequest(
+                    "reference_level needs initialisation reference".into(),
+                ));
+            }
+        }
         Ok(())
     }
 }

@@ -319,10 +319,11 @@ impl Entry {
 /// usual share of the time).
 fn overall_progress(stage: Stage, f: f32) -> (&'static str, f32) {
     let (name, start, span) = match stage {
-        Stage::Analysis => ("analysis", 0.0, 0.1),
-        Stage::Search => ("search", 0.1, 0.6),
-        Stage::Coherence => ("coherence", 0.7, 0.1),
-        Stage::Finish => ("finish", 0.8, 0.2),
+        Stage::Analysis => ("analysis", 0.0, 0.05),
+        Stage::Search => ("search", 0.05, 0.4),
+        Stage::Coherence => ("coherence", 0.45, 0.05),
+        Stage::Finish => ("finish", 0.5, 0.1),
+        Stage::Reference => ("reference", 0.6, 0.4),
     };
     (name, (start + span * f.clamp(0.0, 1.0)).min(0.999))
 }
@@ -1448,6 +1449,7 @@ mod tests {
             Stage::Search,
             Stage::Coherence,
             Stage::Finish,
+            Stage::Reference,
         ] {
             for f in [0.0, 0.5, 1.0] {
                 let (_, p) = overall_progress(s, f);

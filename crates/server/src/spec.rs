@@ -235,6 +235,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("slab_tiling", r#""blocks""#),
     ("feature_weight", "0"),
     ("parity_levels", "0"),
+    ("initialisation", r#""slab""#),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
@@ -532,6 +533,7 @@ fn is_zero(n: &u32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use solidtex_core::Initialisation;
 
     /// The error code a client would see.
     fn code(e: SpecError) -> &'static str {
@@ -989,6 +991,7 @@ mod tests {
         };
         let mut old = now.params.to_flat();
         old.remove("orientation");
+        old.remove("initialisation");
         let a = AnalysisParams::default();
         let then = AnalysisParamsBeforeOrientation {
             neighbourhood: a.neighbourhood,
@@ -1012,6 +1015,18 @@ mod tests {
         };
         assert_eq!(loaded.content_hash_as_stored(&old), id_then);
         assert_ne!(now.content_hash(), id_then);
+    }
+
+    #[test]
+    fn textures_stored_before_the_reference_start_from_the_slab() {
+        let mut old = TextureParams::default().to_flat();
+        old.remove("initialisation");
+        let loaded = TextureParams::from_stored(&old).unwrap();
+        assert_eq!(loaded.analysis.initialisation, Initialisation::Slab);
+        assert_eq!(
+            TextureParams::default().analysis.initialisation,
+            Initialisation::Reference
+        );
     }
 
     #[test]

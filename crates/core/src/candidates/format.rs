@@ -6,7 +6,9 @@
 //! as given. Versions 1 and 2 also stored per level the joint PCA of a
 //! triple's three appearance vectors, which only the colour correction
 //! read; it is skipped. Since version 4 each exemplar is followed by its
-//! feature mask, if it has one. Derived data
+//! feature mask, if it has one. Since version 5 the levels are followed
+//! by the reference's blocks of triples (level, side, then every voxel's
+//! triple); earlier files started from the slab, and read so. Derived data
 //! (stacks, appearance vectors, quantised neighbourhoods) is recomputed on
 //! load, deterministically. Every read is bounds-checked: a truncated or
 //! corrupt file is an error, never a panic or a wrong result.
@@ -19,7 +21,7 @@ use crate::error::{CorruptKind, Error, Result};
 use crate::params::{AnalysisParams, Arrangement, Orientation};
 
 const MAGIC: &[u8; 8] = b"SOLIDTEX";
-const VERSION: u32 = 4;
+const VERSION: u32 = 5;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 struct Writer(Vec<u8>);
@@ -137,7 +139,18 @@ fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
     let npx = c.dims.len() as u32;
     let wide = npx > u16::MAX as u32 + 1;
     let mut w = Writer(Vec::new());
-    w.bytes(&serde_json::to_vec(&c.params).expect("params serialise"));
+    let params = if version < 5 {
+        // Written before the reference's blocks, which had no such keys.
+        let mut value = serde_json::to_value(&c.params).expect("params serialise");
+        let map = value.as_object_mut().expect("an object");
+        map.remove("initialisation");
+        map.remove("reference_level");
+        serde_json::to_vec(&value)
+    } else {
+        // The struct's own field order, whatever map serde_json keeps.
+        serde_json::to_vec(&c.params)
+    };
+    w.bytes(&params.expect("params serialise"));
     w.u8(single as u8);
     w.u32(c.dims.w);
     w.u32(c.dims.h);
@@ -202,6 +215,18 @@ fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
             }
         }
     }
+    if version >= 5 {
+        w.u32(c.blocks().len() as u32);
+        for b in c.blocks() {
+            w.u32(b.level);
+            w.u32(b.side);
+            for t in &b.triples {
+                for &coord in t {
+                    w.coord(coord, wide);
+                }
+            }
+        }
+    }
     let payload = w.0;
     let mut out = Vec::with_capacity(HEADER + payload.len());
     out.extend_from_slice(MAGIC);
@@ -249,6 +274,12 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     params
         .entry("feature_weight")
         .or_insert_with(|| serde_json::json!(0));
+    // Written before the reference's blocks: started from the slab.
+    if version < 5 {
+        params
+            .entry("initialisation")
+            .or_insert_with(|| serde_json::json!("slab"));
+    }
     let params: AnalysisParams =
         serde_json::from_value(params.into()).map_err(|e| invalid(&format!("params: {e}")))?;
     params.validate().map_err(|e| invalid(&e.to_string()))?;
@@ -390,10 +421,50 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
             k2,
         });
     }
+    let mut blocks = Vec::new();
+    if version >= 5 {
+        let count = r.u32()?;
+        if count > params.levels {
+            return Err(invalid("block count"));
+        }
+        for _ in 0..count {
+            let level = r.u32()?;
+            let side = r.u32()?;
+            if side == 0 || side > crate::reference::MAX_REFERENCE_SIZE {
+                return Err(invalid("block side"));
+            }
+            let voxels = (side as usize).pow(3);
+            // Bounded before allocating: each triple takes at least six
+            // bytes of what is left.
+            if voxels.saturating_mul(6) > payload.len() - r.pos {
+                return Err(Error::CorruptFile(CorruptKind::Truncated));
+            }
+            let mut triples = Vec::with_capacity(voxels);
+            for _ in 0..voxels {
+                triples.push([
+                    r.coord(wide, npx)?,
+                    r.coord(wide, npx)?,
+                    r.coord(wide, npx)?,
+                ]);
+            }
+            blocks.push(crate::reference::TripleBlock {
+                side,
+                level,
+                triples,
+            });
+        }
+    }
     if r.pos != payload.len() {
         return Err(invalid("trailing bytes"));
     }
-    Candidates::from_stored(set, params, layout, levels, PrecomputeReport::default())
+    Candidates::from_stored(
+        set,
+        params,
+        layout,
+        levels,
+        blocks,
+        PrecomputeReport::default(),
+    )
 }
 
 /// The layout record, which must agree with an orientation that was given.
@@ -440,6 +511,7 @@ fn read_layout(r: &mut Reader, params: &AnalysisParams) -> Result<Layout> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::params::Initialisation;
 
     /// Horizontal stripes with a little noise: strongly oriented along u.
     fn grain(side: u32) -> Exemplar {
@@ -481,12 +553,57 @@ mod tests {
     }
 
     #[test]
+    fn the_reference_blocks_read_as_written_and_broken_ones_are_refused() {
+        let params = AnalysisParams {
+            levels: 2,
+            reference_level: Some(0),
+            ..AnalysisParams::default()
+        };
+        let c = Candidates::compute(&ExemplarSet::single(grain(16)), &params, &|_, _| {}).unwrap();
+        assert_eq!(
+            c.blocks().iter().map(|b| b.level).collect::<Vec<_>>(),
+            [0, 1]
+        );
+        let bytes = encode(&c);
+        let loaded = decode(&bytes).unwrap();
+        assert_eq!(loaded.blocks(), c.blocks());
+        // A block's side that claims more voxels than the file holds is
+        // refused before anything is allocated for it.
+        let blocks_at = bytes.len()
+            - c.blocks()
+                .iter()
+                .map(|b| 8 + b.triples.len() * 6)
+                .sum::<usize>()
+            - 4;
+        let mut payload = bytes[HEADER..].to_vec();
+        let side_at = blocks_at - HEADER + 4 + 4;
+        payload[side_at..side_at + 4].copy_from_slice(&200u32.to_le_bytes());
+        assert!(decode(&with_header(VERSION, &payload)).is_err());
+        // Blocks that do not match the parameters' levels are refused.
+        let mut payload = bytes[HEADER..].to_vec();
+        let level_at = blocks_at - HEADER + 4;
+        payload[level_at..level_at + 4].copy_from_slice(&1u32.to_le_bytes());
+        assert!(decode(&with_header(VERSION, &payload)).is_err());
+    }
+
+    #[test]
     fn files_of_earlier_versions_load() {
-        let c = compute(grain(16), Orientation::None);
+        // Files before version 5 started from the slab, and read so.
+        let params = AnalysisParams {
+            levels: 2,
+            orientation: Orientation::None,
+            initialisation: Initialisation::Slab,
+            ..AnalysisParams::default()
+        };
+        let c = Candidates::compute(&ExemplarSet::single(grain(16)), &params, &|_, _| {}).unwrap();
         let now = encode(&c);
+        let v4 = encode_version(&c, 4);
+        let loaded = decode(&v4).unwrap();
+        assert_eq!(loaded.params().initialisation, Initialisation::Slab);
+        assert_eq!(encode(&loaded), now);
         // Version 3: no feature-mask flags.
         let v3 = encode_version(&c, 3);
-        assert_eq!(v3.len() + 1, now.len());
+        assert_eq!(v3.len() + 1, v4.len());
         assert_eq!(encode(&decode(&v3).unwrap()), now);
         // Version 2: a joint PCA per level besides, which is skipped.
         let v2 = encode_version(&c, 2);
@@ -499,6 +616,7 @@ mod tests {
         let json_len = u32::from_le_bytes(payload[..4].try_into().unwrap()) as usize;
         let json = std::str::from_utf8(&payload[4..4 + json_len]).unwrap();
         let old_json = json.replace(r#","orientation":"none""#, "");
+        assert!(!json.contains("initialisation"), "{json}");
         assert_ne!(old_json, json);
         let mut old = (old_json.len() as u32).to_le_bytes().to_vec();
         old.extend_from_slice(old_json.as_bytes());

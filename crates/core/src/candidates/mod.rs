@@ -38,6 +38,9 @@ pub enum Stage {
     Coherence,
     /// 2D similarity sets and neighbourhood vectors.
     Finish,
+    /// The reference's blocks of triples (texture optimisation of a
+    /// periodic block), when the synthesis starts from them.
+    Reference,
 }
 
 /// Per-level summary of the candidate sets.
@@ -197,6 +200,9 @@ pub struct Candidates {
     dims: Dims,
     stacks: [GaussianStack; 3],
     levels: Vec<Level>,
+    /// The reference's blocks of triples, one per level that starts from
+    /// one, finest first (none for the slab).
+    blocks: Vec<crate::reference::TripleBlock>,
     report: PrecomputeReport,
     /// Content fingerprint, the texture part of tile cache keys: taken
     /// from the file when loaded, else from the encoding on first use.
@@ -213,6 +219,30 @@ impl std::fmt::Debug for Candidates {
             self.levels.len()
         )
     }
+}
+
+/// The reference's blocks for the levels `params` starts from one, finest
+/// first, optimised once down to the finest of them.
+fn reference_blocks(
+    exemplars: &ExemplarSet,
+    weights: [f32; 3],
+    params: &AnalysisParams,
+    progress: &(dyn Fn(f32) + Sync),
+) -> Result<Vec<crate::reference::TripleBlock>> {
+    let levels = params.reference_levels();
+    if levels.is_empty() {
+        return Ok(Vec::new());
+    }
+    let (finest, coarsest) = (*levels.start(), *levels.end());
+    let rp =
+        crate::reference::seeding_params(exemplars.width(), exemplars.height(), finest, coarsest);
+    let blocks =
+        crate::reference::triple_blocks(exemplars, weights, &rp, finest as usize, progress)?;
+    Ok(blocks
+        .into_iter()
+        .filter(|b| b.level <= coarsest)
+        .rev()
+        .collect())
 }
 
 /// Appearance dimensions used by the similarity k-d tree.
@@ -246,7 +276,19 @@ impl Candidates {
         let kept = 40.0 * (f64::from(params.max_candidates) - 12.0).max(0.0);
         let per_pixel = search.max(later) + wider + kept;
         // Small exemplars peak at fixed costs (samples of set sizes, trees).
-        ((pixels * per_pixel) as u64 + (4 << 20)).max(6 << 20)
+        let analysis = ((pixels * per_pixel) as u64 + (4 << 20)).max(6 << 20);
+        // The reference block's optimisation state (positions, colours,
+        // matches and the blocks kept), per voxel of its finest level.
+        const REFERENCE_BYTES_PER_VOXEL: u64 = 80;
+        let levels = params.reference_levels();
+        let reference = if levels.is_empty() {
+            0
+        } else {
+            let rp =
+                crate::reference::seeding_params(width, height, *levels.start(), *levels.end());
+            u64::from(rp.size).pow(3) * REFERENCE_BYTES_PER_VOXEL
+        };
+        analysis + reference
     }
 
     /// Runs the whole precomputation; `progress(stage, fraction 0..1)` is
@@ -298,6 +340,13 @@ impl Candidates {
         let (stored, appearance) = stages.finish_levels(filtered_levels, appearance_pca);
         let levels = derive_levels(stored, appearance, single, layout.arrangement.weights);
         lap(&mut report, "finish");
+        let blocks = reference_blocks(exemplars, layout.arrangement.weights, params, &|f| {
+            progress(Stage::Reference, f);
+            if let Some(c) = cancel.as_ref() {
+                c.unwind_if_set();
+            }
+        })?;
+        lap(&mut report, "reference");
         Ok(Candidates {
             exemplars: given.clone(),
             analysed,
@@ -306,9 +355,21 @@ impl Candidates {
             dims,
             stacks,
             levels,
+            blocks,
             report,
             digest: std::sync::OnceLock::new(),
         })
+    }
+
+    /// The reference's block of triples that level `k` starts from, if
+    /// it starts from one.
+    pub fn block(&self, k: usize) -> Option<&crate::reference::TripleBlock> {
+        self.blocks.iter().find(|b| b.level as usize == k)
+    }
+
+    /// Every block of the reference kept, finest first.
+    pub(crate) fn blocks(&self) -> &[crate::reference::TripleBlock] {
+        &self.blocks
     }
 
     /// Rebuilds derived data around stored levels (used by `load`).
@@ -317,9 +378,18 @@ impl Candidates {
         params: AnalysisParams,
         layout: Layout,
         stored: Vec<StoredLevel>,
+        blocks: Vec<crate::reference::TripleBlock>,
         report: PrecomputeReport,
     ) -> Result<Candidates> {
         params.validate()?;
+        // One block per level the parameters start from, finest first.
+        let want: Vec<u32> = params.reference_levels().collect();
+        let have: Vec<u32> = blocks.iter().map(|b| b.level).collect();
+        if want != have {
+            return Err(Error::CorruptFile(crate::error::CorruptKind::Invalid(
+                "reference blocks".into(),
+            )));
+        }
         let analysed = layout.apply(&exemplars)?;
         let dims = Dims::new(analysed.width(), analysed.height());
         if stored.len() != params.levels as usize {
@@ -345,6 +415,7 @@ impl Candidates {
             dims,
             stacks,
             levels,
+            blocks,
             report,
             digest: std::sync::OnceLock::new(),
         })

@@ -256,6 +256,29 @@ impl Engine {
         let mut g = Grid::new(b);
         let zs: Vec<i64> = (b.lo[2]..b.hi[2]).collect();
         let layer = (b.size()[0] * b.size()[1]) as usize;
+        if self.cands.block(k).is_some() {
+            if acc.dry {
+                return g;
+            }
+            let f = self.cands.blocks()[0].level as usize;
+            let tiling = init::BlockTiling {
+                cands: &self.cands,
+                seed: self.params.seed,
+                field: self.field.as_deref(),
+                period: self.period_at(f),
+            };
+            g.data
+                .par_chunks_mut(layer)
+                .zip(zs.par_iter())
+                .for_each(|(dst, &z)| {
+                    let mut sites = init::Sites::default();
+                    for p in need.layer(z) {
+                        let i = ((p[1] - b.lo[1]) * b.size()[0] + (p[0] - b.lo[0])) as usize;
+                        dst[i] = tiling.triple(k, p, &mut sites);
+                    }
+                });
+            return g;
+        }
         if k == self.init_level {
             if acc.dry {
                 return g;

@@ -1,6 +1,7 @@
-//! Version 0 of a level: at the coarsest synthesized level, the candidate
-//! slab tiled over space and warped by the jitter field; at finer levels,
-//! the parent's triples upsampled.
+//! Version 0 of a level: the reference's block of triples tiled over space
+//! at a level that starts from one, else at the coarsest synthesized level
+//! the candidate slab tiled over space and warped by the jitter field; at
+//! finer levels, the parent's triples upsampled.
 
 use crate::analysis::stack::spacing;
 use crate::candidates::Candidates;
@@ -13,6 +14,7 @@ use crate::period::Intervals;
 const TAG_SLAB: u32 = 1;
 const TAG_JITTER: u32 = 2;
 const TAG_CELL: u32 = 3;
+const TAG_BLOCK: u32 = 4;
 
 /// Gaussians per jitter cell; cells are a quarter of the exemplar period,
 /// so the density matches the slides' G = 200 per exemplar-sized volume.
@@ -127,6 +129,71 @@ impl Slab<'_> {
         let cands = c.level(k).candidates(0);
         let first = cands.triples[cands.range(pixel).start];
         offset_triple(dims, first, [0, 0, dz], h)
+    }
+}
+
+/// The reference's periodic blocks of triples tiled over space: cells of a
+/// jittered grid, each reading the blocks at its own hashed offset, so the
+/// initialisation has no period (Zhang et al.'s subpart initialisation,
+/// §4.1, with pieces of a solid instead of a slab). No jitter warps them:
+/// the block's features are already solid, and a warp would tear the fine
+/// ones. The cells and offsets are laid out once for all levels that
+/// start from a block, in voxels of the finest of them, so that every
+/// level of detail shows the same pieces, each level reading its own
+/// block (the reference's coarser version of the finest).
+pub struct BlockTiling<'a> {
+    /// The candidates whose blocks are tiled.
+    pub cands: &'a Candidates,
+    /// The texture's seed.
+    pub seed: u64,
+    /// The texture's field, if any.
+    pub field: Option<&'a FrameField>,
+    /// The period of a periodic solid at the finest block's level.
+    pub period: Option<[i64; 3]>,
+}
+
+impl BlockTiling<'_> {
+    /// The triple at `p` of level `k`, which has a block.
+    pub fn triple(&self, k: usize, p: [i64; 3], sites: &mut Sites) -> [u32; 3] {
+        let blocks = self.cands.blocks();
+        let finest = &blocks[0];
+        let f = finest.level as usize;
+        let coarsest = blocks[blocks.len() - 1].level as usize;
+        let block = self.cands.block(k).expect("a level with a block");
+        // `p` in voxels of the finest block's level: the voxel at the
+        // centre of the ones it stands for.
+        let up = k - f;
+        let centre = ((1i64 << up) - 1) / 2;
+        let q = p.map(|v| (v << up) + centre);
+        let side = finest.side as i64;
+        let cells = [0, 1, 2].map(|a| Intervals::nearest(self.period.map(|per| per[a]), side / 2));
+        let (cube, site) = sites.nearest(self.seed, f, &cells, q);
+        let shift = [0, 1, 2].map(|a| cells[a].copy_of(cube[a]) * cells[a].period());
+        let label = [0, 1, 2].map(|a| cells[a].label(cube[a]));
+        // The offset, in whole voxels of the coarsest block so that every
+        // level reads the same place of its own block.
+        let step = 1i64 << (coarsest - f);
+        let o = hash_pos(self.seed, f as u32, TAG_BLOCK, label);
+        let off = [o, o >> 21, o >> 42].map(|v| (v % (side / step) as u64) as i64 * step);
+        // In a periodic solid, `p` moves into its cell's copy in the period
+        // at the origin, where p and p + P read the same voxel.
+        let q = [0, 1, 2].map(|a| q[a] - shift[a]);
+        // In a field, each cell is the block turned into the local frame at
+        // its site, as the slab's pieces are.
+        let q = match self.field {
+            None => q,
+            Some(field) => {
+                let pivot = [0, 1, 2]
+                    .map(|a| (site[a] - shift[a] * SITE_STEPS) as f64 / SITE_STEPS as f64 - 0.5);
+                let frame = field.frame(world(f, pivot));
+                let d = [0, 1, 2].map(|a| q[a] as f64 - pivot[a]);
+                [0, 1, 2].map(|a| {
+                    let e = frame[a][0] * d[0] + frame[a][1] * d[1] + frame[a][2] * d[2];
+                    round(pivot[a] + e)
+                })
+            }
+        };
+        block.at([0, 1, 2].map(|a| (q[a] + off[a]) >> up))
     }
 }
 

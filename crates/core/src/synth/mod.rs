@@ -190,6 +190,17 @@ impl Engine {
     }
 
     /// The period at level `k` of a periodic solid.
+    /// The levels a request at level of detail `lod` reaches: from `lod`
+    /// up to the first level that starts from a block of the reference, or
+    /// to the coarsest.
+    pub(crate) fn chain(&self, lod: u32) -> std::ops::RangeInclusive<usize> {
+        let lod = lod as usize;
+        let start = (lod..self.init_level)
+            .find(|&k| self.cands.block(k).is_some())
+            .unwrap_or(self.init_level);
+        lod..=start
+    }
+
     pub(crate) fn period_at(&self, k: usize) -> Option<[i64; 3]> {
         self.period.map(|p| p.at(k))
     }
@@ -497,7 +508,7 @@ impl Engine {
 
     /// How far the chain of each level reaches, from level `lod` on.
     fn reach_from(&self, lod: u32) -> Vec<plan::Reach> {
-        self.schedules[lod as usize..]
+        self.schedules[self.chain(lod)]
             .iter()
             .map(|s| s.reach)
             .collect()
@@ -513,7 +524,7 @@ impl Engine {
         lod: u32,
         radius: i64,
     ) -> Vec<plan::LevelPlan> {
-        let schedules: Vec<LevelSchedule> = self.schedules[lod as usize..]
+        let schedules: Vec<LevelSchedule> = self.schedules[self.chain(lod)]
             .iter()
             .map(|s| s.with_radius(radius))
             .collect();

@@ -34,20 +34,14 @@ pub(super) struct FramesPath {
 
 /// The slice window sampled, and the distance between samples (in voxels
 /// of the lod, 16 unless given).
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub(super) struct FramesQuery {
-    #[serde(default)]
     u0: Coord,
-    #[serde(default)]
     v0: Coord,
-    #[serde(default)]
     w: Side,
-    #[serde(default)]
     h: Side,
-    #[serde(default)]
     lod: Lod,
-    #[serde(default)]
     step: Int<1, { MAX_SLICE_SIDE as i64 }, 16>,
 }
 

@@ -32,18 +32,13 @@ pub(super) struct SlicePath {
 }
 
 /// Where on its plane a slice is asked for.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub(super) struct SliceQuery {
-    #[serde(default)]
     u0: Coord,
-    #[serde(default)]
     v0: Coord,
-    #[serde(default)]
     w: Side,
-    #[serde(default)]
     h: Side,
-    #[serde(default)]
     lod: Lod,
 }
 
@@ -60,36 +55,32 @@ pub(super) async fn slice(
     answer(&s, t, request, q.lod.get_u32(), Encoding::Png, &headers).await
 }
 
-fn origin() -> Vec3 {
-    Vec3([0.0; 3])
-}
-
-fn unit_x() -> Vec3 {
-    Vec3([1.0, 0.0, 0.0])
-}
-
-fn unit_y() -> Vec3 {
-    Vec3([0.0, 1.0, 0.0])
-}
-
 /// An oblique plane: pixel (i, j) samples `origin + i·u + j·v`.
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub(super) struct CutQuery {
-    #[serde(default = "origin")]
     origin: Vec3,
-    #[serde(default = "unit_x")]
     u: Vec3,
-    #[serde(default = "unit_y")]
     v: Vec3,
-    #[serde(default)]
     w: Side,
-    #[serde(default)]
     h: Side,
-    #[serde(default)]
     lod: Lod,
-    #[serde(default)]
     filter: Filter,
+}
+
+/// The xy plane from the origin, unless asked otherwise.
+impl Default for CutQuery {
+    fn default() -> CutQuery {
+        CutQuery {
+            origin: Vec3([0.0; 3]),
+            u: Vec3([1.0, 0.0, 0.0]),
+            v: Vec3([0.0, 1.0, 0.0]),
+            w: Side::default(),
+            h: Side::default(),
+            lod: Lod::default(),
+            filter: Filter::default(),
+        }
+    }
 }
 
 /// `GET /v1/textures/{id}/cut.png`
@@ -112,22 +103,15 @@ pub(super) async fn cut(
 }
 
 /// A box of voxels.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub(super) struct RegionQuery {
-    #[serde(default)]
     x: Coord,
-    #[serde(default)]
     y: Coord,
-    #[serde(default)]
     z: Coord,
-    #[serde(default)]
     w: RegionSide,
-    #[serde(default)]
     h: RegionSide,
-    #[serde(default)]
     d: RegionSide,
-    #[serde(default)]
     lod: Lod,
 }
 
