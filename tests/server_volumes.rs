@@ -71,14 +71,25 @@ async fn metadata_describes_a_centred_window_per_level() {
         let a = json(&c, &s.url(&format!("/v1/textures/{id}/zarr/{k}/zarr.json"))).await;
         let side = 1i64 << (20 - k);
         assert_eq!(a["node_type"], "array");
-        assert_eq!(a["shape"], serde_json::json!([side, side, side, 3]));
+        assert_eq!(a["shape"], serde_json::json!([3, side, side, side]));
         assert_eq!(
             a["dimension_names"],
-            serde_json::json!(["z", "y", "x", "c"])
+            serde_json::json!(["c", "z", "y", "x"])
         );
-        assert_eq!(a["codecs"][0]["name"], "bytes");
+        let codecs: Vec<&str> = a["codecs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["name"].as_str().unwrap())
+            .collect();
+        assert_eq!(codecs, ["transpose", "bytes", "zstd"]);
         assert_eq!(a["chunk_key_encoding"]["name"], "default");
     }
+    // The group is an OME-Zarr image: one dataset per level of detail.
+    let ms = &group["attributes"]["ome"]["multiscales"][0];
+    assert_eq!(group["attributes"]["ome"]["version"], "0.5");
+    assert_eq!(ms["datasets"].as_array().unwrap().len() as u64, max_lod + 1);
+    assert_eq!(ms["axes"][0]["type"], "channel");
 
     // Metadata revalidates to 304 with its ETag.
     let url = s.url(&format!("/v1/textures/{id}/zarr/0/zarr.json"));
@@ -137,8 +148,9 @@ async fn chunks_hold_the_region_in_each_layout() {
     let want = region(&c, &s, &id, origin, 16, lod).await;
     assert_eq!(want.len(), 16 * 16 * 16 * 3);
 
-    // Zarr: C order over (z, y, x, c) is the region's own layout.
-    let url = s.url(&format!("/v1/textures/{id}/zarr/{lod}/c/{iz}/{iy}/{ix}/0"));
+    // Zarr: C order over (z, y, x, c) is the region's own layout, what the
+    // transpose codec stores, compressed with zstd.
+    let url = s.url(&format!("/v1/textures/{id}/zarr/{lod}/c/0/{iz}/{iy}/{ix}"));
     let (status, headers, zarr) = get(&c, &url).await;
     assert_eq!(status, 200);
     assert_eq!(
@@ -146,7 +158,8 @@ async fn chunks_hold_the_region_in_each_layout() {
         "public, max-age=31536000, immutable"
     );
     assert_eq!(headers["access-control-allow-origin"], "*");
-    assert_eq!(zarr, want);
+    assert!(zarr.len() < want.len(), "{} bytes", zarr.len());
+    assert_eq!(zstd::bulk::decompress(&zarr, want.len()).unwrap(), want);
     let r = c
         .get(&url)
         .header("if-none-match", headers["etag"].clone())
@@ -165,13 +178,27 @@ async fn chunks_hold_the_region_in_each_layout() {
         origin[2],
         origin[2] + 16
     );
-    let (status, _, pre) = get(
-        &c,
-        &s.url(&format!("/v1/textures/{id}/precomputed/{lod}/{name}")),
-    )
-    .await;
+    // The test client asks for no content coding: raw bytes.
+    let pre_url = s.url(&format!("/v1/textures/{id}/precomputed/{lod}/{name}"));
+    let (status, headers, pre) = get(&c, &pre_url).await;
     assert_eq!(status, 200);
+    assert!(headers.get("content-encoding").is_none());
+    assert_eq!(headers["vary"], "accept-encoding");
     assert_eq!(pre.len(), want.len());
+    // Gzipped for a client that accepts it, under its own validator.
+    let r = c
+        .get(&pre_url)
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.headers()["content-encoding"], "gzip");
+    assert_ne!(r.headers()["etag"], headers["etag"]);
+    let gz = r.bytes().await.unwrap();
+    assert!(gz.len() < pre.len(), "{} bytes", gz.len());
+    let mut unzipped = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&gz[..]), &mut unzipped).unwrap();
+    assert_eq!(unzipped, pre);
     let n = 16 * 16 * 16;
     for i in (0..n).step_by(37).chain([0, n - 1]) {
         for ch in 0..3 {
@@ -184,12 +211,12 @@ async fn chunks_hold_the_region_in_each_layout() {
     let end = (1i64 << 19) / 16;
     for (path, status, code) in [
         (
-            format!("/v1/textures/{id}/zarr/{lod}/c/0/0/{end}/0"),
+            format!("/v1/textures/{id}/zarr/{lod}/c/0/0/0/{end}"),
             404,
             "no_chunk",
         ),
         (
-            format!("/v1/textures/{id}/zarr/{lod}/c/0/0/0/1"),
+            format!("/v1/textures/{id}/zarr/{lod}/c/1/0/0/0"),
             404,
             "no_chunk",
         ),
@@ -244,5 +271,42 @@ async fn viewer_is_served_from_the_binary() {
             .starts_with("text/javascript")
     );
     assert!(String::from_utf8(script).unwrap().contains("/v1/textures"));
+    s.stop().await;
+}
+
+/// With `--chunk-compression false` the volume views serve raw chunks, as
+/// before compression.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn chunk_compression_can_be_turned_off() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut args = test_args(dir.path());
+    args.chunk_compression = false;
+    args.chunk_size = 8;
+    let s = TestServer::start(args).await;
+    let c = client();
+    let id = ready_texture(&c, &s, 2).await;
+    let meta = get_json(&c, &s, &format!("/v1/textures/{id}/zarr/0/zarr.json")).await;
+    let codecs: Vec<&str> = meta["codecs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(codecs, ["transpose", "bytes"]);
+    let (st, _, chunk) = get(
+        &c,
+        &s.url(&format!("/v1/textures/{id}/zarr/0/c/0/65536/65536/65536")),
+    )
+    .await;
+    assert_eq!(st, 200);
+    assert_eq!(chunk.len(), 8 * 8 * 8 * 3);
+    let r = c
+        .get(s.url(&format!("/v1/textures/{id}/precomputed/0/0-8_0-8_0-8")))
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert!(r.headers().get("content-encoding").is_none());
+    assert_eq!(r.bytes().await.unwrap().len(), 8 * 8 * 8 * 3);
     s.stop().await;
 }

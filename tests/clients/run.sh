@@ -6,7 +6,8 @@
 #  - viewer.test.mjs: the browser viewer in headless Chromium;
 #  - viewer_zoom.test.mjs: how soon the viewer shows a cold view sharp;
 #  - neuroglancer.test.mjs: Neuroglancer itself rendering the texture;
-#  - test_exports.py: pynrrd and numpy reading the NRRD and raw exports;
+#  - test_exports.py: pynrrd and numpy reading the NRRD and raw exports,
+#    ome-zarr-models validating the OME-Zarr view;
 #  - exports.test.mjs: ktx-parse and three.js (KTX2Loader in Chromium)
 #    reading the KTX2 exports, and the shader example's seams.
 #

@@ -35,7 +35,7 @@ def get(url, timeout=300):
 class Server:
     """A running server with one ready texture (`self.id`)."""
 
-    def __init__(self, chunk_size=16, levels=3, params=""):
+    def __init__(self, chunk_size=16, levels=3, compression=True, params=""):
         self.dir = tempfile.TemporaryDirectory(prefix="solidtex-clients-")
         self.log = open(os.path.join(self.dir.name, "server.log"), "w")
         self.proc = subprocess.Popen(
@@ -45,6 +45,7 @@ class Server:
                 "--data-dir", os.path.join(self.dir.name, "data"),
                 "--default-texture", "false",
                 "--chunk-size", str(chunk_size),
+                "--chunk-compression", "true" if compression else "false",
                 "--log", "warn",
             ],
             stdout=subprocess.PIPE,

@@ -1,8 +1,14 @@
-"""Exports read by tools that are not ours:
+"""Exports and the OME-Zarr view, read by tools that are not ours:
 
 - pynrrd reads the NRRD export: its voxels are `region.raw`'s, its
   spacing and origin place them in finest voxels;
-- numpy reads the raw export as its sidecar JSON says.
+- numpy reads the raw export as its sidecar JSON says, and Pillow the
+  slice atlas, each tile a z slice where the sidecar places it;
+- ome-zarr-models validates the Zarr hierarchy as an OME-Zarr 0.5 image:
+  one dataset per level of detail, axes c, z, y, x, scales 2^lod.
+
+(ome-zarr's own reader is not run: it builds a dask array over the whole
+2^20-voxel window and exhausts memory before reading a chunk.)
 """
 
 import json
@@ -62,3 +68,40 @@ def test_numpy_reads_the_raw_export_by_its_sidecar(server):
     assert np.array_equal(data, region(server, 0, 0, 0, PERIOD, PERIOD, PERIOD, 0))
     # One period tiles: the block one period along is the same.
     assert np.array_equal(data, region(server, PERIOD, -PERIOD, 3 * PERIOD, PERIOD, PERIOD, PERIOD, 0))
+
+
+def test_ome_zarr_models_validates_the_hierarchy(server):
+    import zarr
+    from ome_zarr_models.v05.image import Image
+
+    group = zarr.open_group(f"{server.url}/zarr", mode="r", zarr_format=3)
+    image = Image.from_zarr(group)
+    ms = image.ome_attributes.multiscales[0]
+    assert [a.name for a in ms.axes] == ["c", "z", "y", "x"]
+    assert [a.type for a in ms.axes] == ["channel", "space", "space", "space"]
+    assert [d.path for d in ms.datasets] == [str(k) for k in range(server.max_lod + 1)]
+    for k, dataset in enumerate(ms.datasets):
+        scale = dataset.coordinateTransformations[0].scale
+        assert list(scale) == [1.0] + [float(1 << k)] * 3
+
+
+def test_pillow_reads_the_slice_atlas_by_its_sidecar(server):
+    from PIL import Image
+
+    box = dict(x=7, y=-4, z=3, w=12, h=9, d=5, lod=0)
+    query = "&".join(f"{k}={v}" for k, v in box.items())
+    side = json.loads(get(f"{server.url}/export.json?format=atlas&{query}"))
+    layout = side["layout"]
+    png = get(f"{server.url}/export?format=atlas&{query}")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "atlas.png")
+        with open(path, "wb") as f:
+            f.write(png)
+        image = np.asarray(Image.open(path).convert("RGB"))
+    assert image.shape == (layout["height"], layout["width"], 3)
+    want = region(server, **box)
+    w, h, columns = layout["tile_width"], layout["tile_height"], layout["columns"]
+    for z in range(layout["slices"]):
+        col, row = z % columns, z // columns
+        tile = image[row * h:(row + 1) * h, col * w:(col + 1) * w]
+        assert np.array_equal(tile, want[z]), f"slice {z}"

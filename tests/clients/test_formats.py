@@ -1,6 +1,8 @@
 """The precomputed and Zarr views read by the real clients (zarr-python,
 tensorstore's zarr3 and neuroglancer_precomputed drivers, cloud-volume)
-must give, byte for byte, what `region.raw` gives for the same box.
+must give, byte for byte, what `region.raw` gives for the same box, with
+the chunks compressed (the server's default: zstd for Zarr, gzip for
+precomputed to clients that accept it) and raw.
 
 Boxes are drawn at random (fixed seed) so that they straddle chunk
 boundaries on every axis; some lie far from the origin, at the window's
@@ -19,9 +21,9 @@ from serve import Server
 CHUNK = 16
 
 
-@pytest.fixture(scope="module")
-def server():
-    s = Server(chunk_size=CHUNK)
+@pytest.fixture(scope="module", params=["compressed", "raw"])
+def server(request):
+    s = Server(chunk_size=CHUNK, compression=request.param == "compressed")
     yield s
     s.stop()
 
@@ -53,11 +55,16 @@ def reference(server, box):
     return np.frombuffer(raw, np.uint8).reshape(d, h, w, 3)
 
 
-def zyx(box, lod_origin):
-    """Zarr slices (z, y, x, c) of a box: indices are shifted by the window."""
+def czyx(box, lod_origin):
+    """Zarr slices (c, z, y, x) of a box: indices are shifted by the window."""
     x, y, z, w, h, d, _ = box
     o = -lod_origin
-    return (slice(z + o, z + o + d), slice(y + o, y + o + h), slice(x + o, x + o + w), slice(None))
+    return (slice(None), slice(z + o, z + o + d), slice(y + o, y + o + h), slice(x + o, x + o + w))
+
+
+def channel_last(a):
+    """(c, z, y, x) -> (z, y, x, c), the layout of `region.raw`."""
+    return np.moveaxis(np.asarray(a), 0, -1)
 
 
 def origin(lod):
@@ -82,10 +89,10 @@ def test_zarr_python(server):
     for box in boxes(server.max_lod):
         lod = box[-1]
         arr = group[str(lod)]
-        assert arr.shape == (1 << (20 - lod),) * 3 + (3,)
-        assert arr.chunks == (CHUNK, CHUNK, CHUNK, 3)
+        assert arr.shape == (3,) + (1 << (20 - lod),) * 3
+        assert arr.chunks == (3, CHUNK, CHUNK, CHUNK)
         t0 = time.time()
-        got = arr[zyx(box, origin(lod))]
+        got = channel_last(arr[czyx(box, origin(lod))])
         print(f"zarr-python {box}: {time.time() - t0:.2f} s")
         check("zarr-python", box, got, reference(server, box))
 
@@ -96,10 +103,10 @@ def test_tensorstore_zarr3(server):
     for box in boxes(server.max_lod):
         lod = box[-1]
         arr = ts.open({"driver": "zarr3", "kvstore": f"{server.url}/zarr/{lod}/"}).result()
-        assert arr.domain.shape == (1 << (20 - lod),) * 3 + (3,)
+        assert arr.domain.shape == (3,) + (1 << (20 - lod),) * 3
         assert arr.dtype == ts.uint8
-        got = arr[zyx(box, origin(lod))].read().result()
-        check("tensorstore zarr3", box, np.asarray(got), reference(server, box))
+        got = arr[czyx(box, origin(lod))].read().result()
+        check("tensorstore zarr3", box, channel_last(got), reference(server, box))
 
 
 def test_tensorstore_precomputed(server):

@@ -136,6 +136,13 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_EXPORT_BYTES", default_value = "1G", value_parser = parse_bytes)]
     pub max_export_bytes: u64,
 
+    /// Compress the chunks of the volume views: Zarr v3 arrays declare the
+    /// zstd codec, and Neuroglancer precomputed chunks are sent gzipped to
+    /// clients that accept gzip (`Accept-Encoding`). `off` serves both
+    /// raw, as before.
+    #[arg(long, env = "SOLIDTEX_CHUNK_COMPRESSION", default_value_t = true, action = clap::ArgAction::Set)]
+    pub chunk_compression: bool,
+
     /// Uploaded textures kept at most; more uploads get 507 `storage_full`
     /// until some are deleted (the bundled texture is not counted).
     #[arg(long, env = "SOLIDTEX_MAX_TEXTURES", default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..))]
@@ -277,6 +284,7 @@ impl ServeArgs {
             max_export_voxels: 1 << 24,
             max_export_work: 96 << 20,
             export_queue: 8,
+            chunk_compression: true,
             max_export_bytes: 1 << 30,
             max_textures: 256,
             max_stored_bytes: 4 << 30,

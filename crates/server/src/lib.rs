@@ -171,6 +171,7 @@ impl Server {
             )),
             max_export_voxels: args.max_export_voxels,
             max_export_work: args.max_export_work,
+            chunk_compression: args.chunk_compression,
             max_upload_bytes: usize::try_from(args.max_upload_bytes).unwrap_or(usize::MAX),
             token: args.token.clone().filter(|t| !t.is_empty()),
             cors_origins,

@@ -49,21 +49,31 @@ pub(super) enum Encoding {
     Chunk,
     /// One plane per channel, each x fastest (a precomputed chunk).
     Planar,
+    /// [`Encoding::Chunk`] compressed with zstd (the Zarr array's codec).
+    ChunkZstd,
+    /// [`Encoding::Planar`] gzipped, sent as `Content-Encoding: gzip`.
+    PlanarGzip,
 }
 
 impl Encoding {
     fn content_type(self) -> &'static str {
         match self {
             Encoding::Png => "image/png",
-            Encoding::Raw | Encoding::Chunk | Encoding::Planar => "application/octet-stream",
+            Encoding::Raw
+            | Encoding::Chunk
+            | Encoding::Planar
+            | Encoding::ChunkZstd
+            | Encoding::PlanarGzip => "application/octet-stream",
         }
     }
 
     /// What the ETag adds to the request's key: the bytes differ from
-    /// what the request's own kind is sent as only when planar.
+    /// what the request's own kind is sent as when planar or compressed.
     fn tag(self) -> &'static str {
         match self {
             Encoding::Planar => "planar/",
+            Encoding::ChunkZstd => "zstd/",
+            Encoding::PlanarGzip => "planar/gzip/",
             Encoding::Png | Encoding::Raw | Encoding::Chunk => "",
         }
     }
@@ -77,7 +87,14 @@ impl Encoding {
             }
             Encoding::Raw | Encoding::Chunk => Ok(rgb),
             Encoding::Planar => Ok(planar(&rgb)),
+            Encoding::ChunkZstd => zstd_chunk(&rgb),
+            Encoding::PlanarGzip => gzip_chunk(&planar(&rgb)),
         }
+    }
+
+    /// The `Content-Encoding` its bytes are sent with, if any.
+    fn content_encoding(self) -> Option<&'static str> {
+        (self == Encoding::PlanarGzip).then_some("gzip")
     }
 }
 
@@ -92,6 +109,51 @@ fn planar(rgb: &[u8]) -> Vec<u8> {
         out[2 * n + i] = px[2];
     }
     out
+}
+
+/// zstd level of Zarr chunks (BENCHMARKS.md compares levels).
+pub(super) const ZSTD_LEVEL: i32 = 3;
+
+/// gzip level of precomputed chunks (BENCHMARKS.md compares levels).
+const GZIP_LEVEL: u32 = 6;
+
+/// A chunk's bytes compressed with zstd at [`ZSTD_LEVEL`].
+fn zstd_chunk(bytes: &[u8]) -> Result<Vec<u8>, ApiError> {
+    zstd::bulk::compress(bytes, ZSTD_LEVEL)
+        .map_err(|e| ApiError::internal(format!("zstd compression failed: {e}")))
+}
+
+/// A chunk's bytes gzipped at [`GZIP_LEVEL`].
+fn gzip_chunk(bytes: &[u8]) -> Result<Vec<u8>, ApiError> {
+    use std::io::Write;
+    let mut enc = flate2::write::GzEncoder::new(
+        Vec::with_capacity(bytes.len() / 2),
+        flate2::Compression::new(GZIP_LEVEL),
+    );
+    enc.write_all(bytes)
+        .and_then(|_| enc.finish())
+        .map_err(|e| ApiError::internal(format!("gzip compression failed: {e}")))
+}
+
+/// Whether `Accept-Encoding` accepts gzip (a `gzip` or `*` coding whose
+/// quality is not 0).
+pub(super) fn accepts_gzip(headers: &HeaderMap) -> bool {
+    headers
+        .get_all(header::ACCEPT_ENCODING)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .any(|coding| {
+            let mut parts = coding.split(';');
+            let name = parts.next().unwrap_or("").trim();
+            let refused = parts.any(|p| {
+                p.trim()
+                    .strip_prefix("q=")
+                    .and_then(|q| q.trim().parse::<f64>().ok())
+                    .is_some_and(|q| q == 0.0)
+            });
+            (name.eq_ignore_ascii_case("gzip") || name == "*") && !refused
+        })
 }
 
 /// A strong validator: the texture's content, the engine version and the
@@ -247,7 +309,12 @@ pub(super) async fn answer(
             })
             .await??;
         account(s, &stats);
-        tag.stamp(body(bytes, encoding.content_type()), IMMUTABLE)
+        let mut res = body(bytes, encoding.content_type());
+        if let Some(coding) = encoding.content_encoding() {
+            res.headers_mut()
+                .insert(header::CONTENT_ENCODING, HeaderValue::from_static(coding));
+        }
+        tag.stamp(res, IMMUTABLE)
     };
     if let (Encoding::Raw, RequestKind::Region(r)) = (encoding, request.kind()) {
         shape_headers(&mut res, r.origin, r.size, lod);
@@ -291,6 +358,42 @@ mod tests {
         assert!(tag.matches(&h));
         h.insert(header::IF_NONE_MATCH, HeaderValue::from_static("\"abcd\""));
         assert!(!tag.matches(&h));
+    }
+
+    #[test]
+    fn gzip_is_sent_to_clients_that_accept_it() {
+        let h = |v: &str| {
+            let mut m = HeaderMap::new();
+            m.insert(header::ACCEPT_ENCODING, HeaderValue::from_str(v).unwrap());
+            m
+        };
+        for (v, ok) in [
+            ("gzip", true),
+            ("deflate, gzip;q=0.5", true),
+            ("GZIP", true),
+            ("*", true),
+            ("gzip;q=0", false),
+            ("br, deflate", false),
+            ("", false),
+        ] {
+            assert_eq!(accepts_gzip(&h(v)), ok, "{v}");
+        }
+        assert!(!accepts_gzip(&HeaderMap::new()));
+    }
+
+    #[test]
+    fn compressed_chunks_decompress_to_the_voxels() {
+        use std::io::Read;
+        let rgb: Vec<u8> = (0..16 * 16 * 16 * 3).map(|i| (i / 7 % 251) as u8).collect();
+        assert_eq!(
+            zstd::bulk::decompress(&zstd_chunk(&rgb).unwrap(), rgb.len()).unwrap(),
+            rgb
+        );
+        let mut out = Vec::new();
+        flate2::read::GzDecoder::new(&gzip_chunk(&rgb).unwrap()[..])
+            .read_to_end(&mut out)
+            .unwrap();
+        assert_eq!(out, rgb);
     }
 
     #[test]

@@ -59,7 +59,7 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/textures/{id}/precomputed/{scale}/{chunk}"),
     ("GET", "/v1/textures/{id}/zarr/zarr.json"),
     ("GET", "/v1/textures/{id}/zarr/{lod}/zarr.json"),
-    ("GET", "/v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}"),
+    ("GET", "/v1/textures/{id}/zarr/{lod}/c/{cc}/{cz}/{cy}/{cx}"),
     ("GET", "/v1/textures/{id}/export"),
     ("GET", "/v1/textures/{id}/export.json"),
     ("GET", "/v1/exports/{eid}"),
@@ -92,6 +92,8 @@ pub struct Shared {
     pub(crate) max_export_voxels: u64,
     /// Most voxels one export may synthesize.
     pub(crate) max_export_work: u64,
+    /// Whether volume chunks are compressed (see `ServeArgs`).
+    pub(crate) chunk_compression: bool,
     /// Largest accepted upload, bytes.
     pub(crate) max_upload_bytes: usize,
     /// Bearer token that mutating routes and `/metrics` require, if any.
@@ -185,7 +187,7 @@ pub fn router(state: AppState) -> Router {
             get(volumes::zarr_array_route),
         )
         .route(
-            "/v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}",
+            "/v1/textures/{id}/zarr/{lod}/c/{cc}/{cz}/{cy}/{cx}",
             get(volumes::zarr_chunk),
         )
         .route("/v1/textures/{id}/export", get(exports::export))

@@ -8,6 +8,19 @@
 //! clients see the texture's own coordinates; Zarr has no offsets, so Zarr
 //! indices are shifted by 2^(19−k) (the group's attributes repeat it).
 //!
+//! The Zarr hierarchy is an OME-Zarr image (OME-NGFF 0.5 `multiscales`:
+//! axes c, z, y, x, one dataset per level of detail with its scale and
+//! translation in finest voxels), so that napari and `ome-zarr` open it.
+//! Its arrays are (c, z, y, x), channel first as OME-NGFF orders axes; a
+//! `transpose` codec stores each chunk as (z, y, x, c), the region's own
+//! interleaved bytes.
+//!
+//! Chunks are compressed unless the server was started with
+//! `--chunk-compression false`: Zarr chunks with zstd (declared in the
+//! arrays' codecs), precomputed chunks with gzip as HTTP content coding,
+//! for clients that send `Accept-Encoding: gzip` (the precomputed format
+//! leaves compression to HTTP).
+//!
 //! Chunks are cubes of the configured edge (a power of two, so they tile
 //! every window exactly and there are no partial chunks). Each chunk is a
 //! region request: synthesized on the job queue through the shared tile
@@ -16,12 +29,12 @@
 //! (`no-cache`), because they name the server's chunk size.
 
 use super::AppState;
-use super::answer::{ETag, Encoding, answer, body, texture};
+use super::answer::{ETag, Encoding, ZSTD_LEVEL, accepts_gzip, answer, body, texture};
 use super::params::{NoQuery, TypedPath, TypedQuery};
 use crate::error::ApiError;
 use crate::registry::Entry;
 use axum::extract::State;
-use axum::http::{HeaderMap, StatusCode};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::Response;
 use serde::Deserialize;
 use serde_json::{Value, json};
@@ -187,14 +200,32 @@ pub(super) async fn precomputed_chunk(
     let lod = path_lod(&p.scale, t.1.max_lod())?;
     let origin = precomputed_chunk_origin(&p.chunk, lod, s.chunk_size)?;
     let request = chunk(origin, s.chunk_size)?;
-    answer(&s, t, request, lod, Encoding::Planar, &headers).await
+    let gzip = s.chunk_compression && accepts_gzip(&headers);
+    let encoding = if gzip {
+        Encoding::PlanarGzip
+    } else {
+        Encoding::Planar
+    };
+    let mut res = answer(&s, t, request, lod, encoding, &headers).await?;
+    if s.chunk_compression {
+        res.headers_mut()
+            .insert(header::VARY, HeaderValue::from_static("accept-encoding"));
+    }
+    Ok(res)
 }
 
 // ---------------------------------------------------------------------
 // Zarr v3
 
-/// The root group: attributes say how array indices map to texture
-/// coordinates.
+/// Where index 0 of the array of `lod` lies, in finest voxels (the
+/// centre of its voxel, which stands for the 2^lod-wide cube around it).
+fn translation(lod: u32) -> f64 {
+    let (_, offset) = window(lod);
+    (offset as f64 + 0.5) * f64::from(1u32 << lod) - 0.5
+}
+
+/// The root group: an OME-Zarr image (OME-NGFF 0.5 multiscales), and
+/// attributes that say how array indices map to texture coordinates.
 fn zarr_group(max_lod: u32, chunk: u32) -> Value {
     let levels: Vec<Value> = (0..=max_lod)
         .map(|lod| {
@@ -203,18 +234,68 @@ fn zarr_group(max_lod: u32, chunk: u32) -> Value {
                 "path": lod.to_string(),
                 "lod": lod,
                 "voxel_size": 1u64 << lod,
-                "shape": [side, side, side, 3],
+                "shape": [3, side, side, side],
                 "origin_zyx": [offset, offset, offset],
             })
         })
         .collect();
+    let datasets: Vec<Value> = (0..=max_lod)
+        .map(|lod| {
+            let s = f64::from(1u32 << lod);
+            let t = translation(lod);
+            json!({
+                "path": lod.to_string(),
+                "coordinateTransformations": [
+                    {"type": "scale", "scale": [1.0, s, s, s]},
+                    {"type": "translation", "translation": [0.0, t, t, t]},
+                ],
+            })
+        })
+        .collect();
+    let channel = |label: &str, color: &str| {
+        json!({
+            "label": label,
+            "color": color,
+            "active": true,
+            "coefficient": 1,
+            "family": "linear",
+            "inverted": false,
+            "window": {"min": 0, "max": 255, "start": 0, "end": 255},
+        })
+    };
     json!({
         "zarr_format": 3,
         "node_type": "group",
         "attributes": {
+            "ome": {
+                "version": "0.5",
+                "multiscales": [{
+                    "name": "solidtex",
+                    "axes": [
+                        {"name": "c", "type": "channel"},
+                        {"name": "z", "type": "space"},
+                        {"name": "y", "type": "space"},
+                        {"name": "x", "type": "space"},
+                    ],
+                    "datasets": datasets,
+                    "type": "gaussian",
+                    "metadata": {
+                        "description": "each level of detail is synthesized at its own \
+                                        pyramid level, from a Gaussian stack of the exemplar",
+                    },
+                }],
+                "omero": {
+                    "channels": [
+                        channel("red", "FF0000"),
+                        channel("green", "00FF00"),
+                        channel("blue", "0000FF"),
+                    ],
+                    "rdefs": {"model": "color", "defaultZ": 1u64 << (WINDOW_LOG2 - 1)},
+                },
+            },
             "solidtex": {
-                "description": "An infinite solid texture shown through a finite window per level of detail: index i along z, y or x of array `lod` is texture coordinate i + origin at that level (voxels 2^lod finest voxels wide).",
-                "axes": ["z", "y", "x", "c"],
+                "description": "An infinite solid texture shown through a finite window per level of detail: index i along z, y or x of array `lod` is texture coordinate i + origin at that level (voxels 2^lod finest voxels wide); the OME translation is the same place in finest voxels.",
+                "axes": ["c", "z", "y", "x"],
                 "chunk_size": chunk,
                 "levels": levels,
             }
@@ -222,27 +303,37 @@ fn zarr_group(max_lod: u32, chunk: u32) -> Value {
     })
 }
 
-/// The array of one level of detail: (z, y, x, c) uint8, regular chunks.
-fn zarr_array(lod: u32, chunk: u32) -> Value {
+/// The array of one level of detail: (c, z, y, x) uint8, regular chunks
+/// of all three channels, stored (z, y, x, c) by a transpose codec, and
+/// compressed with zstd when `zstd`.
+fn zarr_array(lod: u32, chunk: u32, zstd: bool) -> Value {
     let (side, offset) = window(lod);
+    let mut codecs = vec![
+        json!({ "name": "transpose", "configuration": { "order": [1, 2, 3, 0] } }),
+        json!({ "name": "bytes", "configuration": { "endian": "little" } }),
+    ];
+    if zstd {
+        codecs.push(json!({
+            "name": "zstd",
+            "configuration": { "level": ZSTD_LEVEL, "checksum": false }
+        }));
+    }
     json!({
         "zarr_format": 3,
         "node_type": "array",
-        "shape": [side, side, side, 3],
+        "shape": [3, side, side, side],
         "data_type": "uint8",
         "chunk_grid": {
             "name": "regular",
-            "configuration": { "chunk_shape": [chunk, chunk, chunk, 3] }
+            "configuration": { "chunk_shape": [3, chunk, chunk, chunk] }
         },
         "chunk_key_encoding": {
             "name": "default",
             "configuration": { "separator": "/" }
         },
         "fill_value": 0,
-        "codecs": [
-            { "name": "bytes", "configuration": { "endian": "little" } }
-        ],
-        "dimension_names": ["z", "y", "x", "c"],
+        "codecs": codecs,
+        "dimension_names": ["c", "z", "y", "x"],
         "attributes": {
             "solidtex": {
                 "lod": lod,
@@ -262,7 +353,7 @@ pub(super) async fn zarr_group_route(
 ) -> Result<Response, ApiError> {
     let (entry, tex) = texture(&s, &id).await?;
     let doc = zarr_group(tex.max_lod(), s.chunk_size);
-    let key = format!("zarr/group/{}", s.chunk_size);
+    let key = format!("zarr/ome-group/{}", s.chunk_size);
     Ok(metadata_response(&entry, &key, &headers, &doc))
 }
 
@@ -282,8 +373,12 @@ pub(super) async fn zarr_array_route(
 ) -> Result<Response, ApiError> {
     let (entry, tex) = texture(&s, &id).await?;
     let lod = path_lod(&lod, tex.max_lod())?;
-    let doc = zarr_array(lod, s.chunk_size);
-    let key = format!("zarr/array/{lod}/{}", s.chunk_size);
+    let doc = zarr_array(lod, s.chunk_size, s.chunk_compression);
+    let key = format!(
+        "zarr/array/{lod}/{}/{}",
+        s.chunk_size,
+        if s.chunk_compression { "zstd" } else { "raw" }
+    );
     Ok(metadata_response(&entry, &key, &headers, &doc))
 }
 
@@ -296,20 +391,22 @@ fn chunk_index(s: &str, count: i64) -> Result<i64, ApiError> {
     i.ok_or_else(|| no_chunk(format_args!("no chunk index `{s}` (0..{count})")))
 }
 
-/// The path of a Zarr chunk: `{lod}/c/{cz}/{cy}/{cx}/{cc}`.
+/// The path of a Zarr chunk: `{lod}/c/{cc}/{cz}/{cy}/{cx}`.
 #[derive(Deserialize)]
 pub(super) struct ZarrChunkPath {
     id: String,
     lod: String,
+    cc: String,
     cz: String,
     cy: String,
     cx: String,
-    cc: String,
 }
 
-/// `GET /v1/textures/{id}/zarr/{lod}/c/{cz}/{cy}/{cx}/{cc}`: the chunk as
-/// C-order bytes of shape (edge, edge, edge, 3), which is how a region is
-/// rendered: x fastest, then y, then z, channel interleaved.
+/// `GET /v1/textures/{id}/zarr/{lod}/c/{cc}/{cz}/{cy}/{cx}`: the chunk
+/// (all three channels) as C-order bytes of shape (edge, edge, edge, 3),
+/// which is how a region is rendered (x fastest, then y, then z, channel
+/// interleaved) and what the transpose codec stores; zstd-compressed
+/// unless compression is off.
 pub(super) async fn zarr_chunk(
     State(s): State<AppState>,
     TypedPath(p): TypedPath<ZarrChunkPath>,
@@ -326,7 +423,12 @@ pub(super) async fn zarr_chunk(
     chunk_index(&p.cc, 1)?;
     let origin = [offset + ix * edge, offset + iy * edge, offset + iz * edge];
     let request = chunk(origin, s.chunk_size)?;
-    answer(&s, t, request, lod, Encoding::Chunk, &headers).await
+    let encoding = if s.chunk_compression {
+        Encoding::ChunkZstd
+    } else {
+        Encoding::Chunk
+    };
+    answer(&s, t, request, lod, encoding, &headers).await
 }
 
 #[cfg(test)]
@@ -400,10 +502,27 @@ mod tests {
         assert_eq!(info["scales"].as_array().unwrap().len(), 3);
         assert_eq!(info["scales"][2]["resolution"], json!([4, 4, 4]));
         assert_eq!(info["scales"][2]["voxel_offset"][0], -(1i64 << 17));
-        let a = zarr_array(1, 16);
-        assert_eq!(a["shape"], json!([1 << 19, 1 << 19, 1 << 19, 3]));
-        assert_eq!(a["chunk_grid"]["configuration"]["chunk_shape"][0], 16);
+        let a = zarr_array(1, 16, true);
+        assert_eq!(a["shape"], json!([3, 1 << 19, 1 << 19, 1 << 19]));
+        assert_eq!(a["chunk_grid"]["configuration"]["chunk_shape"][1], 16);
+        assert_eq!(a["codecs"][2]["name"], "zstd");
+        assert_eq!(
+            zarr_array(1, 16, false)["codecs"].as_array().unwrap().len(),
+            2
+        );
         let g = zarr_group(2, 16);
         assert_eq!(g["attributes"]["solidtex"]["levels"][2]["path"], "2");
+        let ms = &g["attributes"]["ome"]["multiscales"][0];
+        assert_eq!(ms["datasets"].as_array().unwrap().len(), 3);
+        // Index 0 of every level is the same place: the window's corner.
+        for lod in 0..3 {
+            let t = ms["datasets"][lod]["coordinateTransformations"][1]["translation"][1]
+                .as_f64()
+                .unwrap();
+            let s = ms["datasets"][lod]["coordinateTransformations"][0]["scale"][1]
+                .as_f64()
+                .unwrap();
+            assert_eq!(t - (s - 1.0) / 2.0, -((1u64 << 19) as f64), "lod {lod}");
+        }
     }
 }
