@@ -280,6 +280,26 @@ struct State {
 }
 
 impl State {
+    /// A state from each voxel's pixel per plane and the plane it shows:
+    /// its colour is that plane's pixel.
+    fn new<'a>(
+        side: usize,
+        pos: [Vec<u32>; 3],
+        pick: Vec<u8>,
+        plane: impl Fn(usize) -> &'a PlaneLevel + Sync,
+    ) -> State {
+        let colours = (0..pick.len())
+            .into_par_iter()
+            .map(|i| plane(pick[i] as usize).colours[pos[pick[i] as usize][i] as usize])
+            .collect();
+        State {
+            side,
+            pos,
+            pick,
+            colours,
+        }
+    }
+
     #[inline]
     fn index(&self, p: [usize; 3]) -> usize {
         (p[2] * self.side + p[1]) * self.side + p[0]
@@ -487,7 +507,12 @@ fn optimise_block(
 
 /// Random pixels at the coarsest level, hashed per voxel and plane; each
 /// voxel shows a hashed plane's.
-fn initial<'a>(side: usize, seed: u64, k: usize, plane: impl Fn(usize) -> &'a PlaneLevel) -> State {
+fn initial<'a>(
+    side: usize,
+    seed: u64,
+    k: usize,
+    plane: impl Fn(usize) -> &'a PlaneLevel + Sync,
+) -> State {
     let count = side * side * side;
     let at = |i: usize| [i % side, (i / side) % side, i / (side * side)].map(|c| c as i64);
     let pos = [0, 1, 2].map(|p| {
@@ -499,15 +524,7 @@ fn initial<'a>(side: usize, seed: u64, k: usize, plane: impl Fn(usize) -> &'a Pl
     let pick: Vec<u8> = (0..count)
         .map(|i| (hash_pos(seed, k as u32, TAG_INIT + 3, at(i)) % 3) as u8)
         .collect();
-    let colours = (0..count)
-        .map(|i| plane(pick[i] as usize).colours[pos[pick[i] as usize][i] as usize])
-        .collect();
-    State {
-        side,
-        pos,
-        pick,
-        colours,
-    }
+    State::new(side, pos, pick, plane)
 }
 
 const TAG_INIT: u32 = 0x5245_4601;
@@ -537,16 +554,7 @@ fn upsample<'a>(parent: &State, k: usize, plane: impl Fn(usize) -> &'a PlaneLeve
     let pick: Vec<u8> = (0..count)
         .map(|i| parent.pick[parent.index(at(i).map(|c| c / 2))])
         .collect();
-    let colours = (0..count)
-        .into_par_iter()
-        .map(|i| plane(pick[i] as usize).colours[pos[pick[i] as usize][i] as usize])
-        .collect();
-    State {
-        side,
-        pos,
-        pick,
-        colours,
-    }
+    State::new(side, pos, pick, plane)
 }
 
 /// The sparse grid's offset for one plane, level and iteration: hashed,
@@ -1047,9 +1055,21 @@ mod tests {
                 size: 512,
                 ..Default::default()
             },
+            // Just past the largest block (a multiple of the grid's unit).
+            ReferenceParams {
+                size: MAX_REFERENCE_SIZE + 32,
+                levels: 5,
+                ..Default::default()
+            },
         ] {
             assert!(bad.validate().is_err(), "{bad:?}");
         }
+        let largest = ReferenceParams {
+            size: MAX_REFERENCE_SIZE,
+            levels: 5,
+            ..Default::default()
+        };
+        assert!(largest.validate().is_ok());
     }
 
     #[test]
