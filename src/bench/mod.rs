@@ -14,6 +14,7 @@
 
 pub mod machine;
 pub mod markdown;
+pub mod meshes;
 pub mod service;
 
 use anyhow::Context;
@@ -40,6 +41,8 @@ pub struct Options {
     pub max_seconds: f64,
     /// Also measure the service under load (see [`service`]).
     pub load: Option<service::LoadOptions>,
+    /// Only the mesh rows (see [`meshes`]).
+    pub meshes_only: bool,
 }
 
 /// One measurement.
@@ -210,6 +213,8 @@ struct Sizes {
     brick: u32,
     plan_side: u32,
     warm_runs: usize,
+    /// Resolutions of the mesh bakes.
+    mesh_resolutions: &'static [u32],
 }
 
 const QUICK: Sizes = Sizes {
@@ -221,6 +226,7 @@ const QUICK: Sizes = Sizes {
     brick: 8,
     plan_side: 32,
     warm_runs: 2,
+    mesh_resolutions: &[32],
 };
 
 const FULL: Sizes = Sizes {
@@ -240,6 +246,7 @@ const FULL: Sizes = Sizes {
     brick: 64,
     plan_side: 256,
     warm_runs: 3,
+    mesh_resolutions: &[256, 512, 1024],
 };
 
 /// Runs the suite.
@@ -249,6 +256,9 @@ pub fn run(opts: &Options) -> anyhow::Result<Results> {
     let mut rows = Vec::new();
     let mut synthesis = None;
     for name in sizes.precompute {
+        if opts.meshes_only && *name != sizes.synthesis {
+            continue;
+        }
         let path = opts.exemplars.join(name);
         let e = Exemplar::open(&path).with_context(|| {
             format!(
@@ -284,14 +294,19 @@ pub fn run(opts: &Options) -> anyhow::Result<Results> {
         }
     }
     let c = synthesis.expect("the synthesis exemplar is among the precomputed");
-    let plans = plans(&c, sizes.plan_side)?;
     let mut predictor = Predictor {
         corrections_per_s: 200_000.0,
         max_seconds: opts.max_seconds,
     };
-    synthesis_rows(&c, sizes, &mut predictor, &mut rows)?;
-    preview_rows(&c, sizes, &mut predictor, &mut rows)?;
-    field_rows(&c, sizes, &mut predictor, &mut rows)?;
+    let mut plans_made = Vec::new();
+    if !opts.meshes_only {
+        plans_made = plans(&c, sizes.plan_side)?;
+        synthesis_rows(&c, sizes, &mut predictor, &mut rows)?;
+        preview_rows(&c, sizes, &mut predictor, &mut rows)?;
+        field_rows(&c, sizes, &mut predictor, &mut rows)?;
+    }
+    meshes::rows(&c, sizes.mesh_resolutions, &mut rows)?;
+    let plans = plans_made;
     let load = match &opts.load {
         Some(l) => service::measure(&opts.exemplars.join(sizes.synthesis), sizes.levels, l)?,
         None => Vec::new(),

@@ -42,6 +42,9 @@ pub struct BenchArgs {
     /// wait for a slot before it is answered 503.
     #[arg(long, default_value_t = 1.0, value_parser = solidtex_server::config::parse_wait)]
     load_max_wait: f64,
+    /// Only the mesh bakes (shell efficiency), on the synthesis exemplar.
+    #[arg(long)]
+    meshes_only: bool,
     /// Write the results as a Markdown page (e.g. BENCHMARKS.md).
     #[arg(long)]
     markdown: Option<PathBuf>,
@@ -75,6 +78,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             brick_size: if quick { 16 } else { 64 },
             max_queue_wait: a.load_max_wait,
         }),
+        meshes_only: a.meshes_only,
     };
     let results = bench::run(&opts)?;
     if let Some(path) = &a.markdown {

@@ -68,7 +68,7 @@ enum CutFilter {
 }
 
 /// Parses `x,y,z` into three finite numbers.
-fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+pub(super) fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     let [x, y, z] = parts[..] else {
         return Err(format!("`{s}` is not three numbers `x,y,z`"));

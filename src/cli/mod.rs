@@ -2,6 +2,7 @@
 //! exemplar image precomputed on the fly), calls the library and writes
 //! files; no synthesis logic lives here.
 
+mod bake;
 mod bench;
 mod cut;
 mod eval;
@@ -38,6 +39,9 @@ enum Command {
     Slice(slice::SliceArgs),
     /// Synthesize an oblique cut (any plane) as a PNG.
     Cut(cut::CutArgs),
+    /// Texture a mesh (OBJ or GLB) from the solid: a glTF binary with a
+    /// baked base-colour texture or vertex colours.
+    Bake(bake::BakeArgs),
     /// Synthesize a full cube plus three orthogonal middle slices.
     Volume(volume::VolumeArgs),
     /// Write a box of the solid, or one period, as KTX2, a PNG slice
@@ -92,6 +96,7 @@ fn run_command(cli: Cli) -> anyhow::Result<()> {
         Command::Slice(a) => slice::run(a),
         Command::Cut(a) => cut::run(a),
         Command::Volume(a) => volume::run(a),
+        Command::Bake(a) => bake::run(a),
         Command::Reference(a) => reference::run(a),
         Command::Export(a) => export::run(a),
     }

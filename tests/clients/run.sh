@@ -9,7 +9,8 @@
 #  - test_exports.py: pynrrd and numpy reading the NRRD and raw exports,
 #    ome-zarr-models validating the OME-Zarr view;
 #  - exports.test.mjs: ktx-parse and three.js (KTX2Loader in Chromium)
-#    reading the KTX2 exports, and the shader example's seams.
+#    reading the KTX2 exports, and the shader example's seams;
+#  - meshes.test.mjs: Khronos' glTF validator on baked meshes.
 #
 #   tests/clients/run.sh [path/to/solidtex]
 #   tests/clients/run.sh --install     # only install the clients
@@ -34,8 +35,9 @@ if ! cmp -s tests/clients/requirements.txt "$C/venv/requirements.txt"; then
 fi
 
 # playwright-core drives the system's Chromium (it downloads no browser);
-# three.js and ktx-parse read the KTX2 exports.
-NODE_PACKAGES="playwright-core@1.65.1 three@0.187.0 ktx-parse@2.0.0"
+# three.js and ktx-parse read the KTX2 exports; gltf-validator checks
+# baked meshes.
+NODE_PACKAGES="playwright-core@1.65.1 three@0.187.0 ktx-parse@2.0.0 gltf-validator@2.0.0-dev.3.10"
 if [ "$(cat "$C/node/packages.txt" 2>/dev/null)" != "$NODE_PACKAGES" ]; then
     mkdir -p "$C/node"
     # shellcheck disable=SC2086
@@ -61,3 +63,4 @@ node tests/clients/viewer.test.mjs
 node tests/clients/viewer_zoom.test.mjs
 PYTHON=$C/venv/bin/python node tests/clients/neuroglancer.test.mjs
 node tests/clients/exports.test.mjs
+node tests/clients/meshes.test.mjs

@@ -20,6 +20,7 @@ pub mod eval;
 pub mod export;
 mod field;
 pub mod hash;
+pub mod mesh;
 mod params;
 pub mod period;
 pub mod png;

@@ -213,6 +213,9 @@ pub enum RequestKind {
     Cut(Cut),
     /// Voxels anywhere, answered in the order given.
     Points(Vec<[i64; 3]>),
+    /// A mesh's surface: the texels of its baked texture, row by row, or
+    /// its vertices in order (see [`crate::mesh::Bake`]).
+    Bake(crate::mesh::Bake),
 }
 
 /// A request that passed every check: within the coordinate limit, of a
@@ -229,6 +232,8 @@ impl Request {
             RequestKind::Slice(s) => check_slice(s)?,
             RequestKind::Cut(c) => check_cut(&c.plane)?,
             RequestKind::Points(p) => check_points(p)?,
+            // Checked when it was built.
+            RequestKind::Bake(_) => {}
         }
         Ok(Request(kind))
     }
@@ -253,6 +258,11 @@ impl Request {
         Request::new(RequestKind::Points(points))
     }
 
+    /// A mesh baked from the solid.
+    pub fn bake(bake: crate::mesh::Bake) -> Result<Request> {
+        Request::new(RequestKind::Bake(bake))
+    }
+
     /// What is asked for.
     pub fn kind(&self) -> &RequestKind {
         &self.0
@@ -267,6 +277,7 @@ impl Request {
             RequestKind::Cut(c) => [c.plane.width, c.plane.height, 1],
             // At most MAX_REGION_VOXELS points.
             RequestKind::Points(p) => [p.len() as u32, 1, 1],
+            RequestKind::Bake(b) => b.size(),
         }
     }
 
@@ -311,6 +322,7 @@ impl Request {
                 let n = p.len();
                 format!("points/{n}/{:x}/{lod}", crate::hash::fingerprint(&bytes))
             }
+            RequestKind::Bake(b) => b.key(lod),
         }
     }
 }

@@ -4,12 +4,23 @@
 
 use crate::candidates::Candidates;
 use crate::error::{Error, Result};
+use crate::mesh::Bake;
 use crate::params::SynthParams;
 use crate::request::{Request, RequestKind, Slice};
 use crate::synth::cache::TileCache;
 use crate::synth::estimate::WorkEstimate;
-use crate::synth::{Engine, SynthStats};
+use crate::synth::{Engine, SynthStats, sample_voxels};
+use rayon::prelude::*;
 use std::sync::Arc;
+
+/// Texels (or vertices) of a bake synthesized per step: a step's sample
+/// points and voxels stay in memory at once.
+const BAKE_STEP: usize = 1 << 20;
+
+/// Side of the blocks a bake's estimate bounds one by one: the thinner
+/// the blocks, the closer the bound hugs the shell a surface needs, and
+/// the more often it counts the coarse levels they share.
+const ESTIMATE_BLOCK: u32 = 16;
 
 /// A solid texture ready to be sampled anywhere. Cheap to clone; safe to
 /// share between threads. Every method blocks while it synthesizes (using
@@ -68,6 +79,17 @@ impl Texture {
     /// The answer to `request` at level of detail `lod`, as RGB8 in the
     /// order its kind gives (see [`RequestKind`]), with what it cost.
     pub fn render(&self, request: &Request, lod: u32) -> Result<(Vec<u8>, SynthStats)> {
+        self.render_progress(request, lod, &|_, _| {})
+    }
+
+    /// [`Texture::render`], telling `progress` (items answered, total) as
+    /// it goes: a bake step by step, anything else once, when done.
+    pub fn render_progress(
+        &self,
+        request: &Request,
+        lod: u32,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(Vec<u8>, SynthStats)> {
         self.check_lod(lod)?;
         let e = &self.engine;
         match request.kind() {
@@ -78,7 +100,73 @@ impl Texture {
             }
             RequestKind::Cut(c) => e.cut_rgb(&c.plane, lod, c.filter),
             RequestKind::Points(p) => e.points_rgb(p, lod),
+            RequestKind::Bake(b) => return self.render_bake(b, lod, progress),
         }
+        .inspect(|_| progress(request.voxels(), request.voxels()))
+    }
+
+    /// A bake's texels (or vertices), [`BAKE_STEP`] at a time.
+    fn render_bake(
+        &self,
+        b: &Bake,
+        lod: u32,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(Vec<u8>, SynthStats)> {
+        let n = b.items();
+        let mut out = vec![0u8; n * 3];
+        let mut stats = SynthStats::default();
+        for start in (0..n).step_by(BAKE_STEP) {
+            let end = (start + BAKE_STEP).min(n);
+            let (items, points): (Vec<usize>, Vec<[f64; 3]>) = (start..end)
+                .into_par_iter()
+                .filter_map(|i| b.sample(i).map(|p| (i, p)))
+                .unzip();
+            let (rgb, s) = self.engine.samples_rgb(&points, lod, b.options().filter)?;
+            stats.merge(&s);
+            for (&i, c) in items.iter().zip(rgb.chunks_exact(3)) {
+                out[i * 3..i * 3 + 3].copy_from_slice(c);
+            }
+            progress(end as u64, n as u64);
+        }
+        Ok((out, stats))
+    }
+
+    /// The bounds of the aligned blocks of [`ESTIMATE_BLOCK`] voxels a
+    /// bake reads, summed. Each block counts at least its own voxels, so
+    /// counting stops once there are more blocks than the limit pays for.
+    fn estimate_bake(&self, b: &Bake, lod: u32, limit: u64) -> WorkEstimate {
+        let side = i64::from(ESTIMATE_BLOCK);
+        let most = limit / u64::from(ESTIMATE_BLOCK).pow(3) + 1;
+        let mut blocks = rustc_hash::FxHashSet::default();
+        for start in (0..b.items()).step_by(BAKE_STEP) {
+            let end = (start + BAKE_STEP).min(b.items());
+            let points: Vec<[f64; 3]> = (start..end)
+                .into_par_iter()
+                .filter_map(|i| b.sample(i))
+                .collect();
+            for v in sample_voxels(&points, b.options().filter).0 {
+                blocks.insert(v.map(|c| c.div_euclid(side) * side));
+            }
+            if blocks.len() as u64 > most {
+                return WorkEstimate {
+                    per_level: Vec::new(),
+                    total: limit.saturating_add(1),
+                    complete: false,
+                };
+            }
+        }
+        let mut corners: Vec<[i64; 3]> = blocks.into_iter().collect();
+        corners.sort_unstable();
+        self.engine
+            .estimate_blocks(&corners, ESTIMATE_BLOCK, lod, limit)
+    }
+
+    /// Every point a bake samples.
+    fn bake_points(b: &Bake) -> Vec<[f64; 3]> {
+        (0..b.items())
+            .into_par_iter()
+            .filter_map(|i| b.sample(i))
+            .collect()
     }
 
     /// What a cold-cache synthesis of `request` would compute, per level,
@@ -91,6 +179,7 @@ impl Texture {
             RequestKind::Slice(s) => e.plan_region(&s.region(), lod),
             RequestKind::Cut(c) => e.plan_cut(&c.plane, lod, c.filter),
             RequestKind::Points(p) => e.plan_points(p, lod),
+            RequestKind::Bake(b) => e.plan_samples(&Self::bake_points(b), lod, b.options().filter),
         })
     }
 
@@ -106,6 +195,7 @@ impl Texture {
             RequestKind::Slice(s) => e.estimate_region(&s.region(), lod, limit),
             RequestKind::Cut(c) => e.estimate_cut(&c.plane, lod, c.filter, limit),
             RequestKind::Points(p) => e.estimate_points(p, lod, limit),
+            RequestKind::Bake(b) => self.estimate_bake(b, lod, limit),
         })
     }
 

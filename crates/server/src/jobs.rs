@@ -140,6 +140,16 @@ impl Jobs {
         T: Send + 'static,
         F: FnOnce() -> T + Send + 'static,
     {
+        self.run_within(self.work_budget, f).await
+    }
+
+    /// [`Jobs::run`] under a work budget of its own (`None`: unbounded),
+    /// for requests larger than interactive ones (a mesh bake).
+    pub async fn run_within<T, F>(&self, work_budget: Option<u64>, f: F) -> Result<T, JobError>
+    where
+        T: Send + 'static,
+        F: FnOnce() -> T + Send + 'static,
+    {
         let predicted = self.predicted_wait();
         if predicted > self.max_wait.as_secs_f64() {
             return Err(self.refuse("synthesis queue is too slow", predicted));
@@ -167,9 +177,7 @@ impl Jobs {
         let metrics = self.metrics.clone();
         let this = self.clone();
         // Dropping this future (the client hung up) stops the synthesis.
-        let flag = self
-            .work_budget
-            .map_or_else(CancelFlag::new, CancelFlag::with_budget);
+        let flag = work_budget.map_or_else(CancelFlag::new, CancelFlag::with_budget);
         let budget_flag = flag.clone();
         let _cancel_on_drop = CancelOnDrop(flag.clone());
         let handle = tokio::task::spawn_blocking(move || {
@@ -190,7 +198,7 @@ impl Jobs {
             Ok(Err(Cancelled)) if budget_flag.is_over_budget() => {
                 self.metrics.over_budget("running");
                 Err(JobError::OverBudget {
-                    budget: self.work_budget.unwrap_or_default(),
+                    budget: work_budget.unwrap_or_default(),
                 })
             }
             Ok(Err(Cancelled)) => Err(JobError::Failed("job cancelled".into())),

@@ -415,7 +415,7 @@ impl Engine {
 
     /// Counts what the cut `plane` would compute from a cold cache.
     pub(crate) fn plan_cut(&self, plane: &CutPlane, lod: u32, filter: Filter) -> SynthStats {
-        self.plan_points(&cut_points(plane, filter).0, lod)
+        self.plan_samples(&plane_points(plane), lod, filter)
     }
 
     /// Counts what the voxels `points` would compute from a cold cache.
@@ -480,16 +480,26 @@ impl Engine {
         lod: u32,
         limit: u64,
     ) -> estimate::WorkEstimate {
+        self.estimate_boxes(points.iter().map(|&p| (p, [1; 3])), lod, limit)
+    }
+
+    /// The sum of the bounds of boxes (origin, size), stopping past `limit`.
+    fn estimate_boxes(
+        &self,
+        boxes: impl Iterator<Item = ([i64; 3], [u32; 3])>,
+        lod: u32,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
         let reach = &self.reach_from(lod);
         let mut out = estimate::WorkEstimate {
             per_level: vec![0; reach.len()],
             total: 0,
             complete: true,
         };
-        for p in points {
+        for (origin, size) in boxes {
             let left = limit.saturating_sub(out.total);
             let one = estimate::estimate(
-                estimate::Piece::region(*p, [1; 3]),
+                estimate::Piece::region(origin, size),
                 reach,
                 MAX_GROUP_TILES,
                 left,
@@ -574,24 +584,37 @@ impl Engine {
         lod: u32,
         filter: Filter,
     ) -> Result<(Vec<u8>, SynthStats)> {
+        self.samples_rgb(&plane_points(plane), lod, filter)
+    }
+
+    /// The colours at points anywhere (in voxels of level of detail `lod`),
+    /// read through `filter`, each voxel synthesized once however many
+    /// points read it.
+    pub(crate) fn samples_rgb(
+        &self,
+        points: &[[f64; 3]],
+        lod: u32,
+        filter: Filter,
+    ) -> Result<(Vec<u8>, SynthStats)> {
         let acc = self.new_acc();
         let k = lod as usize;
-        let (w, h) = (plane.width as usize, plane.height as usize);
-        let (pts, weights) = cut_points(plane, filter);
+        let (pts, weights) = sample_voxels(points, filter);
+        let mut unique = pts.clone();
+        unique.par_sort_unstable();
+        unique.dedup();
+        let t = self.triples_at(k, &unique, &acc);
+        let at = |p: &[i64; 3]| t[unique.binary_search(p).unwrap_or_default()];
         let rgb = match filter {
-            Filter::Nearest => {
-                let t = self.triples_at(k, &pts, &acc);
-                t.par_iter()
-                    .flat_map_iter(|t| triple_rgb8(&self.cands, k, *t))
-                    .collect()
-            }
+            Filter::Nearest => pts
+                .par_iter()
+                .flat_map_iter(|p| triple_rgb8(&self.cands, k, at(p)))
+                .collect(),
             Filter::Trilinear => {
-                let t = self.triples_at(k, &pts, &acc);
-                let mut out = vec![0u8; w * h * 3];
+                let mut out = vec![0u8; points.len() * 3];
                 out.par_chunks_mut(3).enumerate().for_each(|(i, dst)| {
                     let mut c = [0f32; 3];
                     for j in i * 8..i * 8 + 8 {
-                        let col = colour(&self.cands, k, t[j]);
+                        let col = colour(&self.cands, k, at(&pts[j]));
                         for ch in 0..3 {
                             c[ch] += weights[j] * col[ch];
                         }
@@ -602,6 +625,27 @@ impl Engine {
             }
         };
         Ok((rgb, acc.stats()))
+    }
+
+    /// Counts what the colours at `points` would compute from a cold cache.
+    pub(crate) fn plan_samples(&self, points: &[[f64; 3]], lod: u32, filter: Filter) -> SynthStats {
+        let mut voxels = sample_voxels(points, filter).0;
+        voxels.par_sort_unstable();
+        voxels.dedup();
+        self.plan_points(&voxels, lod)
+    }
+
+    /// An upper bound of what synthesizing every voxel of the aligned
+    /// cubes of `side` voxels from `corners` would count: a bound for any
+    /// voxels inside them.
+    pub(crate) fn estimate_blocks(
+        &self,
+        corners: &[[i64; 3]],
+        side: u32,
+        lod: u32,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
+        self.estimate_boxes(corners.iter().map(|&o| (o, [side; 3])), lod, limit)
     }
 }
 
@@ -667,23 +711,27 @@ fn position(b: &Box3, i: usize) -> [i64; 3] {
     ]
 }
 
-/// The voxels a cut samples, pixel by pixel, and for the trilinear filter
-/// the eight corners of each pixel with their weights (nearest: no weights).
-fn cut_points(plane: &CutPlane, filter: Filter) -> (Vec<[i64; 3]>, Vec<f32>) {
-    let (w, h) = (plane.width as usize, plane.height as usize);
-    let at = |i: usize, j: usize| plane.at(i as u32, j as u32);
+/// Where the pixels of a cut sample, row by row.
+fn plane_points(plane: &CutPlane) -> Vec<[f64; 3]> {
+    let w = plane.width;
+    (0..w * plane.height)
+        .map(|i| plane.at(i % w, i / w))
+        .collect()
+}
+
+/// The voxels points read: each rounded to the nearest voxel, or for the
+/// trilinear filter the eight corners around each with their weights
+/// (nearest: no weights).
+pub(crate) fn sample_voxels(points: &[[f64; 3]], filter: Filter) -> (Vec<[i64; 3]>, Vec<f32>) {
     match filter {
         Filter::Nearest => {
-            let pts = (0..w * h)
-                .map(|i| at(i % w, i / w).map(|v| v.round() as i64))
-                .collect();
+            let pts = points.iter().map(|q| q.map(|v| v.round() as i64)).collect();
             (pts, Vec::new())
         }
         Filter::Trilinear => {
-            let mut pts = Vec::with_capacity(w * h * 8);
-            let mut weights = Vec::with_capacity(w * h * 8);
-            for i in 0..w * h {
-                let q = at(i % w, i / w);
+            let mut pts = Vec::with_capacity(points.len() * 8);
+            let mut weights = Vec::with_capacity(points.len() * 8);
+            for q in points {
                 let base = q.map(|v| v.floor());
                 let f = [0, 1, 2].map(|a| q[a] - base[a]);
                 for corner in 0..8 {

@@ -53,12 +53,15 @@ pub(super) enum Encoding {
     ChunkZstd,
     /// [`Encoding::Planar`] gzipped, sent as `Content-Encoding: gzip`.
     PlanarGzip,
+    /// A bake's textured mesh as a glTF binary.
+    Glb,
 }
 
 impl Encoding {
     fn content_type(self) -> &'static str {
         match self {
             Encoding::Png => "image/png",
+            Encoding::Glb => "model/gltf-binary",
             Encoding::Raw
             | Encoding::Chunk
             | Encoding::Planar
@@ -74,7 +77,7 @@ impl Encoding {
             Encoding::Planar => "planar/",
             Encoding::ChunkZstd => "zstd/",
             Encoding::PlanarGzip => "planar/gzip/",
-            Encoding::Png | Encoding::Raw | Encoding::Chunk => "",
+            Encoding::Png | Encoding::Raw | Encoding::Chunk | Encoding::Glb => "",
         }
     }
 
@@ -89,6 +92,10 @@ impl Encoding {
             Encoding::Planar => Ok(planar(&rgb)),
             Encoding::ChunkZstd => zstd_chunk(&rgb),
             Encoding::PlanarGzip => gzip_chunk(&planar(&rgb)),
+            Encoding::Glb => match request.kind() {
+                RequestKind::Bake(b) => Ok(b.glb(&rgb)?),
+                _ => Err(ApiError::internal("only a bake is sent as glTF")),
+            },
         }
     }
 
@@ -238,6 +245,7 @@ fn kind_name(request: &Request) -> &'static str {
         RequestKind::Slice(_) => "slice",
         RequestKind::Cut(_) => "cut",
         RequestKind::Points(_) => "points",
+        RequestKind::Bake(_) => "bake",
     }
 }
 
@@ -261,17 +269,23 @@ fn check_budget(s: &AppState, request: &Request) -> Result<(), ApiError> {
 fn check_work(
     s: &AppState,
     predicted: solidtex_core::Result<WorkEstimate>,
+    budget: u64,
 ) -> Result<(), ApiError> {
     let e = predicted?;
-    if e.complete && e.total <= s.max_request_work {
+    if e.complete && e.total <= budget {
         return Ok(());
     }
     s.metrics.over_budget("predicted");
-    Err(ApiError::predicted_over_budget(
-        e.total,
-        e.complete,
-        s.max_request_work,
-    ))
+    Err(ApiError::predicted_over_budget(e.total, e.complete, budget))
+}
+
+/// Most voxels `request` may synthesize: a bake, the size of an export
+/// (`--max-export-work`), anything else an interactive request's.
+fn work_budget(s: &AppState, request: &Request) -> u64 {
+    match request.kind() {
+        RequestKind::Bake(_) => s.max_export_work,
+        _ => s.max_request_work,
+    }
 }
 
 /// Records what a synthesis cost in the span and the metrics.
@@ -294,20 +308,22 @@ pub(super) async fn answer(
     headers: &HeaderMap,
 ) -> Result<Response, ApiError> {
     check_budget(s, &request)?;
-    check_work(s, tex.estimate(&request, lod, s.max_request_work))?;
+    let budget = work_budget(s, &request);
+    check_work(s, tex.estimate(&request, lod, budget), budget)?;
     let key = format!("{}{}", encoding.tag(), request.key(lod));
     let tag = ETag::new(&entry, &key);
     let mut res = if tag.matches(headers) {
         tag.not_modified(IMMUTABLE)
     } else {
         let req = request.clone();
-        let (bytes, stats) = s
-            .jobs
-            .run(move || -> Result<_, ApiError> {
-                let (rgb, stats) = tex.render(&req, lod)?;
-                Ok((encoding.encode(&req, rgb)?, stats))
-            })
-            .await??;
+        let job = move || -> Result<_, ApiError> {
+            let (rgb, stats) = tex.render(&req, lod)?;
+            Ok((encoding.encode(&req, rgb)?, stats))
+        };
+        let (bytes, stats) = match request.kind() {
+            RequestKind::Bake(_) => s.jobs.run_within(Some(budget), job).await??,
+            _ => s.jobs.run(job).await??,
+        };
         account(s, &stats);
         let mut res = body(bytes, encoding.content_type());
         if let Some(coding) = encoding.content_encoding() {

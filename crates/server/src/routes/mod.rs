@@ -7,6 +7,7 @@
 //! queue, and shape responses; no synthesis logic lives here.
 
 mod answer;
+mod bake;
 mod exports;
 mod frames;
 mod ops;
@@ -189,6 +190,10 @@ pub fn router(state: AppState) -> Router {
         .route(
             "/v1/textures/{id}/zarr/{lod}/c/{cc}/{cz}/{cy}/{cx}",
             get(volumes::zarr_chunk),
+        )
+        .route(
+            "/v1/textures/{id}/bake",
+            post(bake::bake).layer(DefaultBodyLimit::max(solidtex_core::mesh::MAX_MESH_BYTES)),
         )
         .route("/v1/textures/{id}/export", get(exports::export))
         .route("/v1/textures/{id}/export.json", get(exports::describe))

@@ -1,0 +1,102 @@
+//! `solidtex bake`: a mesh textured from the solid, as a glTF binary.
+
+use super::cut::parse_vec3;
+use super::source::{SourceArgs, load_source, progress_bar, summary};
+use anyhow::Context;
+use clap::Args;
+use solidtex_core::mesh::{Bake, BakeOptions, Colours, Mesh, MeshFormat, Uvs};
+use solidtex_core::{Filter, Request};
+use solidtex_server::write_atomic;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+#[derive(Args)]
+pub struct BakeArgs {
+    /// The mesh: OBJ or glTF binary (GLB).
+    mesh: PathBuf,
+    #[command(flatten)]
+    src: SourceArgs,
+    /// Voxels spanned by the longest side of the mesh's bounding box.
+    #[arg(long, default_value_t = 256)]
+    resolution: u32,
+    /// Turn, degrees about x, then y, then z (around the box's centre).
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
+    rotation: [f64; 3],
+    /// Where the box's lowest corner lies, `x,y,z` in voxels.
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
+    offset: [f64; 3],
+    /// Side of the baked texture (about one texel per voxel of surface
+    /// when omitted).
+    #[arg(long)]
+    texture_size: Option<u32>,
+    /// Whose texture coordinates: auto (the mesh's when valid), mesh or atlas.
+    #[arg(long, default_value = "auto")]
+    uvs: UvArg,
+    /// Bake one colour per vertex instead of a texture.
+    #[arg(long)]
+    vertex_colours: bool,
+    /// Read the solid between voxel centres trilinearly.
+    #[arg(long)]
+    trilinear: bool,
+    /// Output `.glb`.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum UvArg {
+    Auto,
+    Mesh,
+    Atlas,
+}
+
+/// Runs `solidtex bake`.
+pub fn run(a: BakeArgs) -> anyhow::Result<()> {
+    let bytes = std::fs::read(&a.mesh).with_context(|| format!("reading {}", a.mesh.display()))?;
+    let format = match a.mesh.extension().and_then(|e| e.to_str()) {
+        Some(ext) => MeshFormat::from_name(ext).ok(),
+        None => None,
+    };
+    let mesh = Mesh::parse(&bytes, format).with_context(|| a.mesh.display().to_string())?;
+    let tex = load_source(&a.src)?;
+    let mut options = BakeOptions::new(a.resolution);
+    options.placement.rotation = a.rotation;
+    options.placement.offset = a.offset;
+    options.texture_size = a.texture_size;
+    options.uvs = match a.uvs {
+        UvArg::Auto => Uvs::Auto,
+        UvArg::Mesh => Uvs::Mesh,
+        UvArg::Atlas => Uvs::Atlas,
+    };
+    if a.vertex_colours {
+        options.colours = Colours::Vertex;
+    }
+    if a.trilinear {
+        options.filter = Filter::Trilinear;
+    }
+    let triangles = mesh.triangles().len();
+    let dropped = mesh.dropped();
+    let bake = Bake::new(Arc::new(mesh), options)?;
+    let t0 = Instant::now();
+    let bar = progress_bar();
+    bar.set_message("bake");
+    let request = Request::bake(bake.clone())?;
+    let (rgb, stats) = tex.render_progress(&request, a.src.lod, &|done, total| {
+        bar.set_position(done * 1000 / total.max(1));
+    })?;
+    bar.finish_and_clear();
+    let glb = bake.glb(&rgb)?;
+    write_atomic(&a.output, &glb).with_context(|| format!("writing {}", a.output.display()))?;
+    let layout = match bake.texture_side() {
+        Some(s) if bake.uses_mesh_uvs() => format!("a {s}² texture on the mesh's UVs"),
+        Some(s) => format!("a {s}² texture in a generated atlas"),
+        None => "vertex colours".to_string(),
+    };
+    let what = format!(
+        "{triangles} triangles ({dropped} degenerate dropped) at resolution {} with {layout}",
+        a.resolution
+    );
+    eprintln!("{}", summary(&what, &a.output, t0, &stats));
+    Ok(())
+}

@@ -1,0 +1,57 @@
+// Baked meshes read by Khronos' glTF validator (npm `gltf-validator`):
+// every bake the server answers (the mesh's own UVs, a generated atlas,
+// vertex colours, trilinear reads, a GLB sent back in) and one
+// `solidtex bake` writes report no errors; the command line's file is the
+// server's byte for byte. The files are left in ARTEFACTS.
+//
+//   node meshes.test.mjs
+
+import assert from "node:assert/strict";
+import { execFileSync } from "node:child_process";
+import { mkdirSync, readFileSync, writeFileSync } from "node:fs";
+import { createRequire } from "node:module";
+import { join } from "node:path";
+import { ARTEFACTS, ROOT, binary, startServer } from "./browser.mjs";
+
+const NODE = process.env.CLIENTS_NODE_DIR || join(ROOT, "target", "clients", "node");
+const require = createRequire(join(NODE, "package.json"));
+const validator = require("gltf-validator");
+
+const TORUS = join(ROOT, "tests", "fixtures", "meshes", "torus.obj");
+mkdirSync(ARTEFACTS, { recursive: true });
+
+async function validate(name, bytes) {
+  writeFileSync(join(ARTEFACTS, `${name}.glb`), bytes);
+  const report = await validator.validateBytes(bytes);
+  const { numErrors, numWarnings } = report.issues;
+  const errors = report.issues.messages.filter((m) => m.severity === 0);
+  assert.equal(numErrors, 0, `${name}: ${JSON.stringify(errors.slice(0, 5), null, 1)}`);
+  console.log(`${name}: valid glTF (${numWarnings} warnings)`);
+}
+
+const server = await startServer([], { defaultTexture: true });
+try {
+  const bake = async (query, body) => {
+    const res = await fetch(`${server.base}/v1/textures/default/bake?${query}`, { method: "POST", body });
+    assert.equal(res.status, 200, `${query}: ${await res.clone().text()}`);
+    assert.equal(res.headers.get("content-type"), "model/gltf-binary");
+    return new Uint8Array(await res.arrayBuffer());
+  };
+  const torus = readFileSync(TORUS);
+  const own = await bake("resolution=64&uvs=mesh", torus);
+  await validate("torus-mesh-uvs", own);
+  await validate("torus-atlas", await bake("resolution=64&uvs=atlas", torus));
+  await validate("torus-vertex-colours", await bake("resolution=64&colours=vertex", torus));
+  await validate("torus-trilinear", await bake("resolution=48&uvs=atlas&filter=trilinear&rotation=30,0,45", torus));
+  // A baked GLB sent back in, on its own UVs.
+  await validate("torus-rebaked", await bake("resolution=64&uvs=mesh&format=glb", own));
+  const out = join(ARTEFACTS, "torus-cli.glb");
+  execFileSync(binary(), ["bake", TORUS, "--resolution", "64", "--uvs", "mesh", "-o", out], {
+    stdio: ["ignore", "inherit", "inherit"],
+  });
+  const cli = new Uint8Array(readFileSync(out));
+  await validate("torus-cli", cli);
+  assert.ok(Buffer.from(cli).equals(Buffer.from(own)), "the command line's bake differs from the server's");
+} finally {
+  await server.stop();
+}
