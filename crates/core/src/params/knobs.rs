@@ -130,9 +130,12 @@ const fn kept(knob: Knob) -> Knob {
     }
 }
 
+/// A preset's name and the synthesis parameters it expands to.
+pub type Preset = (&'static str, fn() -> crate::SynthParams);
+
 /// The presets a flat object of synthesis parameters may start from
-/// (`preset`), with what they expand to.
-pub const PRESETS: &[(&str, fn() -> crate::SynthParams)] = &[
+/// (`preset`), the defaults first.
+pub const PRESETS: &[Preset] = &[
     ("default", crate::SynthParams::default),
     ("preview", crate::SynthParams::preview),
 ];
