@@ -65,7 +65,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             quality: a.quality,
             reference: a.reference,
         };
-        let scores = evaluate(&name, &e, a.side, extra, &a.synth.params(Scheme::DualGrid))?;
+        let scores = evaluate(&name, &e, a.side, extra, &a.synth.params())?;
         if !a.json {
             print(&scores)?;
         }

@@ -3,12 +3,17 @@
 //! parameters, and how results are written and summarised.
 
 use anyhow::Context;
-use clap::Args;
+use clap::builder::PossibleValuesParser;
+use clap::error::ErrorKind;
+use clap::parser::ValueSource;
+use clap::{Arg, ArgAction, ArgMatches, Args, Command, FromArgMatches};
 use indicatif::{ProgressBar, ProgressStyle};
+use solidtex_core::knobs::{self, Knob, Part, Values};
 use solidtex_core::{
-    AnalysisParams, Candidates, Exemplar, ExemplarSet, Field, Scheme, SlabTiling, Stage,
-    SynthParams, SynthStats, Texture, TileCache,
+    AnalysisParams, Candidates, Exemplar, ExemplarSet, Stage, SynthParams, SynthStats, Texture,
+    TileCache,
 };
+use solidtex_server::spec::TextureParams;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -18,9 +23,6 @@ pub struct SourceArgs {
     /// A `.stx` file, or an exemplar image (precomputed on the fly; the
     /// bundled default exemplar when omitted).
     pub source: Option<PathBuf>,
-    /// Correction scheme: standard or dual-grid.
-    #[arg(long, default_value = "dual-grid")]
-    pub scheme: Scheme,
     #[command(flatten)]
     pub synth: SynthArgs,
     /// Level of detail (0 = finest).
@@ -28,111 +30,118 @@ pub struct SourceArgs {
     pub lod: u32,
 }
 
-/// Synthesis parameters other than the scheme.
-#[derive(Args, Clone)]
+/// Synthesis parameters: one flag per synthesis knob
+/// ([`solidtex_core::knobs`]), read as the server reads a query string,
+/// and `--preview`.
+#[derive(Clone, Debug, Default)]
 pub struct SynthArgs {
-    /// Random seed.
-    #[arg(long, default_value_t = SynthParams::default().seed)]
-    seed: u64,
-    /// Preview parameters: one correction pass per level and the finest
-    /// level upsampled without correction: faster cold slices for worse
-    /// patch coherence (docs/quality.md).
-    #[arg(long, conflicts_with_all = ["passes", "finest_passes", "fine_levels"])]
-    preview: bool,
-    /// Correction passes per level, the fine levels excepted.
-    #[arg(long, default_value_t = SynthParams::default().passes)]
-    passes: u32,
-    /// Correction passes at the finest levels (see `--fine-levels`).
-    #[arg(long, default_value_t = SynthParams::default().finest_passes)]
-    finest_passes: u32,
-    /// Levels, counted from the finest, corrected with `--finest-passes`
-    /// passes instead of `--passes`.
-    #[arg(long, default_value_t = SynthParams::default().fine_levels)]
-    fine_levels: u32,
-    /// Dual-grid cell side M.
-    #[arg(long, default_value_t = SynthParams::default().grid)]
-    grid: u32,
-    /// Jitter strength (0 disables).
-    #[arg(long, default_value_t = SynthParams::default().jitter)]
-    jitter: f32,
-    /// Levels, counted from the finest, whose passes run as two parity
-    /// subpasses (even coordinate sums, then odd: short chains) instead
-    /// of s³ block subpasses.
-    #[arg(long, default_value_t = SynthParams::default().parity_levels)]
-    parity_levels: u32,
-    /// Subpass block side s of block subpasses (s³ subpasses per pass; 1
-    /// disables subpasses there).
-    #[arg(long, default_value_t = SynthParams::default().subpass_side)]
-    subpass_side: u32,
-    /// Gain on correction queries around their mean colour (1 disables).
-    #[arg(long, default_value_t = SynthParams::default().contrast)]
-    contrast: f32,
-    /// Penalty on coherent triples whose three exemplar colours disagree
-    /// (0 disables).
-    #[arg(long, default_value_t = SynthParams::default().consistency)]
-    consistency: f32,
-    /// Thickness of the candidate slab's layers, in voxels of the
-    /// initialisation level (Dong et al.: N).
-    #[arg(long, default_value_t = SynthParams::default().slab_thickness)]
-    slab_thickness: u32,
-    /// How the slab is cut for tiling: cells (a jittered grid, borders at
-    /// every angle) or blocks (axis-aligned squares).
-    #[arg(long, default_value_t = SynthParams::default().slab_tiling)]
-    slab_tiling: SlabTiling,
-    /// A field of local frames the texture follows: a preset
-    /// (`slant:ANGLE`, `circular[:CX,CY]`, `emissive[:CX,CY]`,
-    /// `zigzag:ANGLE,PERIOD`, `slant3d:DX,DY,DZ`), a JSON object, or
-    /// `@FILE` holding one (docs/fields.md).
-    #[arg(long, value_parser = parse_field)]
-    field: Option<Field>,
-    /// Make the solid periodic with this period in finest voxels: one
-    /// side (`128`) or three (`128,128,64`), each a multiple of the
-    /// coarsest level's spacing times 4 (32 by default).
-    #[arg(long, value_parser = parse_period)]
-    period: Option<[u32; 3]>,
-}
-
-fn parse_period(s: &str) -> anyhow::Result<[u32; 3]> {
-    Ok(solidtex_core::period::parse(s)?)
-}
-
-/// A `--field` value, reading `@FILE` from the file.
-fn parse_field(s: &str) -> anyhow::Result<Field> {
-    let text = match s.strip_prefix('@') {
-        Some(path) => std::fs::read_to_string(path).with_context(|| format!("reading {path}"))?,
-        None => s.to_string(),
-    };
-    Ok(text.parse()?)
+    params: SynthParams,
 }
 
 impl SynthArgs {
-    pub fn params(&self, scheme: Scheme) -> SynthParams {
-        // The preview sets the passes (clap refuses them beside it).
-        let base = if self.preview {
+    pub fn params(&self) -> SynthParams {
+        self.params.clone()
+    }
+}
+
+const PREVIEW: &str = "preview";
+
+/// The synthesis knobs that have a flag.
+fn flagged() -> impl Iterator<Item = &'static Knob> {
+    knobs::knobs_of(Part::Synthesis).filter(|k| k.flag)
+}
+
+fn flag_of(k: &'static Knob) -> Arg {
+    let about = k.about;
+    let short = about
+        .split(". ")
+        .next()
+        .unwrap_or(about)
+        .trim_end_matches('.');
+    let mut arg = Arg::new(k.name)
+        .long(k.flag_name())
+        .help(format!("{short}."))
+        .long_help(about)
+        .action(ArgAction::Set);
+    if let Some(d) = knobs::default_of(k) {
+        let text = match d {
+            serde_json::Value::String(s) => s,
+            other => other.to_string(),
+        };
+        arg = arg.default_value(text);
+    }
+    match k.values {
+        Values::Choice(names) => arg
+            .value_name("NAME")
+            .value_parser(PossibleValuesParser::new(names)),
+        Values::Flag => arg
+            .value_name("BOOL")
+            .value_parser(PossibleValuesParser::new(["true", "false"])),
+        Values::Integer { .. } => arg.value_name("N"),
+        Values::Number { .. } => arg.value_name("X"),
+        Values::Text { .. } => arg.value_name("TEXT"),
+    }
+}
+
+impl Args for SynthArgs {
+    fn augment_args(cmd: Command) -> Command {
+        let preview = Arg::new(PREVIEW)
+            .long(PREVIEW)
+            .action(ArgAction::SetTrue)
+            .help(
+                "Preview parameters: one correction pass per level and the finest level \
+                 upsampled without correction: faster cold slices for worse patch coherence \
+                 (docs/quality.md).",
+            )
+            .conflicts_with_all(["passes", "finest_passes", "fine_levels"]);
+        cmd.args(flagged().map(flag_of)).arg(preview)
+    }
+
+    fn augment_args_for_update(cmd: Command) -> Command {
+        Self::augment_args(cmd)
+    }
+}
+
+impl FromArgMatches for SynthArgs {
+    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
+        let invalid = |e: String| clap::Error::raw(ErrorKind::ValueValidation, format!("{e}\n"));
+        // Only the flags given: the rest keep the preset's values.
+        let mut given = Vec::new();
+        for k in flagged() {
+            if m.value_source(k.name) != Some(ValueSource::CommandLine) {
+                continue;
+            }
+            let Some(v) = m.get_one::<String>(k.name) else {
+                continue;
+            };
+            let v = match (k.name, v.strip_prefix('@')) {
+                ("field", Some(path)) => std::fs::read_to_string(path)
+                    .map_err(|e| invalid(format!("--field: reading {path}: {e}")))?,
+                _ => v.clone(),
+            };
+            given.push((k.name, v));
+        }
+        let preset = if m.get_flag(PREVIEW) {
             SynthParams::preview()
         } else {
-            SynthParams {
-                passes: self.passes,
-                finest_passes: self.finest_passes,
-                fine_levels: self.fine_levels,
-                ..SynthParams::default()
-            }
+            SynthParams::default()
         };
-        SynthParams {
-            seed: self.seed,
-            scheme,
-            grid: self.grid,
-            jitter: self.jitter,
-            parity_levels: self.parity_levels,
-            subpass_side: self.subpass_side,
-            contrast: self.contrast,
-            consistency: self.consistency,
-            slab_thickness: self.slab_thickness,
-            slab_tiling: self.slab_tiling,
-            field: self.field.clone(),
-            period: self.period,
-            ..base
-        }
+        let mut flat = match serde_json::to_value(preset) {
+            Ok(serde_json::Value::Object(o)) => o,
+            _ => serde_json::Map::new(),
+        };
+        flat.extend(TextureParams::flat_from_pairs(
+            given.iter().map(|(k, v)| (*k, v.as_str())),
+        ));
+        let params: SynthParams = serde_json::from_value(serde_json::Value::Object(flat))
+            .map_err(|e| invalid(e.to_string()))?;
+        params.validate().map_err(|e| invalid(e.to_string()))?;
+        Ok(SynthArgs { params })
+    }
+
+    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
+        *self = Self::from_arg_matches(m)?;
+        Ok(())
     }
 }
 
@@ -211,7 +220,7 @@ pub fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
             }
         }
     };
-    let params = src.synth.params(src.scheme);
+    let params = src.synth.params();
     Ok(Texture::new(
         Arc::new(cands),
         params,
