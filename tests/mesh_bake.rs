@@ -218,7 +218,7 @@ async fn bad_meshes_get_clear_errors() {
         .unwrap() as usize;
     doc["accessors"][indices]["count"] = serde_json::json!(30_000_000);
     let mut text = serde_json::to_vec(&doc).unwrap();
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let bin = huge.split_off(20 + json_len);

@@ -95,7 +95,7 @@ impl Layout {
         let pair = (i / 2) as u32;
         let o = [(pair % grid * cell) as f32, (pair / grid * cell) as f32];
         let c = cell as f32;
-        let local = if i % 2 == 0 {
+        let local = if i.is_multiple_of(2) {
             [[1.0, 1.0], [c - 3.0, 1.0], [1.0, c - 3.0]]
         } else {
             [[c - 1.0, c - 1.0], [3.0, c - 1.0], [c - 1.0, 3.0]]

@@ -230,8 +230,9 @@ fn degenerate(p: [[f32; 3]; 3]) -> bool {
             .sum::<f64>()
     };
     let longest = len2(p[0], p[1]).max(len2(p[1], p[2])).max(len2(p[2], p[0]));
-    // |u × v|² against the longest side⁴: sin² of the smallest angle, roughly.
-    !(area2 > 1e-14 * longest * longest)
+    // |u × v|² against the longest side⁴: sin² of the smallest angle,
+    // roughly. NaN (no area to speak of) counts as degenerate.
+    area2.partial_cmp(&(1e-14 * longest * longest)) != Some(std::cmp::Ordering::Greater)
 }
 
 #[cfg(test)]

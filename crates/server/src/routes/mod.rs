@@ -61,6 +61,7 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/textures/{id}/zarr/zarr.json"),
     ("GET", "/v1/textures/{id}/zarr/{lod}/zarr.json"),
     ("GET", "/v1/textures/{id}/zarr/{lod}/c/{cc}/{cz}/{cy}/{cx}"),
+    ("POST", "/v1/textures/{id}/bake"),
     ("GET", "/v1/textures/{id}/export"),
     ("GET", "/v1/textures/{id}/export.json"),
     ("GET", "/v1/exports/{eid}"),
