@@ -62,6 +62,11 @@ pub struct PrecomputeArgs {
     /// the coarsest alone by default).
     #[arg(long)]
     reference_level: Option<u32>,
+    /// Strength of the histogram matching calibrated here (0 = none): the
+    /// correction learns to use the exemplar's colours as often as the
+    /// exemplar does (docs/quality.md).
+    #[arg(long, default_value_t = AnalysisParams::default().histogram_matching)]
+    histogram_matching: f32,
     /// Also print each stage's time and each level's candidate statistics.
     #[arg(long)]
     verbose: bool,
@@ -83,6 +88,7 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
         levels: a.levels,
         orientation: a.orientation,
         feature_weight: a.feature_weight,
+        histogram_matching: a.histogram_matching,
         initialisation: if a.quality {
             Initialisation::Reference
         } else {

@@ -55,6 +55,14 @@ pub struct AnalysisParams {
     /// `.stx`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference_level: Option<u32>,
+    /// Strength of the histogram matching calibrated at precompute (see
+    /// [`crate::synth::usage`]): how far, per calibration round, a pixel's
+    /// penalty in the correction moves for its colour's over-use, in
+    /// units of its level's typical distance between close alternatives;
+    /// 0 leaves the correction unweighted. Not written when 0, so textures
+    /// without it keep their ids.
+    #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
+    pub histogram_matching: f32,
 }
 
 /// What the lazy synthesis's first version of a level is made from.
@@ -117,6 +125,7 @@ impl Default for AnalysisParams {
             similar_fine: 2,
             orientation: Orientation::Auto,
             feature_weight: DEFAULT_FEATURE_WEIGHT,
+            histogram_matching: 0.0,
             initialisation: Initialisation::default(),
             reference_level: None,
         }
@@ -187,6 +196,7 @@ impl AnalysisParams {
             a.validate()?;
         }
         range("feature_weight", self.feature_weight, 0.0, 4.0)?;
+        range("histogram_matching", self.histogram_matching, 0.0, 4.0)?;
         if let Some(level) = self.reference_level {
             range("reference_level", level, 0, self.levels - 1)?;
             if self.initialisation != Initialisation::Reference {

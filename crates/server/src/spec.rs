@@ -47,7 +47,12 @@ fn keys_of<T: Serialize + Default>() -> Vec<String> {
 fn analysis_keys() -> Vec<String> {
     let mut keys = keys_of::<AnalysisParams>();
     // Left out of the defaults' JSON, which omits them at their defaults.
-    for key in ["feature_weight", "initialisation", "reference_level"] {
+    for key in [
+        "feature_weight",
+        "histogram_matching",
+        "initialisation",
+        "reference_level",
+    ] {
         keys.push(key.to_string());
     }
     keys
@@ -239,6 +244,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("feature_weight", "0"),
     ("parity_levels", "0"),
     ("initialisation", r#""slab""#),
+    ("histogram_matching", "0"),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
