@@ -8,6 +8,8 @@ use clap::error::ErrorKind;
 use clap::parser::ValueSource;
 use clap::{Arg, ArgAction, ArgMatches, Args, Command, FromArgMatches};
 use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
 use solidtex_core::knobs::{self, Knob, Part, Values};
 use solidtex_core::{
     AnalysisParams, Candidates, Exemplar, ExemplarSet, Stage, SynthParams, SynthStats, Texture,
@@ -46,9 +48,14 @@ impl SynthArgs {
 
 const PREVIEW: &str = "preview";
 
-/// The synthesis knobs that have a flag.
-fn flagged() -> impl Iterator<Item = &'static Knob> {
-    knobs::knobs_of(Part::Synthesis).filter(|k| k.flag)
+/// The knobs of `part` that have a flag.
+fn flagged(part: Part) -> impl Iterator<Item = &'static Knob> {
+    knobs::knobs_of(part).filter(|k| k.flag)
+}
+
+/// One flag per knob of `part` that has one, described, with its default.
+pub fn knob_flags(part: Part) -> impl Iterator<Item = Arg> {
+    flagged(part).map(flag_of)
 }
 
 fn flag_of(k: &'static Knob) -> Arg {
@@ -83,6 +90,44 @@ fn flag_of(k: &'static Knob) -> Arg {
     }
 }
 
+/// A refused flag value, as clap reports one.
+pub fn invalid(e: impl std::fmt::Display) -> clap::Error {
+    clap::Error::raw(ErrorKind::ValueValidation, e.to_string())
+}
+
+/// `base` with the flags of `part` given on the command line laid over
+/// it, each value read as the server reads a query string's (`@FILE`
+/// reads a field from the file).
+pub fn given_over<T: Serialize + DeserializeOwned>(
+    m: &ArgMatches,
+    part: Part,
+    base: &T,
+) -> Result<T, clap::Error> {
+    let mut given = Vec::new();
+    for k in flagged(part) {
+        if m.value_source(k.name) != Some(ValueSource::CommandLine) {
+            continue;
+        }
+        let Some(v) = m.get_one::<String>(k.name) else {
+            continue;
+        };
+        let v = match (k.name, v.strip_prefix('@')) {
+            ("field", Some(path)) => std::fs::read_to_string(path)
+                .map_err(|e| invalid(format!("--field: reading {path}: {e}")))?,
+            _ => v.clone(),
+        };
+        given.push((k.name, v));
+    }
+    let mut flat = match serde_json::to_value(base) {
+        Ok(serde_json::Value::Object(o)) => o,
+        _ => serde_json::Map::new(),
+    };
+    flat.extend(TextureParams::flat_from_pairs(
+        given.iter().map(|(k, v)| (*k, v.as_str())),
+    ));
+    serde_json::from_value(serde_json::Value::Object(flat)).map_err(invalid)
+}
+
 impl Args for SynthArgs {
     fn augment_args(cmd: Command) -> Command {
         let preview = Arg::new(PREVIEW)
@@ -94,7 +139,7 @@ impl Args for SynthArgs {
                  (docs/quality.md).",
             )
             .conflicts_with_all(["passes", "finest_passes", "fine_levels"]);
-        cmd.args(flagged().map(flag_of)).arg(preview)
+        cmd.args(knob_flags(Part::Synthesis)).arg(preview)
     }
 
     fn augment_args_for_update(cmd: Command) -> Command {
@@ -104,38 +149,14 @@ impl Args for SynthArgs {
 
 impl FromArgMatches for SynthArgs {
     fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
-        let invalid = |e: String| clap::Error::raw(ErrorKind::ValueValidation, format!("{e}\n"));
-        // Only the flags given: the rest keep the preset's values.
-        let mut given = Vec::new();
-        for k in flagged() {
-            if m.value_source(k.name) != Some(ValueSource::CommandLine) {
-                continue;
-            }
-            let Some(v) = m.get_one::<String>(k.name) else {
-                continue;
-            };
-            let v = match (k.name, v.strip_prefix('@')) {
-                ("field", Some(path)) => std::fs::read_to_string(path)
-                    .map_err(|e| invalid(format!("--field: reading {path}: {e}")))?,
-                _ => v.clone(),
-            };
-            given.push((k.name, v));
-        }
+        // The flags given override the preset's values.
         let preset = if m.get_flag(PREVIEW) {
             SynthParams::preview()
         } else {
             SynthParams::default()
         };
-        let mut flat = match serde_json::to_value(preset) {
-            Ok(serde_json::Value::Object(o)) => o,
-            _ => serde_json::Map::new(),
-        };
-        flat.extend(TextureParams::flat_from_pairs(
-            given.iter().map(|(k, v)| (*k, v.as_str())),
-        ));
-        let params: SynthParams = serde_json::from_value(serde_json::Value::Object(flat))
-            .map_err(|e| invalid(e.to_string()))?;
-        params.validate().map_err(|e| invalid(e.to_string()))?;
+        let params = given_over(m, Part::Synthesis, &preset)?;
+        params.validate().map_err(invalid)?;
         Ok(SynthArgs { params })
     }
 
