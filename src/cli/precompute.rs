@@ -1,10 +1,10 @@
 //! `solidtex precompute`: 3D candidates of an exemplar into a `.stx` file.
 
-use super::source::{given_over, invalid, knob_flags, open_exemplar, precompute};
+use super::knob_flags::AnalysisArgs;
+use super::source::{open_exemplar, precompute};
 use anyhow::{Context, bail};
-use clap::{Arg, ArgAction, ArgMatches, Args, Command, FromArgMatches};
-use solidtex_core::knobs::Part;
-use solidtex_core::{AnalysisParams, Candidates, Exemplar, ExemplarSet, Layout, Orientation};
+use clap::Args;
+use solidtex_core::{Candidates, Exemplar, ExemplarSet, Layout, Orientation};
 use solidtex_server::write_atomic;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -41,51 +41,6 @@ pub struct PrecomputeArgs {
     verbose: bool,
 }
 
-/// Analysis parameters: one flag per analysis knob
-/// ([`solidtex_core::knobs`]), and `--quality`.
-pub struct AnalysisArgs {
-    params: AnalysisParams,
-}
-
-const QUALITY: &str = "quality";
-
-impl Args for AnalysisArgs {
-    fn augment_args(cmd: Command) -> Command {
-        let quality = Arg::new(QUALITY)
-            .long(QUALITY)
-            .action(ArgAction::SetTrue)
-            .help(
-                "The quality preset: the reference kept at every level, so the finest level \
-                 starts from the reference's own solid (minutes of precompute; \
-                 docs/quality.md says for which exemplars).",
-            )
-            .conflicts_with_all(["reference_level", "initialisation"]);
-        cmd.args(knob_flags(Part::Analysis)).arg(quality)
-    }
-
-    fn augment_args_for_update(cmd: Command) -> Command {
-        Self::augment_args(cmd)
-    }
-}
-
-impl FromArgMatches for AnalysisArgs {
-    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
-        let preset = if m.get_flag(QUALITY) {
-            AnalysisParams::quality()
-        } else {
-            AnalysisParams::default()
-        };
-        let params = given_over(m, Part::Analysis, &preset)?;
-        params.validate().map_err(invalid)?;
-        Ok(AnalysisArgs { params })
-    }
-
-    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
-        *self = Self::from_arg_matches(m)?;
-        Ok(())
-    }
-}
-
 /// Runs `solidtex precompute`.
 pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
     let xy = masked(open_exemplar(&a.exemplar)?, a.feature_mask.as_deref())?;
@@ -98,7 +53,7 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
         )?,
         _ => bail!("give both --yz and --zx, or neither"),
     };
-    let params = a.analysis.params;
+    let params = a.analysis.params();
     let (w, h) = (set.width(), set.height());
     let estimate = Candidates::estimated_peak_bytes(w, h, !set.is_single(), &params);
     solidtex_server::peak_alloc::start();

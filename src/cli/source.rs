@@ -2,20 +2,13 @@
 //! `.stx`, an exemplar image, or the bundled default), its synthesis
 //! parameters, and how results are written and summarised.
 
+use super::knob_flags::SynthArgs;
 use anyhow::Context;
-use clap::builder::PossibleValuesParser;
-use clap::error::ErrorKind;
-use clap::parser::ValueSource;
-use clap::{Arg, ArgAction, ArgMatches, Args, Command, FromArgMatches};
+use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
-use serde::de::DeserializeOwned;
-use solidtex_core::knobs::{self, Knob, Part, Values};
 use solidtex_core::{
-    AnalysisParams, Candidates, Exemplar, ExemplarSet, Stage, SynthParams, SynthStats, Texture,
-    TileCache,
+    AnalysisParams, Candidates, Exemplar, ExemplarSet, Stage, SynthStats, Texture, TileCache,
 };
-use solidtex_server::spec::TextureParams;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -30,140 +23,6 @@ pub struct SourceArgs {
     /// Level of detail (0 = finest).
     #[arg(long, default_value_t = 0)]
     pub lod: u32,
-}
-
-/// Synthesis parameters: one flag per synthesis knob
-/// ([`solidtex_core::knobs`]), read as the server reads a query string,
-/// and `--preview`.
-#[derive(Clone, Debug, Default)]
-pub struct SynthArgs {
-    params: SynthParams,
-}
-
-impl SynthArgs {
-    pub fn params(&self) -> SynthParams {
-        self.params.clone()
-    }
-}
-
-const PREVIEW: &str = "preview";
-
-/// The knobs of `part` that have a flag.
-fn flagged(part: Part) -> impl Iterator<Item = &'static Knob> {
-    knobs::knobs_of(part).filter(|k| k.flag)
-}
-
-/// One flag per knob of `part` that has one, described, with its default.
-pub fn knob_flags(part: Part) -> impl Iterator<Item = Arg> {
-    flagged(part).map(flag_of)
-}
-
-fn flag_of(k: &'static Knob) -> Arg {
-    let about = k.about;
-    let short = about
-        .split(". ")
-        .next()
-        .unwrap_or(about)
-        .trim_end_matches('.');
-    let mut arg = Arg::new(k.name)
-        .long(k.flag_name())
-        .help(format!("{short}."))
-        .long_help(about)
-        .action(ArgAction::Set);
-    if let Some(d) = knobs::default_of(k) {
-        let text = match d {
-            serde_json::Value::String(s) => s,
-            other => other.to_string(),
-        };
-        arg = arg.default_value(text);
-    }
-    match k.values {
-        Values::Choice(names) => arg
-            .value_name("NAME")
-            .value_parser(PossibleValuesParser::new(names)),
-        Values::Flag => arg
-            .value_name("BOOL")
-            .value_parser(PossibleValuesParser::new(["true", "false"])),
-        Values::Integer { .. } => arg.value_name("N"),
-        Values::Number { .. } => arg.value_name("X"),
-        Values::Text { .. } => arg.value_name("TEXT"),
-    }
-}
-
-/// A refused flag value, as clap reports one.
-pub fn invalid(e: impl std::fmt::Display) -> clap::Error {
-    clap::Error::raw(ErrorKind::ValueValidation, e.to_string())
-}
-
-/// `base` with the flags of `part` given on the command line laid over
-/// it, each value read as the server reads a query string's (`@FILE`
-/// reads a field from the file).
-pub fn given_over<T: Serialize + DeserializeOwned>(
-    m: &ArgMatches,
-    part: Part,
-    base: &T,
-) -> Result<T, clap::Error> {
-    let mut given = Vec::new();
-    for k in flagged(part) {
-        if m.value_source(k.name) != Some(ValueSource::CommandLine) {
-            continue;
-        }
-        let Some(v) = m.get_one::<String>(k.name) else {
-            continue;
-        };
-        let v = match (k.name, v.strip_prefix('@')) {
-            ("field", Some(path)) => std::fs::read_to_string(path)
-                .map_err(|e| invalid(format!("--field: reading {path}: {e}")))?,
-            _ => v.clone(),
-        };
-        given.push((k.name, v));
-    }
-    let mut flat = match serde_json::to_value(base) {
-        Ok(serde_json::Value::Object(o)) => o,
-        _ => serde_json::Map::new(),
-    };
-    flat.extend(TextureParams::flat_from_pairs(
-        given.iter().map(|(k, v)| (*k, v.as_str())),
-    ));
-    serde_json::from_value(serde_json::Value::Object(flat)).map_err(invalid)
-}
-
-impl Args for SynthArgs {
-    fn augment_args(cmd: Command) -> Command {
-        let preview = Arg::new(PREVIEW)
-            .long(PREVIEW)
-            .action(ArgAction::SetTrue)
-            .help(
-                "Preview parameters: one correction pass per level and the finest level \
-                 upsampled without correction: faster cold slices for worse patch coherence \
-                 (docs/quality.md).",
-            )
-            .conflicts_with_all(["passes", "finest_passes", "fine_levels"]);
-        cmd.args(knob_flags(Part::Synthesis)).arg(preview)
-    }
-
-    fn augment_args_for_update(cmd: Command) -> Command {
-        Self::augment_args(cmd)
-    }
-}
-
-impl FromArgMatches for SynthArgs {
-    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
-        // The flags given override the preset's values.
-        let preset = if m.get_flag(PREVIEW) {
-            SynthParams::preview()
-        } else {
-            SynthParams::default()
-        };
-        let params = given_over(m, Part::Synthesis, &preset)?;
-        params.validate().map_err(invalid)?;
-        Ok(SynthArgs { params })
-    }
-
-    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
-        *self = Self::from_arg_matches(m)?;
-        Ok(())
-    }
 }
 
 /// One sentence on what a synthesis command wrote and what it cost.
