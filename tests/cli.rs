@@ -198,3 +198,89 @@ fn corrected_slices_are_closer_in_structure_than_the_slab_and_a_shuffle() {
         }
     }
 }
+
+/// The parameter flags are the knobs of crates/core/src/params/knobs.rs:
+/// every knob that has a flag is an option of the synthesis commands or
+/// of `precompute`, a value out of its range is refused as the server refuses it,
+/// and the flags set exactly the parameters the same keys set.
+#[test]
+fn synthesis_flags_are_the_knobs() {
+    use solidtex_core::knobs::{Part, knobs_of};
+    use solidtex_core::{
+        AnalysisParams, Axis, ExemplarSet, Request, SynthParams, Texture, TileCache, Window,
+    };
+    use std::sync::Arc;
+
+    for (command, part) in [("slice", Part::Synthesis), ("precompute", Part::Analysis)] {
+        let help = Command::new(env!("CARGO_BIN_EXE_solidtex"))
+            .args([command, "--help"])
+            .output()
+            .unwrap();
+        let help = String::from_utf8_lossy(&help.stdout);
+        for k in knobs_of(part).filter(|k| k.flag) {
+            assert!(
+                help.contains(&format!("--{} <", k.flag_name())),
+                "no --{} in `{command} --help`",
+                k.flag_name()
+            );
+        }
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_solidtex"))
+        .args([
+            "slice", "--axis", "z", "--at", "0", "--passes", "7", "-o", "x.png",
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("`passes`"),
+        "{stderr}"
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("slice.png");
+    solidtex(&[
+        "slice",
+        "--axis",
+        "z",
+        "--at",
+        "3",
+        "--width",
+        "24",
+        "--height",
+        "16",
+        "--seed",
+        "7",
+        "--correct-init-level",
+        "false",
+        "--scheme",
+        "standard",
+        "--jitter",
+        "0.5",
+        "--period",
+        "32",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    let set = ExemplarSet::single(solidtex_core::bundled::exemplar());
+    let candidates = solidtex_core::bundled::candidates_for(&set, &AnalysisParams::default())
+        .expect("the bundled candidates");
+    let params: SynthParams = serde_json::from_str(
+        r#"{"seed": 7, "correct_init_level": false, "scheme": "standard", "jitter": 0.5,
+            "period": "32"}"#,
+    )
+    .unwrap();
+    let texture = Texture::new(
+        Arc::new(candidates),
+        params,
+        Arc::new(TileCache::new(64 << 20)),
+    )
+    .unwrap();
+    let (want, _) = texture
+        .render(
+            &Request::slice(Axis::Z, 3, Window::new(0, 0, 24, 16)).unwrap(),
+            0,
+        )
+        .unwrap();
+    assert_eq!(rgb(&png), (24, 16, want));
+}

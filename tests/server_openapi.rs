@@ -1,5 +1,6 @@
-//! `openapi.yaml` is a valid OpenAPI 3 document and describes exactly the
-//! routes the router serves.
+//! `openapi.yaml` is a valid OpenAPI 3 document, describes exactly the
+//! routes the router serves, and its parameter sections are the ones
+//! generated from the knobs' declaration.
 
 mod common;
 mod server_support;
@@ -29,6 +30,36 @@ fn doc_routes() -> BTreeSet<(String, String)> {
         }
     }
     out
+}
+
+/// The parameter sections are generated from
+/// crates/core/src/params/knobs.rs (`solidtex_server::openapi`); with
+/// `SOLIDTEX_WRITE_OPENAPI=1` this test writes them into openapi.yaml.
+#[test]
+fn parameter_sections_are_generated_from_the_knobs() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("openapi.yaml");
+    let on_disk = std::fs::read_to_string(&path).unwrap();
+    let generated = solidtex_server::openapi::regenerate(&on_disk).unwrap();
+    if generated == on_disk {
+        return;
+    }
+    if std::env::var_os("SOLIDTEX_WRITE_OPENAPI").is_some() {
+        std::fs::write(&path, &generated).unwrap();
+        return;
+    }
+    let first = on_disk
+        .lines()
+        .zip(generated.lines())
+        .position(|(a, b)| a != b)
+        .unwrap_or(on_disk.lines().count().min(generated.lines().count()));
+    panic!(
+        "openapi.yaml's generated sections are out of date with the knobs of \
+         crates/core/src/params/knobs.rs (first difference at line {}).\n\
+         Regenerate them with:\n    \
+         SOLIDTEX_WRITE_OPENAPI=1 cargo test --release --test server_openapi \
+         parameter_sections\nand commit openapi.yaml.",
+        first + 1
+    );
 }
 
 #[test]

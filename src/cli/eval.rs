@@ -8,7 +8,8 @@
 //! shuffle of the exemplar; on request also the quality preset and the
 //! global reference (slices through its periodic block, wrapping).
 
-use super::source::{SynthArgs, open_exemplar};
+use super::knob_flags::SynthArgs;
+use super::source::open_exemplar;
 use clap::Args;
 use solidtex_core::eval::{
     RgbView, SliceScores, Structure, anisotropy, score_slice, shuffled_exemplar, structure,
@@ -65,7 +66,7 @@ pub fn run(a: EvalArgs) -> anyhow::Result<()> {
             quality: a.quality,
             reference: a.reference,
         };
-        let scores = evaluate(&name, &e, a.side, extra, &a.synth.params(Scheme::DualGrid))?;
+        let scores = evaluate(&name, &e, a.side, extra, &a.synth.params())?;
         if !a.json {
             print(&scores)?;
         }

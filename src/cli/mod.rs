@@ -7,6 +7,7 @@ mod cut;
 mod eval;
 mod export;
 mod inspect;
+mod knob_flags;
 mod loadtest;
 mod plan;
 mod precompute;

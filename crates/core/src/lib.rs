@@ -36,7 +36,7 @@ pub use error::{CorruptKind, Error, Result};
 pub use field::{Along, Curve, Field, Sketch};
 pub use params::{
     AnalysisParams, Arrangement, Correction, Initialisation, Orientation, Scheme, SlabTiling,
-    Slices, SynthParams,
+    Slices, SynthParams, knobs,
 };
 pub use request::{
     Axis, COORD_LIMIT, Cut, CutPlane, Filter, MAX_REGION_VOXELS, MAX_SLICE_SIDE, Region, Request,

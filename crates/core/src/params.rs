@@ -7,6 +7,8 @@ use crate::error::{Error, Result};
 use crate::field::Field;
 use serde::{Deserialize, Serialize};
 
+pub mod knobs;
+
 /// Parameters of the exemplar analysis and 3D candidate precomputation.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -181,22 +183,10 @@ impl AnalysisParams {
 
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
-        range("neighbourhood", self.neighbourhood, 3, 9)?;
-        if self.neighbourhood.is_multiple_of(2) {
-            return Err(Error::InvalidRequest("neighbourhood must be odd".into()));
-        }
-        range("pca_dims", self.pca_dims, 2, 16)?;
-        range("strips", self.strips, 4, 256)?;
-        range("triples", self.triples, 4, 1000)?;
-        range("max_candidates", self.max_candidates, 1, 32)?;
-        range("levels", self.levels, 1, 6)?;
-        range("similar_coarse", self.similar_coarse, 1, 8)?;
-        range("similar_fine", self.similar_fine, 1, 8)?;
+        knobs::check_ranges(knobs::Part::Analysis, &as_json(self)?)?;
         if let Orientation::Given(a) = &self.orientation {
             a.validate()?;
         }
-        range("feature_weight", self.feature_weight, 0.0, 4.0)?;
-        range("histogram_matching", self.histogram_matching, 0.0, 4.0)?;
         if let Some(level) = self.reference_level {
             range("reference_level", level, 0, self.levels - 1)?;
             if self.initialisation != Initialisation::Reference {
@@ -642,16 +632,7 @@ impl SynthParams {
 
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
-        range("passes", self.passes, 0, 6)?;
-        range("finest_passes", self.finest_passes, 0, 6)?;
-        range("fine_levels", self.fine_levels, 1, 16)?;
-        range("parity_levels", self.parity_levels, 0, 16)?;
-        range("subpass_side", self.subpass_side, 1, 3)?;
-        range("grid", self.grid, 4, 64)?;
-        range("jitter", self.jitter, 0.0, 4.0)?;
-        range("contrast", self.contrast, 1.0, 4.0)?;
-        range("consistency", self.consistency, 0.0, 1024.0)?;
-        range("slab_thickness", self.slab_thickness, 1, 9)?;
+        knobs::check_ranges(knobs::Part::Synthesis, &as_json(self)?)?;
         if let Some(field) = &self.field {
             field.validate()?;
         }
@@ -693,6 +674,11 @@ fn field_or_text<'de, D: serde::Deserializer<'de>>(
             .map(Some)
             .map_err(D::Error::custom),
     }
+}
+
+/// Parameters as their JSON object, which [`knobs::check_ranges`] reads.
+fn as_json<T: Serialize>(params: &T) -> Result<serde_json::Value> {
+    serde_json::to_value(params).map_err(|e| Error::InvalidRequest(e.to_string()))
 }
 
 /// Checks `min ≤ v ≤ max` (NaN fails the test and is refused too).

@@ -40,6 +40,7 @@ pub(crate) mod jobs;
 pub(crate) mod listen;
 pub mod memory;
 pub mod metrics;
+pub mod openapi;
 pub(crate) mod panics;
 pub mod peak_alloc;
 pub(crate) mod process;

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use sha2::{Digest, Sha256};
 use solidtex_core::Layout;
+use solidtex_core::knobs::{self, Part};
 use solidtex_core::{AnalysisParams, Exemplar, ExemplarSet, SynthParams};
 
 /// Why parameters are refused.
@@ -35,27 +36,14 @@ pub struct TextureParams {
     pub synth: SynthParams,
 }
 
-fn keys_of<T: Serialize + Default>() -> Vec<String> {
-    match serde_json::to_value(T::default()) {
-        Ok(Value::Object(m)) => m.keys().cloned().collect(),
-        _ => Vec::new(),
-    }
+/// The keys of one part's knobs.
+fn keys_of(part: Part) -> Vec<String> {
+    knobs::knobs_of(part).map(|k| k.name.to_string()).collect()
 }
 
-/// The analysis parameters' keys, those left out of the defaults' JSON
-/// included (no feature-distance channel writes no `feature_weight`).
+/// The analysis parameters' keys.
 fn analysis_keys() -> Vec<String> {
-    let mut keys = keys_of::<AnalysisParams>();
-    // Left out of the defaults' JSON, which omits them at their defaults.
-    for key in [
-        "feature_weight",
-        "histogram_matching",
-        "initialisation",
-        "reference_level",
-    ] {
-        keys.push(key.to_string());
-    }
-    keys
+    keys_of(Part::Analysis)
 }
 
 impl TextureParams {
@@ -69,22 +57,21 @@ impl TextureParams {
     /// id, are those the preset expands to.
     pub fn from_flat(obj: &Map<String, Value>) -> Result<TextureParams, SpecError> {
         let analysis_keys = analysis_keys();
-        let mut synth_keys = keys_of::<SynthParams>();
-        // Left out of the defaults' JSON, which has no field and no period.
-        synth_keys.push("field".to_string());
-        synth_keys.push("period".to_string());
+        let synth_keys = keys_of(Part::Synthesis);
         let mut a = Map::new();
         let mut s = Map::new();
         if let Some(preset) = obj.get("preset") {
-            let base = match preset.as_str() {
-                Some("default") => SynthParams::default(),
-                Some("preview") => SynthParams::preview(),
-                _ => {
-                    return Err(invalid_params(format!(
-                        "unknown preset {preset} (known: default, preview)"
-                    )));
-                }
+            let Some((_, base)) = knobs::PRESETS
+                .iter()
+                .find(|(name, _)| preset.as_str() == Some(name))
+            else {
+                let known: Vec<&str> = knobs::PRESETS.iter().map(|(name, _)| *name).collect();
+                return Err(invalid_params(format!(
+                    "unknown preset {preset} (known: {})",
+                    known.join(", ")
+                )));
             };
+            let base = base();
             if let Ok(Value::Object(m)) = serde_json::to_value(base) {
                 s = m;
             }
@@ -189,15 +176,17 @@ impl TextureParams {
 
     /// Parameters from query-string pairs: each value is read as a JSON
     /// scalar when it is one (`seed=7`, `jitter=0.5`, `correct_init_level=false`)
-    /// and as a string otherwise (`scheme=dual-grid`). A key of
-    /// [`TEXT_KEYS`] stays a string whatever it holds.
+    /// and as a string otherwise (`scheme=dual-grid`). A knob with a
+    /// strict text grammar ([`knobs::Values::Text`]) stays a string
+    /// whatever it holds: JSON's reading would let `period=null` or
+    /// `period=%2016` through, outside the pattern openapi.yaml documents.
     pub fn flat_from_pairs<'a>(
         pairs: impl Iterator<Item = (&'a str, &'a str)>,
     ) -> Map<String, Value> {
         pairs
             .map(|(k, v)| {
                 let value = match serde_json::from_str::<Value>(v) {
-                    Ok(j) if !j.is_object() && !j.is_array() && !TEXT_KEYS.contains(&k) => j,
+                    Ok(j) if !j.is_object() && !j.is_array() && !strict_text(k) => j,
                     _ => Value::String(v.to_string()),
                 };
                 (k.to_string(), value)
@@ -223,10 +212,10 @@ impl TextureParams {
     }
 }
 
-/// Query parameters with a text grammar of their own, which their own
-/// parser reads strictly: JSON's reading would let `period=null` or
-/// `period=%2016` through, outside the pattern openapi.yaml documents.
-const TEXT_KEYS: &[&str] = &["period"];
+/// Whether `key` is a knob whose text is always kept a string.
+fn strict_text(key: &str) -> bool {
+    knobs::knob(key).is_some_and(|k| matches!(k.values, knobs::Values::Text { strict: true, .. }))
+}
 
 /// Synthesis keys added after the first stored layout, with the value that
 /// behaves as textures stored without them did (`finest_passes` and
