@@ -14,13 +14,13 @@
 use super::Engine;
 use super::cache::TileCache;
 use super::colour;
-use crate::reference::palette::Palette;
 use super::grid::Box3;
 use crate::analysis::stack::spacing;
 use crate::candidates::Candidates;
 use crate::candidates::geometry::Dims;
 use crate::error::{Error, Result};
 use crate::params::SynthParams;
+use crate::reference::palette::Palette;
 use crate::simd;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -40,6 +40,13 @@ pub(crate) const PEAK_BYTES: u64 = CACHE_BYTES as u64 + (64 << 20);
 /// pixel is priced out of use altogether.
 const MOST: f64 = 4.0;
 
+/// The finest level calibrated: at the finest, where a voxel's colour is
+/// the mean of three fine exemplar colours, pushing the choice toward
+/// under-used colours moved the mean toward the calm middle instead
+/// (docs/quality.md); the coarse levels, which lay out the structure,
+/// take the penalties.
+const FINEST_CALIBRATED: usize = 1;
+
 /// Calibration rounds: each synthesizes with the penalties of the last.
 const ROUNDS: u32 = 4;
 
@@ -57,8 +64,6 @@ pub(crate) fn calibrate(
     let dims = cands.dims();
     let n = dims.len();
     let margins: Vec<f64> = (0..levels).map(|k| margin(&cands, k)).collect();
-    #[cfg(test)]
-    println!("margins {margins:?}");
     let mut penalty: Vec<[Vec<f64>; 3]> = (0..levels)
         .map(|_| [0, 1, 2].map(|_| vec![0.0; n]))
         .collect();
@@ -79,6 +84,8 @@ pub(crate) fn calibrate(
         })
         .collect();
     let mut cands = cands;
+    let calibrated = FINEST_CALIBRATED.min(levels - 1)..levels;
+    let steps = ROUNDS as usize * calibrated.len();
     for round in 0..ROUNDS {
         let shared = Arc::new(cands);
         let engine = Engine::new(
@@ -86,50 +93,56 @@ pub(crate) fn calibrate(
             params.clone(),
             Arc::new(TileCache::new(CACHE_BYTES)),
         )?;
-        for (k, pen) in penalty.iter_mut().enumerate() {
+        for k in calibrated.clone() {
             // A block of its own each round, so that no penalty is fitted
             // to one block's accidents.
             let lo = i64::from(round) * 4 * BLOCK;
             let b = Box3::new([lo, -lo, lo / 2], [BLOCK; 3]);
-            let acc = engine.new_acc();
-            let triples = engine.level_box(k, &b, &acc);
-            let radius = (spacing(k) as usize).min(dims.w.min(dims.h) as usize / 8);
+            let triples = engine.level_box(k, &b, &engine.new_acc()).data;
+            // Pixels closer than the level's spacing are near copies in
+            // its Gaussian stack: their use is counted together.
+            let radius = (spacing(k) as usize)
+                .min(dims.w.min(dims.h) as usize / 8)
+                .max(1);
             // Smaller steps as the rounds settle.
             let step = f64::from(strength) * margins[k] / f64::from(round + 1);
-            let mode = std::env::var("UMODE").unwrap_or_else(|_| "usage".into());
-            // The voxels' colour histogram over the palette, against the
-            // exemplars'.
+            // How much the voxels over-use each palette colour, from −1
+            // (never used) to 1 (used where the exemplars never are).
             let synth_hist = histogram(
                 &palettes[k],
-                triples.data.iter().map(|&t| colour::colour(&shared, k, t)),
+                triples.iter().map(|&t| colour::colour(&shared, k, t)),
             );
             let colour_over: Vec<f64> = synth_hist
                 .iter()
                 .zip(&exemplar_hists[k])
                 .map(|(&s, &e)| if s + e > 0.0 { (s - e) / (s + e) } else { 0.0 })
                 .collect();
-            pen.par_iter_mut().enumerate().for_each(|(plane, pen)| {
-                let mut count = vec![0u32; n];
-                for t in &triples.data {
-                    count[t[plane] as usize] += 1;
-                }
-                let used = blur(&count, dims, radius.max(1));
-                let expected = triples.data.len() as f64 / n as f64;
-                let side = (2 * radius.max(1) + 1).pow(2) as f64;
-                let own = shared.stack(plane).level(k);
-                for (e, (p, &u)) in pen.iter_mut().zip(&used).enumerate() {
-                    let u = u as f64 / side;
-                    let usage = (u - expected) / (u + expected);
-                    let colour = colour_over[palettes[k].nearest(own[e]) as usize];
-                    let over = match mode.as_str() {
-                        "colour" => colour,
-                        "both" => 0.5 * (usage + colour),
-                        _ => usage,
-                    };
-                    *p = (*p + step * over).clamp(0.0, MOST * margins[k]);
-                }
-            });
-            progress((round as usize * levels + k + 1) as f32 / (ROUNDS as usize * levels) as f32);
+            let expected = triples.len() as f64 / n as f64;
+            let window = ((2 * radius + 1) * (2 * radius + 1)) as f64;
+            let most = MOST * margins[k];
+            penalty[k]
+                .par_iter_mut()
+                .enumerate()
+                .for_each(|(plane, pen)| {
+                    let mut count = vec![0u32; n];
+                    for t in &triples {
+                        count[t[plane] as usize] += 1;
+                    }
+                    let used = blur(&count, dims, radius);
+                    let own = shared.stack(plane).level(k);
+                    for ((p, &u), &c) in pen.iter_mut().zip(&used).zip(own) {
+                        // The pixel's own over-use (position histogram, Chen
+                        // and Wang) and its colour's (colour histogram, Kopf
+                        // et al.), equally: over-use alone spreads the choice
+                        // over more pixels but toward the calm mean colour.
+                        let u = f64::from(u) / window;
+                        let usage = (u - expected) / (u + expected);
+                        let colour = colour_over[palettes[k].nearest(c) as usize];
+                        *p = (*p + step * 0.5 * (usage + colour)).clamp(0.0, most);
+                    }
+                });
+            let done = round as usize * calibrated.len() + k + 1 - calibrated.start;
+            progress(done as f32 / steps as f32);
         }
         drop(engine);
         // The engine, the only other holder, is gone.
@@ -285,10 +298,13 @@ mod tests {
         let one = run(1);
         let two = run(2);
         assert_eq!(one.to_bytes(), two.to_bytes());
-        for k in 0..2 {
+        // The finest level is left unweighted, the coarser one is not.
+        let weighted = |k| {
             let u = one.usage_penalty(k).expect("calibrated");
-            assert!(u.iter().any(|plane| plane.iter().any(|&v| v > 0)), "level {k}");
-        }
+            u.iter().any(|plane| plane.iter().any(|&v| v > 0))
+        };
+        assert!(!weighted(0));
+        assert!(weighted(1));
         let loaded = Candidates::load(&one.to_bytes()).unwrap();
         assert_eq!(loaded.usage_penalty(0), one.usage_penalty(0));
         assert_eq!(block(loaded), block(two));

@@ -555,7 +555,9 @@ impl<'a> AppearanceCorrector<'a> {
         match self.usage {
             None => 0,
             Some([a, b, c]) => {
-                u32::from(a[t[0] as usize]) + u32::from(b[t[1] as usize]) + u32::from(c[t[2] as usize])
+                u32::from(a[t[0] as usize])
+                    + u32::from(b[t[1] as usize])
+                    + u32::from(c[t[2] as usize])
             }
         }
     }
