@@ -199,9 +199,9 @@ fn corrected_slices_are_closer_in_structure_than_the_slab_and_a_shuffle() {
     }
 }
 
-/// The synthesis flags are the knobs of crates/core/src/params/knobs.rs:
-/// every synthesis knob that has a flag is an option of the synthesis
-/// commands, a value out of its range is refused as the server refuses it,
+/// The parameter flags are the knobs of crates/core/src/params/knobs.rs:
+/// every knob that has a flag is an option of the synthesis commands or
+/// of `precompute`, a value out of its range is refused as the server refuses it,
 /// and the flags set exactly the parameters the same keys set.
 #[test]
 fn synthesis_flags_are_the_knobs() {
@@ -211,17 +211,19 @@ fn synthesis_flags_are_the_knobs() {
     };
     use std::sync::Arc;
 
-    let help = Command::new(env!("CARGO_BIN_EXE_solidtex"))
-        .args(["slice", "--help"])
-        .output()
-        .unwrap();
-    let help = String::from_utf8_lossy(&help.stdout);
-    for k in knobs_of(Part::Synthesis).filter(|k| k.flag) {
-        assert!(
-            help.contains(&format!("--{} <", k.flag_name())),
-            "no --{} in `slice --help`",
-            k.flag_name()
-        );
+    for (command, part) in [("slice", Part::Synthesis), ("precompute", Part::Analysis)] {
+        let help = Command::new(env!("CARGO_BIN_EXE_solidtex"))
+            .args([command, "--help"])
+            .output()
+            .unwrap();
+        let help = String::from_utf8_lossy(&help.stdout);
+        for k in knobs_of(part).filter(|k| k.flag) {
+            assert!(
+                help.contains(&format!("--{} <", k.flag_name())),
+                "no --{} in `{command} --help`",
+                k.flag_name()
+            );
+        }
     }
     let out = Command::new(env!("CARGO_BIN_EXE_solidtex"))
         .args([

@@ -8,7 +8,8 @@
 //! shuffle of the exemplar; on request also the quality preset and the
 //! global reference (slices through its periodic block, wrapping).
 
-use super::source::{SynthArgs, open_exemplar};
+use super::knob_flags::SynthArgs;
+use super::source::open_exemplar;
 use clap::Args;
 use solidtex_core::eval::{
     RgbView, SliceScores, Structure, anisotropy, score_slice, shuffled_exemplar, structure,

@@ -8,6 +8,7 @@ mod cut;
 mod eval;
 mod export;
 mod inspect;
+mod knob_flags;
 mod loadtest;
 mod plan;
 mod precompute;

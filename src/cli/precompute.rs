@@ -1,11 +1,10 @@
 //! `solidtex precompute`: 3D candidates of an exemplar into a `.stx` file.
 
+use super::knob_flags::AnalysisArgs;
 use super::source::{open_exemplar, precompute};
 use anyhow::{Context, bail};
 use clap::Args;
-use solidtex_core::{
-    AnalysisParams, Candidates, Exemplar, ExemplarSet, Initialisation, Layout, Orientation,
-};
+use solidtex_core::{Candidates, Exemplar, ExemplarSet, Layout, Orientation};
 use solidtex_server::write_atomic;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -35,33 +34,8 @@ pub struct PrecomputeArgs {
     /// Output `.stx` file.
     #[arg(short, long)]
     output: PathBuf,
-    /// Pyramid levels analysed.
-    #[arg(long, default_value_t = 4)]
-    levels: u32,
-    /// How the exemplar is laid on the planes: auto (turn one plane and
-    /// weight the third down when the exemplar is strongly oriented along
-    /// an axis), none, or an arrangement as JSON, e.g.
-    /// '{"rotate": [0, 270, 0], "weights": [1, 1, 0.25]}'.
-    #[arg(long, default_value = "auto")]
-    orientation: Orientation,
-    /// Weight of the feature-distance channel in the appearance vectors,
-    /// relative to the luminance; 0 matches colour alone.
-    #[arg(long, default_value_t = AnalysisParams::default().feature_weight)]
-    feature_weight: f32,
-    /// What the synthesis starts from: reference (a periodic block of the
-    /// global reference, optimised here) or slab (Dong et al.'s candidate
-    /// slab).
-    #[arg(long, default_value_t = AnalysisParams::default().initialisation)]
-    initialisation: Initialisation,
-    /// The quality preset: the reference kept at every level, so the
-    /// finest level starts from the reference's own solid (minutes of
-    /// precompute; docs/quality.md says for which exemplars).
-    #[arg(long, conflicts_with = "reference_level")]
-    quality: bool,
-    /// The finest level at which the reference is kept (0 = finest;
-    /// the coarsest alone by default).
-    #[arg(long)]
-    reference_level: Option<u32>,
+    #[command(flatten)]
+    analysis: AnalysisArgs,
     /// Also print each stage's time and each level's candidate statistics.
     #[arg(long)]
     verbose: bool,
@@ -79,22 +53,7 @@ pub fn run(a: PrecomputeArgs) -> anyhow::Result<()> {
         )?,
         _ => bail!("give both --yz and --zx, or neither"),
     };
-    let params = AnalysisParams {
-        levels: a.levels,
-        orientation: a.orientation,
-        feature_weight: a.feature_weight,
-        initialisation: if a.quality {
-            Initialisation::Reference
-        } else {
-            a.initialisation
-        },
-        reference_level: if a.quality {
-            AnalysisParams::quality().reference_level
-        } else {
-            a.reference_level
-        },
-        ..AnalysisParams::default()
-    };
+    let params = a.analysis.params();
     let (w, h) = (set.width(), set.height());
     let estimate = Candidates::estimated_peak_bytes(w, h, !set.is_single(), &params);
     solidtex_server::peak_alloc::start();

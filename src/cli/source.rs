@@ -2,18 +2,13 @@
 //! `.stx`, an exemplar image, or the bundled default), its synthesis
 //! parameters, and how results are written and summarised.
 
+use super::knob_flags::SynthArgs;
 use anyhow::Context;
-use clap::builder::PossibleValuesParser;
-use clap::error::ErrorKind;
-use clap::parser::ValueSource;
-use clap::{Arg, ArgAction, ArgMatches, Args, Command, FromArgMatches};
+use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use solidtex_core::knobs::{self, Knob, Part, Values};
 use solidtex_core::{
-    AnalysisParams, Candidates, Exemplar, ExemplarSet, Stage, SynthParams, SynthStats, Texture,
-    TileCache,
+    AnalysisParams, Candidates, Exemplar, ExemplarSet, Stage, SynthStats, Texture, TileCache,
 };
-use solidtex_server::spec::TextureParams;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -28,121 +23,6 @@ pub struct SourceArgs {
     /// Level of detail (0 = finest).
     #[arg(long, default_value_t = 0)]
     pub lod: u32,
-}
-
-/// Synthesis parameters: one flag per synthesis knob
-/// ([`solidtex_core::knobs`]), read as the server reads a query string,
-/// and `--preview`.
-#[derive(Clone, Debug, Default)]
-pub struct SynthArgs {
-    params: SynthParams,
-}
-
-impl SynthArgs {
-    pub fn params(&self) -> SynthParams {
-        self.params.clone()
-    }
-}
-
-const PREVIEW: &str = "preview";
-
-/// The synthesis knobs that have a flag.
-fn flagged() -> impl Iterator<Item = &'static Knob> {
-    knobs::knobs_of(Part::Synthesis).filter(|k| k.flag)
-}
-
-fn flag_of(k: &'static Knob) -> Arg {
-    let about = k.about;
-    let short = about
-        .split(". ")
-        .next()
-        .unwrap_or(about)
-        .trim_end_matches('.');
-    let mut arg = Arg::new(k.name)
-        .long(k.flag_name())
-        .help(format!("{short}."))
-        .long_help(about)
-        .action(ArgAction::Set);
-    if let Some(d) = knobs::default_of(k) {
-        let text = match d {
-            serde_json::Value::String(s) => s,
-            other => other.to_string(),
-        };
-        arg = arg.default_value(text);
-    }
-    match k.values {
-        Values::Choice(names) => arg
-            .value_name("NAME")
-            .value_parser(PossibleValuesParser::new(names)),
-        Values::Flag => arg
-            .value_name("BOOL")
-            .value_parser(PossibleValuesParser::new(["true", "false"])),
-        Values::Integer { .. } => arg.value_name("N"),
-        Values::Number { .. } => arg.value_name("X"),
-        Values::Text { .. } => arg.value_name("TEXT"),
-    }
-}
-
-impl Args for SynthArgs {
-    fn augment_args(cmd: Command) -> Command {
-        let preview = Arg::new(PREVIEW)
-            .long(PREVIEW)
-            .action(ArgAction::SetTrue)
-            .help(
-                "Preview parameters: one correction pass per level and the finest level \
-                 upsampled without correction: faster cold slices for worse patch coherence \
-                 (docs/quality.md).",
-            )
-            .conflicts_with_all(["passes", "finest_passes", "fine_levels"]);
-        cmd.args(flagged().map(flag_of)).arg(preview)
-    }
-
-    fn augment_args_for_update(cmd: Command) -> Command {
-        Self::augment_args(cmd)
-    }
-}
-
-impl FromArgMatches for SynthArgs {
-    fn from_arg_matches(m: &ArgMatches) -> Result<Self, clap::Error> {
-        let invalid = |e: String| clap::Error::raw(ErrorKind::ValueValidation, format!("{e}\n"));
-        // Only the flags given: the rest keep the preset's values.
-        let mut given = Vec::new();
-        for k in flagged() {
-            if m.value_source(k.name) != Some(ValueSource::CommandLine) {
-                continue;
-            }
-            let Some(v) = m.get_one::<String>(k.name) else {
-                continue;
-            };
-            let v = match (k.name, v.strip_prefix('@')) {
-                ("field", Some(path)) => std::fs::read_to_string(path)
-                    .map_err(|e| invalid(format!("--field: reading {path}: {e}")))?,
-                _ => v.clone(),
-            };
-            given.push((k.name, v));
-        }
-        let preset = if m.get_flag(PREVIEW) {
-            SynthParams::preview()
-        } else {
-            SynthParams::default()
-        };
-        let mut flat = match serde_json::to_value(preset) {
-            Ok(serde_json::Value::Object(o)) => o,
-            _ => serde_json::Map::new(),
-        };
-        flat.extend(TextureParams::flat_from_pairs(
-            given.iter().map(|(k, v)| (*k, v.as_str())),
-        ));
-        let params: SynthParams = serde_json::from_value(serde_json::Value::Object(flat))
-            .map_err(|e| invalid(e.to_string()))?;
-        params.validate().map_err(|e| invalid(e.to_string()))?;
-        Ok(SynthArgs { params })
-    }
-
-    fn update_from_arg_matches(&mut self, m: &ArgMatches) -> Result<(), clap::Error> {
-        *self = Self::from_arg_matches(m)?;
-        Ok(())
-    }
 }
 
 /// One sentence on what a synthesis command wrote and what it cost.
@@ -184,6 +64,7 @@ pub fn precompute(
         Stage::Coherence,
         Stage::Finish,
         Stage::Reference,
+        Stage::Calibration,
     ];
     let cb = |s: Stage, f: f32| {
         let i = stages.iter().position(|&x| x == s).unwrap_or(0);

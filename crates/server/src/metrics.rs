@@ -137,197 +137,207 @@ pub struct Metrics {
 }
 
 impl Metrics {
-    /// A fresh registry; `cache` is read at every scrape.
+    /// A fresh registry; `cache` is read at every scrape. The handles are
+    /// made here and registered, in this order, by concern.
     pub fn new(cache: Arc<TileCache>) -> Metrics {
-        let mut registry = Registry::with_prefix("solidtex");
-        let requests = Family::<RequestLabels, Counter>::default();
-        registry.register(
+        let mut m = Metrics {
+            registry: Registry::with_prefix("solidtex"),
+            requests: Default::default(),
+            latency: Family::<RouteLabels, Histogram, fn() -> Histogram>::new_with_constructor(
+                latency_histogram as fn() -> Histogram,
+            ),
+            voxels: Default::default(),
+            corrections: Default::default(),
+            tiles_computed: Default::default(),
+            tiles_from_cache: Default::default(),
+            jobs_queued: Default::default(),
+            jobs_running: Default::default(),
+            jobs_rejected: Default::default(),
+            jobs_timed_out: Default::default(),
+            jobs_cancelled: Default::default(),
+            job_wait: latency_histogram(),
+            over_budget: Default::default(),
+            precomputes: Default::default(),
+            precompute_seconds: precompute_histogram(),
+            precomputes_pending: Default::default(),
+            precompute_peak_bytes: Histogram::new(exponential_buckets(4.0 * 1048576.0, 2.0, 14)),
+            precompute_reserved_bytes: Default::default(),
+            connections_open: Default::default(),
+            connections_evicted: Default::default(),
+            connections_refused: Default::default(),
+            textures_loaded: Default::default(),
+            textures_refused: Default::default(),
+            textures: Default::default(),
+            memory_bound: Default::default(),
+        };
+        m.register_requests();
+        m.register_synthesis();
+        m.register_jobs();
+        m.register_precomputes();
+        m.register_connections();
+        m.register_textures();
+        m.registry
+            .register_collector(Box::new(CacheCollector { cache }));
+        m.registry.register_collector(Box::new(ProcessCollector));
+        m
+    }
+
+    /// Registers the HTTP requests' metrics: counted, and timed, by route.
+    fn register_requests(&mut self) {
+        self.registry.register(
             "http_requests",
             "HTTP requests by route, method and status",
-            requests.clone(),
+            self.requests.clone(),
         );
-        let latency = Family::<RouteLabels, Histogram, fn() -> Histogram>::new_with_constructor(
-            latency_histogram as fn() -> Histogram,
-        );
-        registry.register_with_unit(
+        self.registry.register_with_unit(
             "http_request_duration",
             "HTTP request latency by route",
             prometheus_client::registry::Unit::Seconds,
-            latency.clone(),
+            self.latency.clone(),
         );
-        let voxels = Family::<LevelLabels, Counter>::default();
-        registry.register(
+    }
+
+    /// Registers the synthesis's metrics: voxels and corrections per level,
+    /// tiles computed or found.
+    fn register_synthesis(&mut self) {
+        self.registry.register(
             "synth_voxels",
             "Voxels synthesized, per pyramid level (0 = finest)",
-            voxels.clone(),
+            self.voxels.clone(),
         );
-        let corrections = Family::<LevelLabels, Counter>::default();
-        registry.register(
+        self.registry.register(
             "synth_corrections",
             "Voxel corrections performed, per pyramid level",
-            corrections.clone(),
+            self.corrections.clone(),
         );
-        let tiles_computed = Counter::default();
-        registry.register(
+        self.registry.register(
             "synth_tiles_computed",
             "Tiles synthesized by requests",
-            tiles_computed.clone(),
+            self.tiles_computed.clone(),
         );
-        let tiles_from_cache = Counter::default();
-        registry.register(
+        self.registry.register(
             "synth_tiles_from_cache",
             "Tiles requests found in the cache or got from a concurrent request",
-            tiles_from_cache.clone(),
+            self.tiles_from_cache.clone(),
         );
-        let jobs_queued = Gauge::default();
-        registry.register(
+    }
+
+    /// Registers the job queue's metrics (queued, running, turned away,
+    /// stopped, waits) and the requests over budget.
+    fn register_jobs(&mut self) {
+        self.registry.register(
             "jobs_queued",
             "Synthesis jobs waiting for a slot",
-            jobs_queued.clone(),
+            self.jobs_queued.clone(),
         );
-        let jobs_running = Gauge::default();
-        registry.register(
+        self.registry.register(
             "jobs_running",
             "Synthesis jobs running",
-            jobs_running.clone(),
+            self.jobs_running.clone(),
         );
-        let jobs_rejected = Counter::default();
-        registry.register(
+        self.registry.register(
             "jobs_rejected",
             "Requests answered 503 because the queue was full or too slow",
-            jobs_rejected.clone(),
+            self.jobs_rejected.clone(),
         );
-        let jobs_cancelled = Counter::default();
-        registry.register(
+        self.registry.register(
             "jobs_cancelled",
             "Running synthesis jobs stopped because their client went away",
-            jobs_cancelled.clone(),
+            self.jobs_cancelled.clone(),
         );
-        let jobs_timed_out = Counter::default();
-        registry.register(
+        self.registry.register(
             "jobs_timed_out",
             "Queued jobs answered 503 after waiting the whole wait limit",
-            jobs_timed_out.clone(),
+            self.jobs_timed_out.clone(),
         );
-        let job_wait = latency_histogram();
-        registry.register_with_unit(
+        self.registry.register_with_unit(
             "job_wait",
             "Time admitted synthesis jobs waited for a running slot",
             prometheus_client::registry::Unit::Seconds,
-            job_wait.clone(),
+            self.job_wait.clone(),
         );
-        let over_budget = Family::<StageLabels, Counter>::default();
-        registry.register(
+        self.registry.register(
             "requests_over_budget",
             "Voxel requests answered 400 over_budget: predicted over it before any work, \
              or stopped while running",
-            over_budget.clone(),
+            self.over_budget.clone(),
         );
-        let precomputes = Family::<OutcomeLabels, Counter>::default();
-        registry.register(
+    }
+
+    /// Registers the precomputations' metrics: outcomes, time, memory.
+    fn register_precomputes(&mut self) {
+        self.registry.register(
             "precomputes",
             "Candidate precomputations finished, by outcome",
-            precomputes.clone(),
+            self.precomputes.clone(),
         );
-        let precompute_seconds = precompute_histogram();
-        registry.register_with_unit(
+        self.registry.register_with_unit(
             "precompute_duration",
             "Candidate precomputation time",
             prometheus_client::registry::Unit::Seconds,
-            precompute_seconds.clone(),
+            self.precompute_seconds.clone(),
         );
-        let precomputes_pending = Gauge::default();
-        registry.register(
+        self.registry.register(
             "precomputes_pending",
             "Precomputations queued or running",
-            precomputes_pending.clone(),
+            self.precomputes_pending.clone(),
         );
-        let precompute_peak_bytes = Histogram::new(exponential_buckets(4.0 * 1048576.0, 2.0, 14));
-        registry.register_with_unit(
+        self.registry.register_with_unit(
             "precompute_peak",
             "Heap bytes each candidate precomputation peaked at (counted by the server's \
              allocator on the precompute threads)",
             prometheus_client::registry::Unit::Bytes,
-            precompute_peak_bytes.clone(),
+            self.precompute_peak_bytes.clone(),
         );
-        let precompute_reserved_bytes = Gauge::default();
-        registry.register_with_unit(
+        self.registry.register_with_unit(
             "precompute_reserved",
             "Estimated peak bytes of the precomputations running (bounded by \
              --max-precompute-bytes)",
             prometheus_client::registry::Unit::Bytes,
-            precompute_reserved_bytes.clone(),
+            self.precompute_reserved_bytes.clone(),
         );
-        let connections_open = Gauge::default();
-        registry.register(
+    }
+
+    /// Registers the client connections' metrics.
+    fn register_connections(&mut self) {
+        self.registry.register(
             "connections_open",
             "Open client connections",
-            connections_open.clone(),
+            self.connections_open.clone(),
         );
-        let connections_evicted = Counter::default();
-        registry.register(
+        self.registry.register(
             "connections_evicted",
             "Idle connections closed to make room under the connection cap",
-            connections_evicted.clone(),
+            self.connections_evicted.clone(),
         );
-        let connections_refused = Counter::default();
-        registry.register(
+        self.registry.register(
             "connections_refused",
             "Connections answered 503 because every open one had a request in flight",
-            connections_refused.clone(),
+            self.connections_refused.clone(),
         );
-        let textures_loaded = Counter::default();
-        registry.register(
+    }
+
+    /// Registers the textures' metrics and the resident-memory bound.
+    fn register_textures(&mut self) {
+        self.registry.register(
             "textures_loaded",
             "Ready textures loaded from the data directory without recomputation",
-            textures_loaded.clone(),
+            self.textures_loaded.clone(),
         );
-        let textures_refused = Counter::default();
-        registry.register(
+        self.registry.register(
             "textures_refused",
             "Stored textures not served because their content does not match their id",
-            textures_refused.clone(),
+            self.textures_refused.clone(),
         );
-        let textures = Family::<StatusLabels, Gauge>::default();
-        registry.register("textures", "Textures by status", textures.clone());
-        let memory_bound = Family::<PartLabels, Gauge>::default();
-        registry.register_with_unit(
+        self.registry
+            .register("textures", "Textures by status", self.textures.clone());
+        self.registry.register_with_unit(
             "memory_bound",
             "The server's bound on its resident memory, by part (the bound is their sum): \
              from its limits and what it holds now",
             prometheus_client::registry::Unit::Bytes,
-            memory_bound.clone(),
+            self.memory_bound.clone(),
         );
-        registry.register_collector(Box::new(CacheCollector { cache }));
-        registry.register_collector(Box::new(ProcessCollector));
-        Metrics {
-            registry,
-            requests,
-            latency,
-            voxels,
-            corrections,
-            tiles_computed,
-            tiles_from_cache,
-            jobs_queued,
-            jobs_running,
-            jobs_rejected,
-            jobs_timed_out,
-            jobs_cancelled,
-            job_wait,
-            over_budget,
-            precomputes,
-            precompute_seconds,
-            precomputes_pending,
-            precompute_peak_bytes,
-            precompute_reserved_bytes,
-            connections_open,
-            connections_evicted,
-            connections_refused,
-            textures_loaded,
-            textures_refused,
-            textures,
-            memory_bound,
-        }
     }
 
     /// Counts one finished request. Every label comes from a small set

@@ -233,6 +233,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("feature_weight", "0"),
     ("parity_levels", "0"),
     ("initialisation", r#""slab""#),
+    ("histogram_matching", "0"),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
@@ -562,6 +563,12 @@ mod tests {
             flat(r#"{"preset": "default"}"#).unwrap(),
             TextureParams::default()
         );
+        let structured = flat(r#"{"preset": "structured"}"#).unwrap();
+        let spelled = flat(
+            r#"{"scheme": "standard", "passes": 2, "finest_passes": 2, "fine_levels": 1,
+                "parity_levels": 0}"#,
+        );
+        assert_eq!(structured, spelled.unwrap());
         for bad in [r#"{"preset": "fast"}"#, r#"{"preset": 1}"#] {
             let e = flat(bad).unwrap_err();
             assert!(format!("{e:?}").contains("preset"), "{bad}: {e:?}");

@@ -8,7 +8,10 @@
 //! read; it is skipped. Since version 4 each exemplar is followed by its
 //! feature mask, if it has one. Since version 5 the levels are followed
 //! by the reference's blocks of triples (level, side, then every voxel's
-//! triple); earlier files started from the slab, and read so. Derived data
+//! triple); earlier files started from the slab, and read so. Since
+//! version 6 the blocks are followed by the usage penalties of a texture
+//! calibrated for histogram matching (the number of levels, 0 or all of
+//! them, then per level and plane a u16 per pixel). Derived data
 //! (stacks, appearance vectors, quantised neighbourhoods) is recomputed on
 //! load, deterministically. Every read is bounds-checked: a truncated or
 //! corrupt file is an error, never a panic or a wrong result.
@@ -21,7 +24,7 @@ use crate::error::{CorruptKind, Error, Result};
 use crate::params::{AnalysisParams, Arrangement, Orientation};
 
 const MAGIC: &[u8; 8] = b"SOLIDTEX";
-const VERSION: u32 = 5;
+const VERSION: u32 = 6;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 struct Writer(Vec<u8>);
@@ -223,6 +226,19 @@ fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
             for t in &b.triples {
                 for &coord in t {
                     w.coord(coord, wide);
+                }
+            }
+        }
+    }
+    if version >= 6 {
+        let levels = (0..c.level_count())
+            .map_while(|k| c.usage_penalty(k))
+            .collect::<Vec<_>>();
+        w.u32(levels.len() as u32);
+        for planes in levels {
+            for plane in planes {
+                for &v in plane {
+                    w.0.extend_from_slice(&v.to_le_bytes());
                 }
             }
         }
@@ -454,17 +470,37 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
             });
         }
     }
+    let mut usage = Vec::new();
+    if version >= 6 {
+        let count = r.u32()?;
+        if count != 0 && count != params.levels {
+            return Err(invalid("usage level count"));
+        }
+        for _ in 0..count {
+            let mut planes: [Vec<u16>; 3] = Default::default();
+            for plane in &mut planes {
+                let bytes = r.take(npx as usize * 2)?;
+                *plane = bytes
+                    .chunks_exact(2)
+                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                    .collect();
+            }
+            usage.push(planes);
+        }
+    }
     if r.pos != payload.len() {
         return Err(invalid("trailing bytes"));
     }
-    Candidates::from_stored(
+    let mut c = Candidates::from_stored(
         set,
         params,
         layout,
         levels,
         blocks,
         PrecomputeReport::default(),
-    )
+    )?;
+    c.set_usage_penalty(usage);
+    Ok(c)
 }
 
 /// The layout record, which must agree with an orientation that was given.
@@ -553,6 +589,31 @@ mod tests {
     }
 
     #[test]
+    fn usage_penalties_read_as_written_and_broken_ones_are_refused() {
+        let mut c = compute(grain(16), Orientation::None);
+        let n = c.dims.len();
+        let usage: Vec<[Vec<u16>; 3]> = (0..2)
+            .map(|k| [0, 1, 2].map(|p| (0..n).map(|i| (i * 7 + p * 3 + k) as u16).collect()))
+            .collect();
+        c.set_usage_penalty(usage.clone());
+        let bytes = c.to_bytes();
+        let loaded = decode(&bytes).unwrap();
+        assert_eq!(loaded.usage, usage);
+        assert_eq!(loaded.to_bytes(), bytes);
+        let payload = &bytes[HEADER..];
+        // One value short.
+        assert!(decode(&with_header(VERSION, &payload[..payload.len() - 2])).is_err());
+        // A count that is neither 0 nor the level count.
+        let count_at = payload.len() - 2 * 3 * n * 2 - 4;
+        let mut wrong = payload.to_vec();
+        wrong[count_at..count_at + 4].copy_from_slice(&1u32.to_le_bytes());
+        assert!(decode(&with_header(VERSION, &wrong)).is_err());
+        // Files before version 6 have none, and read so.
+        let v5 = encode_version(&c, 5);
+        assert!(decode(&v5).unwrap().usage_penalty(0).is_none());
+    }
+
+    #[test]
     fn the_reference_blocks_read_as_written_and_broken_ones_are_refused() {
         let params = AnalysisParams {
             levels: 2,
@@ -575,6 +636,8 @@ mod tests {
                 .iter()
                 .map(|b| 8 + b.triples.len() * 6)
                 .sum::<usize>()
+            - 4
+            // The usage penalties' count (none) follows the blocks.
             - 4;
         let mut payload = bytes[HEADER..].to_vec();
         let side_at = blocks_at - HEADER + 4 + 4;

@@ -41,6 +41,9 @@ pub enum Stage {
     /// The reference's blocks of triples (texture optimisation of a
     /// periodic block), when the synthesis starts from them.
     Reference,
+    /// The histogram matching's usage penalties, when asked for (see
+    /// [`crate::synth::usage`]).
+    Calibration,
 }
 
 /// Per-level summary of the candidate sets.
@@ -203,6 +206,9 @@ pub struct Candidates {
     /// The reference's blocks of triples, one per level that starts from
     /// one, finest first (none for the slab).
     blocks: Vec<crate::reference::TripleBlock>,
+    /// Per level, finest first, each plane's usage penalty per exemplar
+    /// pixel (see [`crate::synth::usage`]); empty when not calibrated.
+    usage: Vec<[Vec<u16>; 3]>,
     report: PrecomputeReport,
     /// Content fingerprint, the texture part of tile cache keys: taken
     /// from the file when loaded, else from the encoding on first use.
@@ -288,7 +294,14 @@ impl Candidates {
                 crate::reference::seeding_params(width, height, *levels.start(), *levels.end());
             u64::from(rp.size).pow(3) * REFERENCE_BYTES_PER_VOXEL
         };
-        analysis + reference
+        // The calibration's synthesis: its tile cache at most, the
+        // counted blocks and the penalties.
+        let calibration = if params.histogram_matching > 0.0 {
+            crate::synth::usage::PEAK_BYTES + (pixels as u64) * 3 * 10 * u64::from(params.levels)
+        } else {
+            0
+        };
+        analysis + reference + calibration
     }
 
     /// Runs the whole precomputation; `progress(stage, fraction 0..1)` is
@@ -347,7 +360,7 @@ impl Candidates {
             }
         })?;
         lap(&mut report, "reference");
-        Ok(Candidates {
+        let c = Candidates {
             exemplars: given.clone(),
             analysed,
             layout,
@@ -356,15 +369,46 @@ impl Candidates {
             stacks,
             levels,
             blocks,
+            usage: Vec::new(),
             report,
             digest: std::sync::OnceLock::new(),
-        })
+        };
+        if params.histogram_matching <= 0.0 {
+            return Ok(c);
+        }
+        let mut c = crate::synth::usage::calibrate(
+            c,
+            &crate::params::SynthParams::default(),
+            params.histogram_matching,
+            &|f| {
+                progress(Stage::Calibration, f);
+                if let Some(c) = cancel.as_ref() {
+                    c.unwind_if_set();
+                }
+            },
+        )?;
+        lap(&mut c.report, "calibration");
+        Ok(c)
     }
 
     /// The reference's block of triples that level `k` starts from, if
     /// it starts from one.
     pub fn block(&self, k: usize) -> Option<&crate::reference::TripleBlock> {
         self.blocks.iter().find(|b| b.level as usize == k)
+    }
+
+    /// Level `k`'s usage penalties per plane and exemplar pixel, if the
+    /// texture was calibrated.
+    pub fn usage_penalty(&self, k: usize) -> Option<&[Vec<u16>; 3]> {
+        self.usage.get(k)
+    }
+
+    /// Replaces the usage penalties (one entry per level, finest first, or
+    /// none); the content, and so the fingerprint, changes.
+    pub(crate) fn set_usage_penalty(&mut self, usage: Vec<[Vec<u16>; 3]>) {
+        debug_assert!(usage.is_empty() || usage.len() == self.levels.len());
+        self.usage = usage;
+        self.digest = std::sync::OnceLock::new();
     }
 
     /// Every block of the reference kept, finest first.
@@ -416,6 +460,7 @@ impl Candidates {
             stacks,
             levels,
             blocks,
+            usage: Vec::new(),
             report,
             digest: std::sync::OnceLock::new(),
         })

@@ -24,7 +24,7 @@
 //! Randomness hashes (seed, level, iteration, position): the block does not
 //! depend on the thread count.
 
-mod palette;
+pub(crate) mod palette;
 
 use crate::analysis::appearance::{Pca, Projector};
 use crate::analysis::exemplar::ExemplarSet;

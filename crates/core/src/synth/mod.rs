@@ -44,6 +44,7 @@ mod periodic_tests;
 pub mod plan;
 pub mod schedule;
 mod stats;
+pub(crate) mod usage;
 
 use crate::candidates::Candidates;
 use crate::error::Result;

@@ -19,7 +19,7 @@ use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
 use serde_json::{Value, json};
-use solidtex_core::{Axis, MAX_SLICE_SIDE, Request, Window};
+use solidtex_core::{Axis, MAX_SLICE_SIDE, Request, SynthParams, Texture, Window};
 
 /// Most samples one request may ask for.
 pub const MAX_FRAME_SAMPLES: u64 = 4096;
@@ -63,52 +63,82 @@ pub(super) async fn frames(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let (entry, tex) = texture(&s, &p.id).await?;
-    let (axis, at) = (p.axis, p.at.0.get());
-    let window = Window::new(q.u0.get(), q.v0.get(), q.w.get_u32(), q.h.get_u32());
-    // The window as a slice request: within the coordinate limit.
-    let slice = Request::slice(axis, at, window)?;
-    let (lod, step) = (q.lod.get_u32(), q.step.get_u32());
-    if lod > tex.max_lod() {
-        return Err(ApiError::out_of_range("lod", lod, 0, tex.max_lod()));
-    }
-    let (w, h) = (window.width, window.height);
-    let columns = w.div_ceil(step);
-    let rows = h.div_ceil(step);
-    let count = u64::from(columns) * u64::from(rows);
-    if count > MAX_FRAME_SAMPLES {
-        return Err(ApiError::too_large(format!(
-            "{columns}x{rows} samples (w / step by h / step, rounded up); at most \
-             {MAX_FRAME_SAMPLES}: ask for a smaller area or a larger step"
-        )));
-    }
-    let tag = ETag::new(&entry, &format!("frames/{step}/{}", slice.key(lod)));
+    let (grid, slice) = Grid::new(&p, &q, tex.max_lod())?;
+    let tag = ETag::new(
+        &entry,
+        &format!("frames/{}/{}", grid.step, slice.key(grid.lod)),
+    );
     if tag.matches(&headers) {
         return Ok(tag.not_modified(IMMUTABLE));
     }
-    let (u0, v0) = (window.u0, window.v0);
-    let (n, ia, ib) = axis.frame();
-    let name = axis.name();
-    let kind = entry
-        .params
-        .synth
-        .field
-        .as_ref()
-        .map(|f| match serde_json::to_value(f) {
-            Ok(Value::Object(m)) => m.get("kind").cloned().unwrap_or(Value::Null),
-            _ => Value::Null,
-        });
-    let json = tokio::task::spawn_blocking(move || {
-        let mut samples = Vec::with_capacity(count as usize);
+    let kind = field_kind(&entry.params.synth);
+    let json = tokio::task::spawn_blocking(move || grid.answer(&tex, kind))
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))?;
+    Ok(tag.stamp(body(json.into_bytes(), "application/json"), IMMUTABLE))
+}
+
+/// The grid of samples a request reads: every `step`-th voxel of a slice
+/// window, at one level of detail.
+struct Grid {
+    axis: Axis,
+    at: i64,
+    window: Window,
+    lod: u32,
+    step: u32,
+    columns: u32,
+    rows: u32,
+}
+
+impl Grid {
+    /// The request's grid and the slice request of its window (which
+    /// checks the window against the coordinate limit, and keys the
+    /// answer); a lod past the texture's or more than
+    /// [`MAX_FRAME_SAMPLES`] samples are refused.
+    fn new(p: &FramesPath, q: &FramesQuery, max_lod: u32) -> Result<(Grid, Request), ApiError> {
+        let (axis, at) = (p.axis, p.at.0.get());
+        let window = Window::new(q.u0.get(), q.v0.get(), q.w.get_u32(), q.h.get_u32());
+        let slice = Request::slice(axis, at, window)?;
+        let (lod, step) = (q.lod.get_u32(), q.step.get_u32());
+        if lod > max_lod {
+            return Err(ApiError::out_of_range("lod", lod, 0, max_lod));
+        }
+        let columns = window.width.div_ceil(step);
+        let rows = window.height.div_ceil(step);
+        if u64::from(columns) * u64::from(rows) > MAX_FRAME_SAMPLES {
+            return Err(ApiError::too_large(format!(
+                "{columns}x{rows} samples (w / step by h / step, rounded up); at most \
+                 {MAX_FRAME_SAMPLES}: ask for a smaller area or a larger step"
+            )));
+        }
+        let grid = Grid {
+            axis,
+            at,
+            window,
+            lod,
+            step,
+            columns,
+            rows,
+        };
+        Ok((grid, slice))
+    }
+
+    /// The frame at every sample, in the slice's (u, v, normal) axes, and
+    /// the grid, as the answer's JSON text.
+    fn answer(&self, tex: &Texture, field_kind: Value) -> String {
+        let (n, ia, ib) = self.axis.frame();
+        let Window { u0, v0, .. } = self.window;
+        let mut samples = Vec::with_capacity(self.columns as usize * self.rows as usize);
         // Every sample lies within the window the slice request bounded.
-        for j in 0..rows {
-            let v = v0 + i64::from(j) * i64::from(step);
-            for i in 0..columns {
-                let u = u0 + i64::from(i) * i64::from(step);
+        for j in 0..self.rows {
+            let v = v0 + i64::from(j) * i64::from(self.step);
+            for i in 0..self.columns {
+                let u = u0 + i64::from(i) * i64::from(self.step);
                 let mut p = [0.0; 3];
                 p[ia] = u as f64;
                 p[ib] = v as f64;
-                p[n] = at as f64;
-                let f = tex.frame(lod, p);
+                p[n] = self.at as f64;
+                let f = tex.frame(self.lod, p);
                 let project = |a: [f64; 3]| [short(a[ia]), short(a[ib]), short(a[n])];
                 samples.push(json!({
                     "u": u,
@@ -120,26 +150,31 @@ pub(super) async fn frames(
             }
         }
         json!({
-            "axis": name,
-            "at": at,
-            "lod": lod,
+            "axis": self.axis.name(),
+            "at": self.at,
+            "lod": self.lod,
             "u_axis": axis_name(ia),
             "v_axis": axis_name(ib),
             "u0": u0,
             "v0": v0,
-            "w": w,
-            "h": h,
-            "step": step,
-            "columns": columns,
-            "rows": rows,
-            "field_kind": kind.unwrap_or(Value::Null),
+            "w": self.window.width,
+            "h": self.window.height,
+            "step": self.step,
+            "columns": self.columns,
+            "rows": self.rows,
+            "field_kind": field_kind,
             "samples": samples,
         })
         .to_string()
-    })
-    .await
-    .map_err(|e| ApiError::internal(e.to_string()))?;
-    Ok(tag.stamp(body(json.into_bytes(), "application/json"), IMMUTABLE))
+    }
+}
+
+/// The `kind` of the texture's field, or null without one.
+fn field_kind(synth: &SynthParams) -> Value {
+    match synth.field.as_ref().map(serde_json::to_value) {
+        Some(Ok(Value::Object(m))) => m.get("kind").cloned().unwrap_or(Value::Null),
+        _ => Value::Null,
+    }
 }
 
 #[cfg(test)]
