@@ -1,14 +1,15 @@
 //! Usage calibration: the lazy engine's counterpart of the histogram
 //! matching of Kopf et al. 2007 and Chen & Wang 2010. Their optimisation
-//! pushes the solid's position histogram (how often each exemplar pixel
-//! is used) back toward the exemplar's own, uniform one between
+//! pushes the solid's colour histogram and its position histogram (how
+//! often each exemplar pixel is used) back toward the exemplar's between
 //! iterations: over-used calm pixels lose weight, rare vein or crack
 //! pixels gain it. A lazy solid cannot look at itself as a whole, so the
 //! weights are found once, at precompute: the engine synthesizes a block
-//! of every level, counts how often each exemplar pixel of each plane is
-//! used, turns over-use into a penalty (under-use into a smaller one)
-//! that the correction adds to a candidate's distance, and repeats with
-//! the penalties in place. The penalties are stored with the candidates,
+//! of each coarse level, counts how often each exemplar pixel of each
+//! plane and each palette colour is used, raises the penalty of what is
+//! over-used and lowers (down to zero) that of what is under-used, and
+//! repeats with the penalties in place; the correction adds a triple's
+//! penalties to its distance. The penalties are stored with the candidates,
 //! so a voxel stays a pure function of (texture, seed, position).
 
 use super::Engine;
