@@ -234,6 +234,7 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("parity_levels", "0"),
     ("initialisation", r#""slab""#),
     ("histogram_matching", "0"),
+    ("glcp_weight", "0"),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.

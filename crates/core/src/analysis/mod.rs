@@ -10,5 +10,6 @@ pub mod appearance;
 pub mod decode;
 pub mod exemplar;
 pub mod feature;
+pub mod glcp;
 pub mod orientation;
 pub mod stack;

@@ -16,7 +16,7 @@
 //! load, deterministically. Every read is bounds-checked: a truncated or
 //! corrupt file is an error, never a panic or a wrong result.
 
-use super::{Candidates, PlaneCandidates, PrecomputeReport, StoredLevel};
+use super::{Candidates, PlaneCandidates, PrecomputeReport, StoredLevel, feature_channels};
 use crate::analysis::appearance::Pca;
 use crate::analysis::exemplar::{Exemplar, ExemplarSet};
 use crate::analysis::orientation::{Grain, Layout};
@@ -290,6 +290,10 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     params
         .entry("feature_weight")
         .or_insert_with(|| serde_json::json!(0));
+    // Written before the co-occurrence features: none.
+    params
+        .entry("glcp_weight")
+        .or_insert_with(|| serde_json::json!(0));
     // Written before the reference's blocks: started from the slab.
     if version < 5 {
         params
@@ -358,7 +362,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     let planes = if single { 1 } else { 3 };
     let npx = width * height;
     let wide = npx > u16::MAX as u32 + 1;
-    let channels = if params.feature_weight > 0.0 { 4 } else { 3 };
+    let channels = 3 + feature_channels(&params);
     let app_input = (params.neighbourhood * params.neighbourhood) as usize * channels;
     let mut levels = Vec::new();
     for _ in 0..params.levels {
@@ -726,6 +730,33 @@ mod tests {
             plain.level(0).appearance[0].vectors,
             c.level(0).appearance[0].vectors
         );
+    }
+
+    #[test]
+    fn co_occurrence_features_widen_the_vectors_beside_the_feature_channel_and_round_trip() {
+        let n = AnalysisParams::default().neighbourhood as usize;
+        for (feature_weight, channels) in [(0.0, 3 + 12), (1.0, 3 + 12 + 1)] {
+            let params = AnalysisParams {
+                levels: 2,
+                glcp_weight: 0.5,
+                feature_weight,
+                ..AnalysisParams::default()
+            };
+            let c =
+                Candidates::compute(&ExemplarSet::single(grain(32)), &params, &|_, _| {}).unwrap();
+            for k in 0..2 {
+                assert_eq!(c.level(k).appearance[0].pca.input, n * n * channels);
+                assert_eq!(c.level(k).appearance[0].channels, channels);
+            }
+            let bytes = encode(&c);
+            let back = decode(&bytes).unwrap();
+            assert_eq!(back.params().glcp_weight, 0.5);
+            assert_eq!(back.level(1).appearance, c.level(1).appearance);
+            assert_eq!(encode(&back), bytes);
+        }
+        let plain = compute(grain(32), Orientation::None);
+        let json = serde_json::to_string(plain.params()).unwrap();
+        assert!(!json.contains("glcp_weight"), "{json}");
     }
 
     #[test]

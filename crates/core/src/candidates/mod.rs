@@ -12,9 +12,9 @@ pub mod search;
 
 use crate::analysis::appearance::{self, AppearanceLevel, Pca};
 use crate::analysis::exemplar::ExemplarSet;
-use crate::analysis::feature;
 use crate::analysis::orientation::Layout;
 use crate::analysis::stack::{GaussianStack, spacing};
+use crate::analysis::{feature, glcp};
 use crate::error::{Error, Result};
 use crate::params::AnalysisParams;
 use crate::synth::cancel::CancelFlag;
@@ -280,7 +280,14 @@ impl Candidates {
         let n = f64::from(params.neighbourhood);
         let wider = 11.0 * (n * n - 25.0).max(0.0);
         let kept = 40.0 * (f64::from(params.max_candidates) - 12.0).max(0.0);
-        let per_pixel = search.max(later) + wider + kept;
+        // Co-occurrence features: a level's neighbourhoods gathered for
+        // its PCA, four bytes per value.
+        let glcp = if params.glcp_weight > 0.0 {
+            4.0 * n * n * glcp::CHANNELS as f64
+        } else {
+            0.0
+        };
+        let per_pixel = search.max(later) + wider + kept + glcp;
         // Small exemplars peak at fixed costs (samples of set sizes, trees).
         let analysis = ((pixels * per_pixel) as u64 + (4 << 20)).max(6 << 20);
         // The reference block's optimisation state (positions, colours,
@@ -335,7 +342,7 @@ impl Candidates {
         // Watched between pixels of the search and between stages: a
         // server stops the precompute of a texture deleted meanwhile.
         let cancel = crate::synth::cancel::current();
-        let stacks = build_stacks(exemplars, levels_n, params.feature_weight);
+        let stacks = build_stacks(exemplars, levels_n, params);
         let stages = Stages {
             stacks: &stacks,
             dims,
@@ -441,7 +448,7 @@ impl Candidates {
                 "level count".into(),
             )));
         }
-        let stacks = build_stacks(&analysed, stored.len(), params.feature_weight);
+        let stacks = build_stacks(&analysed, stored.len(), &params);
         let single = analysed.is_single();
         let appearance = stored
             .iter()
@@ -771,15 +778,36 @@ impl PopSingle for Vec<PlaneCandidates> {
     }
 }
 
-/// Each plane's stack, with its feature-distance channel when
-/// `feature_weight` is above 0.
-fn build_stacks(exemplars: &ExemplarSet, levels: usize, feature_weight: f32) -> [GaussianStack; 3] {
+/// Each plane's stack, with its co-occurrence features when `glcp_weight`
+/// is above 0 and its feature-distance channel when `feature_weight` is.
+/// Feature values per exemplar pixel in the appearance neighbourhoods
+/// besides its colour.
+pub(crate) fn feature_channels(params: &AnalysisParams) -> usize {
+    let glcp = if params.glcp_weight > 0.0 {
+        glcp::CHANNELS
+    } else {
+        0
+    };
+    glcp + usize::from(params.feature_weight > 0.0)
+}
+
+fn build_stacks(
+    exemplars: &ExemplarSet,
+    levels: usize,
+    params: &AnalysisParams,
+) -> [GaussianStack; 3] {
     let stack = |p: usize| {
-        let s = GaussianStack::new(exemplars.plane(p), levels);
-        if feature_weight > 0.0 {
+        let mut s = GaussianStack::new(exemplars.plane(p), levels);
+        if params.glcp_weight > 0.0 {
+            s = s.with_features(
+                glcp::glcp_features(exemplars.plane(p), params.glcp_weight),
+                glcp::CHANNELS,
+            );
+        }
+        if params.feature_weight > 0.0 {
             s.with_feature(feature::feature_distance(
                 exemplars.plane(p),
-                feature_weight,
+                params.feature_weight,
             ))
         } else {
             s

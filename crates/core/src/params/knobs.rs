@@ -358,6 +358,16 @@ pub const KNOBS: &[Knob] = &[
          parameters when 0.",
     ),
     analysis(
+        "glcp_weight",
+        number(0.0, 2.0),
+        "Weight of the grey-level co-occurrence features (Chang et al. 2012) in the appearance \
+         vectors: the entropy, contrast and correlation of the grey levels next to each other \
+         in a 15×15 window around each exemplar pixel, in four directions, so that matching \
+         keeps rough next to rough and smooth next to smooth. The spread of the twelve \
+         features together relative to the colours' (0.3 is a good start); 0 (default) \
+         leaves them out. Not written into the texture's parameters when 0.",
+    ),
+    analysis(
         "histogram_matching",
         number(0.0, 4.0),
         "Strength of the histogram matching calibrated at precompute: the texture is \
