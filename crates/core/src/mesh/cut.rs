@@ -153,7 +153,7 @@ pub(super) fn cut(mesh: &Mesh, planes: &[Plane]) -> Result<Mesh> {
         }
     }
     // Each piece: triangles, cap flags, and its side of every plane so far.
-    let mut pieces: Vec<(Vec<[u32; 3]>, Vec<bool>, Vec<i8>)> =
+    let mut pieces: Vec<(Vec<[u32; 3]>, Vec<bool>, Sides)> =
         vec![(welded.clone(), vec![false; welded.len()], Vec::new())];
     for plane in planes {
         let eps = 1e-7 * scale;
@@ -260,7 +260,10 @@ fn weld(mesh: &Mesh) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     (positions, triangles)
 }
 
+/// Triangles and their cap flags.
 type Side = (Vec<[u32; 3]>, Vec<bool>);
+/// Which side of each plane so far: -1 below, +1 above.
+type Sides = Vec<i8>;
 
 /// One piece split by `plane`: the triangles below it and above it, each
 /// side closed by the caps of the loops the plane cuts.
