@@ -183,6 +183,28 @@ fn the_command_line_bakes_a_glb() {
     assert_eq!(&glb[..4], b"glTF");
     let m = Mesh::parse(&glb, None).unwrap();
     assert_eq!(m.triangles().len(), 2304);
+    // A fracture of two planes: four pieces, each a node.
+    let out = dir.path().join("broken.glb");
+    solidtex(&[
+        "bake",
+        mesh,
+        "--resolution",
+        "32",
+        "--cut",
+        "0,0,1,0.05",
+        "--cut",
+        "1,0,0,-0.2",
+        "--spread",
+        "0.05",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let glb = std::fs::read(&out).unwrap();
+    let text = String::from_utf8_lossy(&glb[..4096]);
+    assert!(
+        text.contains("piece 3") && !text.contains("piece 4"),
+        "{text}"
+    );
 }
 
 /// Every broken mesh and absurd request answers 4xx JSON with a message.
@@ -298,6 +320,55 @@ async fn bad_meshes_get_clear_errors() {
             400,
             "invalid_parameter",
         ),
+        (
+            "a cut plane that misses the mesh",
+            "cut=0,0,1,5",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "a cut plane with a zero normal",
+            "cut=0,0,0,0",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "a cut plane of three numbers",
+            "cut=0,0,1",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "nine cut planes",
+            "cut=0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "vertex colours of a cut",
+            "cut=0,0,1,0&colours=vertex",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "spread 2",
+            "cut=0,0,1,0&spread=2",
+            torus_obj(),
+            400,
+            "out_of_range",
+        ),
+        (
+            "spread x",
+            "cut=0,0,1,0&spread=x",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
     ] {
         let (status, headers, body) = post(query, body).await;
         assert!(
@@ -307,9 +378,86 @@ async fn bad_meshes_get_clear_errors() {
         );
         assert_error(status, &headers, &body, want_status, want_code);
     }
-    // The server is still up and answers.
+    // The server is still up and answers, a cut too: two pieces, two nodes.
     let (status, _, _) = post("resolution=16&texture_size=64", torus_obj()).await;
     assert_eq!(status, 200);
+    let (status, _, glb) = post("resolution=16&cut=0,0,1,0&spread=0.1", torus_obj()).await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&glb));
+    let text = String::from_utf8_lossy(&glb[..glb.len().min(4096)]);
+    assert!(
+        text.contains("piece 1") && !text.contains("piece 2"),
+        "{text}"
+    );
+}
+
+/// A torus cut across its hole (the plane through two of the fixture's
+/// vertex rings, with texture seams to weld): two closed pieces with
+/// annulus caps, and along the cut line the caps show the very voxels the
+/// surface shows there.
+#[test]
+fn a_cut_caps_the_pieces_with_the_inside_of_the_solid() {
+    let tex = texture();
+    let cut = torus()
+        .cut(&[solidtex_core::mesh::Plane::new([0.0, 0.0, 1.0], 0.0).unwrap()])
+        .unwrap();
+    assert_eq!(cut.pieces().len(), 2);
+    let caps = (0..cut.triangles().len())
+        .filter(|&t| cut.is_cap(t))
+        .count();
+    assert!(caps > 0);
+    let mut options = BakeOptions::new(48);
+    options.texture_size = Some(1024);
+    let bake = Bake::new(Arc::new(cut), options).unwrap();
+    assert!(!bake.uses_mesh_uvs());
+    let rgb = tex
+        .render(&Request::bake(bake.clone()).unwrap(), 0)
+        .unwrap()
+        .0;
+    // The voxel each texel reads, cap texels and surface texels apart.
+    let mut surface = std::collections::HashMap::new();
+    let mut cap_texels = Vec::new();
+    for i in 0..bake.items() {
+        let (Some(t), Some(p)) = (bake.texel_triangle(i), bake.sample(i)) else {
+            continue;
+        };
+        let v = p.map(|c| c.round() as i64);
+        let colour = [rgb[i * 3], rgb[i * 3 + 1], rgb[i * 3 + 2]];
+        if bake.mesh().is_cap(t) {
+            // On the plane: half way up the box of 48 × 48 × 12.44 voxels.
+            assert!((p[2] - 48.0 * 0.35 / 2.7).abs() < 1e-3, "{p:?}");
+            cap_texels.push((v, colour));
+        } else {
+            surface.insert(v, colour);
+        }
+    }
+    let along: Vec<_> = cap_texels
+        .iter()
+        .filter_map(|(v, c)| surface.get(v).map(|s| (c, s)))
+        .collect();
+    assert!(
+        along.len() > 200,
+        "{} cap texels on the cut line",
+        along.len()
+    );
+    for (cap, surf) in &along {
+        assert_eq!(cap, surf);
+    }
+    // Inside, the caps show the solid too: the voxels the region route gives.
+    for (v, c) in cap_texels.iter().step_by(997) {
+        assert_eq!(&voxel(&tex, *v), c, "{v:?}");
+    }
+    // Two nodes, and the pieces read back whole.
+    let glb = bake.glb(&rgb).unwrap();
+    let again = Mesh::parse(&glb, Some(MeshFormat::Glb)).unwrap();
+    assert_eq!(again.triangles().len(), bake.mesh().triangles().len());
+    let text = String::from_utf8_lossy(&glb[..4096]);
+    assert!(text.contains("piece 1"), "{text}");
+    // Vertex colours cannot show a cap, and a cut has no UVs of its own.
+    for (colours, uvs) in [(Colours::Vertex, Uvs::Auto), (Colours::Texture, Uvs::Mesh)] {
+        let mut o = BakeOptions::new(48);
+        (o.colours, o.uvs) = (colours, uvs);
+        assert!(Bake::new(Arc::new(bake.mesh().clone()), o).is_err());
+    }
 }
 
 /// Through HTTP: at the middle of a triangle, the baked texture shows one
@@ -367,4 +515,126 @@ async fn the_served_bake_agrees_with_the_region_route() {
         }
     }
     assert!(matched >= 24, "{matched} of 25 triangle centres");
+}
+
+/// The torus as a PLY: ASCII, or binary little- or big-endian, with a
+/// comment, texture coordinates, an extra element and int or uchar counts.
+fn torus_ply(encoding: &str) -> Vec<u8> {
+    let m = torus();
+    let (p, t, uv) = (m.positions(), m.triangles(), m.uvs().unwrap());
+    let mut out = format!(
+        "ply\nformat {encoding} 1.0\ncomment torus\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\n\
+         property float s\nproperty float t\n\
+         element face {}\nproperty list uchar int vertex_indices\n\
+         element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n",
+        p.len(),
+        t.len()
+    )
+    .into_bytes();
+    let big = encoding == "binary_big_endian";
+    let f = |out: &mut Vec<u8>, v: f32| {
+        out.extend(if big {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        })
+    };
+    let i = |out: &mut Vec<u8>, v: i32| {
+        out.extend(if big {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        })
+    };
+    for (k, q) in p.iter().enumerate() {
+        let (s, tt) = (uv[k][0], 1.0 - uv[k][1]);
+        if encoding == "ascii" {
+            out.extend(format!("{} {} {} {s} {tt}\n", q[0], q[1], q[2]).bytes());
+        } else {
+            for c in [q[0], q[1], q[2], s, tt] {
+                f(&mut out, c);
+            }
+        }
+    }
+    for tri in t {
+        if encoding == "ascii" {
+            out.extend(format!("3 {} {} {}\n", tri[0], tri[1], tri[2]).bytes());
+        } else {
+            out.push(3);
+            for &c in tri {
+                i(&mut out, c as i32);
+            }
+        }
+    }
+    if encoding == "ascii" {
+        out.extend(b"0 1\n");
+    } else {
+        i(&mut out, 0);
+        i(&mut out, 1);
+    }
+    out
+}
+
+#[test]
+fn ply_meshes_read_as_their_obj_does_and_bad_ones_are_refused() {
+    let obj = torus();
+    for encoding in ["ascii", "binary_little_endian", "binary_big_endian"] {
+        let bytes = torus_ply(encoding);
+        assert_eq!(MeshFormat::sniff(&bytes), MeshFormat::Ply);
+        let m = Mesh::parse(&bytes, None).unwrap();
+        assert_eq!(m.triangles(), obj.triangles(), "{encoding}");
+        assert_eq!(m.positions(), obj.positions(), "{encoding}");
+        assert_eq!(m.uvs(), obj.uvs(), "{encoding}");
+    }
+    let good = torus_ply("binary_little_endian");
+    let header_end = good.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let ascii = String::from_utf8(torus_ply("ascii")).unwrap();
+    let bad: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("truncated binary", good[..good.len() / 2].to_vec(), "invalid_request"),
+        ("header only", good[..header_end].to_vec(), "invalid_request"),
+        (
+            "10 M faces claimed",
+            String::from_utf8_lossy(&good[..header_end])
+                .replace("element face 2304", "element face 10000000")
+                .into_bytes(),
+            "too_large",
+        ),
+        (
+            "2^60 vertices claimed",
+            ascii.replace("element vertex 1225", "element vertex 1152921504606846976").into_bytes(),
+            "invalid_request",
+        ),
+        (
+            "NaN vertex",
+            ascii.replacen("\n1.35 0 0 ", "\nnan 0 0 ", 1).into_bytes(),
+            "invalid_request",
+        ),
+        (
+            "index past the vertices",
+            ascii.replacen("\n3 0 ", "\n3 99999 ", 1).into_bytes(),
+            "invalid_request",
+        ),
+        (
+            "negative index",
+            ascii.replacen("\n3 0 ", "\n3 -1 ", 1).into_bytes(),
+            "invalid_request",
+        ),
+        (
+            "no z",
+            ascii.replacen("property float z\n", "", 1).into_bytes(),
+            "invalid_request",
+        ),
+        ("no faces", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n".to_vec(), "invalid_request"),
+        ("not PLY at all", b"ply\nhello\n".to_vec(), "invalid_request"),
+    ];
+    for (what, bytes, code) in bad {
+        let e = Mesh::parse(&bytes, None).expect_err(what);
+        let got = match e {
+            solidtex_core::Error::TooLarge(_) => "too_large",
+            solidtex_core::Error::InvalidRequest(_) => "invalid_request",
+            ref other => panic!("{what}: {other:?}"),
+        };
+        assert_eq!(got, code, "{what}: {e}");
+    }
 }
