@@ -183,6 +183,28 @@ fn the_command_line_bakes_a_glb() {
     assert_eq!(&glb[..4], b"glTF");
     let m = Mesh::parse(&glb, None).unwrap();
     assert_eq!(m.triangles().len(), 2304);
+    // A fracture of two planes: four pieces, each a node.
+    let out = dir.path().join("broken.glb");
+    solidtex(&[
+        "bake",
+        mesh,
+        "--resolution",
+        "32",
+        "--cut",
+        "0,0,1,0.05",
+        "--cut",
+        "1,0,0,-0.2",
+        "--spread",
+        "0.05",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let glb = std::fs::read(&out).unwrap();
+    let text = String::from_utf8_lossy(&glb[..4096]);
+    assert!(
+        text.contains("piece 3") && !text.contains("piece 4"),
+        "{text}"
+    );
 }
 
 /// Every broken mesh and absurd request answers 4xx JSON with a message.
@@ -298,6 +320,55 @@ async fn bad_meshes_get_clear_errors() {
             400,
             "invalid_parameter",
         ),
+        (
+            "a cut plane that misses the mesh",
+            "cut=0,0,1,5",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "a cut plane with a zero normal",
+            "cut=0,0,0,0",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "a cut plane of three numbers",
+            "cut=0,0,1",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "nine cut planes",
+            "cut=0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0;0,0,1,0",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "vertex colours of a cut",
+            "cut=0,0,1,0&colours=vertex",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
+        (
+            "spread 2",
+            "cut=0,0,1,0&spread=2",
+            torus_obj(),
+            400,
+            "out_of_range",
+        ),
+        (
+            "spread x",
+            "cut=0,0,1,0&spread=x",
+            torus_obj(),
+            400,
+            "invalid_parameter",
+        ),
     ] {
         let (status, headers, body) = post(query, body).await;
         assert!(
@@ -307,9 +378,86 @@ async fn bad_meshes_get_clear_errors() {
         );
         assert_error(status, &headers, &body, want_status, want_code);
     }
-    // The server is still up and answers.
+    // The server is still up and answers, a cut too: two pieces, two nodes.
     let (status, _, _) = post("resolution=16&texture_size=64", torus_obj()).await;
     assert_eq!(status, 200);
+    let (status, _, glb) = post("resolution=16&cut=0,0,1,0&spread=0.1", torus_obj()).await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&glb));
+    let text = String::from_utf8_lossy(&glb[..glb.len().min(4096)]);
+    assert!(
+        text.contains("piece 1") && !text.contains("piece 2"),
+        "{text}"
+    );
+}
+
+/// A torus cut across its hole (the plane through two of the fixture's
+/// vertex rings, with texture seams to weld): two closed pieces with
+/// annulus caps, and along the cut line the caps show the very voxels the
+/// surface shows there.
+#[test]
+fn a_cut_caps_the_pieces_with_the_inside_of_the_solid() {
+    let tex = texture();
+    let cut = torus()
+        .cut(&[solidtex_core::mesh::Plane::new([0.0, 0.0, 1.0], 0.0).unwrap()])
+        .unwrap();
+    assert_eq!(cut.pieces().len(), 2);
+    let caps = (0..cut.triangles().len())
+        .filter(|&t| cut.is_cap(t))
+        .count();
+    assert!(caps > 0);
+    let mut options = BakeOptions::new(48);
+    options.texture_size = Some(1024);
+    let bake = Bake::new(Arc::new(cut), options).unwrap();
+    assert!(!bake.uses_mesh_uvs());
+    let rgb = tex
+        .render(&Request::bake(bake.clone()).unwrap(), 0)
+        .unwrap()
+        .0;
+    // The voxel each texel reads, cap texels and surface texels apart.
+    let mut surface = std::collections::HashMap::new();
+    let mut cap_texels = Vec::new();
+    for i in 0..bake.items() {
+        let (Some(t), Some(p)) = (bake.texel_triangle(i), bake.sample(i)) else {
+            continue;
+        };
+        let v = p.map(|c| c.round() as i64);
+        let colour = [rgb[i * 3], rgb[i * 3 + 1], rgb[i * 3 + 2]];
+        if bake.mesh().is_cap(t) {
+            // On the plane: half way up the box of 48 × 48 × 12.44 voxels.
+            assert!((p[2] - 48.0 * 0.35 / 2.7).abs() < 1e-3, "{p:?}");
+            cap_texels.push((v, colour));
+        } else {
+            surface.insert(v, colour);
+        }
+    }
+    let along: Vec<_> = cap_texels
+        .iter()
+        .filter_map(|(v, c)| surface.get(v).map(|s| (c, s)))
+        .collect();
+    assert!(
+        along.len() > 200,
+        "{} cap texels on the cut line",
+        along.len()
+    );
+    for (cap, surf) in &along {
+        assert_eq!(cap, surf);
+    }
+    // Inside, the caps show the solid too: the voxels the region route gives.
+    for (v, c) in cap_texels.iter().step_by(997) {
+        assert_eq!(&voxel(&tex, *v), c, "{v:?}");
+    }
+    // Two nodes, and the pieces read back whole.
+    let glb = bake.glb(&rgb).unwrap();
+    let again = Mesh::parse(&glb, Some(MeshFormat::Glb)).unwrap();
+    assert_eq!(again.triangles().len(), bake.mesh().triangles().len());
+    let text = String::from_utf8_lossy(&glb[..4096]);
+    assert!(text.contains("piece 1"), "{text}");
+    // Vertex colours cannot show a cap, and a cut has no UVs of its own.
+    for (colours, uvs) in [(Colours::Vertex, Uvs::Auto), (Colours::Texture, Uvs::Mesh)] {
+        let mut o = BakeOptions::new(48);
+        (o.colours, o.uvs) = (colours, uvs);
+        assert!(Bake::new(Arc::new(bake.mesh().clone()), o).is_err());
+    }
 }
 
 /// Through HTTP: at the middle of a triangle, the baked texture shows one

@@ -4,7 +4,7 @@
 //! load.
 
 use super::machine::Machine;
-use super::{PlanRow, Results, human_bytes, human_seconds};
+use super::{PlanRow, Results, Row, human_bytes, human_seconds, meshes};
 use std::fmt::Write;
 
 /// The command that regenerates the page with the issue's full sizes.
@@ -125,19 +125,10 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         "| benchmark | time | runs | peak heap | target | papers | detail |\n\
          | --- | ---: | ---: | ---: | --- | --- | --- |"
     );
-    for row in &r.rows {
-        let _ = writeln!(
-            w,
-            "| {} | {} | {} | {} | {} | {} | {} |",
-            row.name,
-            row.seconds.map_or("not measured".into(), human_seconds),
-            row.runs,
-            row.peak_bytes.map_or("-".into(), human_bytes),
-            row.target.unwrap_or(""),
-            row.paper.unwrap_or(""),
-            row.detail
-        );
-    }
+    let is_mesh = |row: &&Row| row.name.starts_with(meshes::ROW_PREFIX);
+    rows(w, r.rows.iter().filter(|row| !is_mesh(row)));
+    let mesh_rows: Vec<&Row> = r.rows.iter().filter(is_mesh).collect();
+    let _ = write!(w, "\n{}", mesh_section(&mesh_rows, None));
     let _ = writeln!(w, "\n## Dependency sets: standard vs dual grid\n");
     let _ = writeln!(
         w,
@@ -197,10 +188,108 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
     out
 }
 
+/// The engine table's rows.
+fn rows<'a>(w: &mut String, rows: impl Iterator<Item = &'a Row>) {
+    for row in rows {
+        let _ = writeln!(
+            w,
+            "| {} | {} | {} | {} | {} | {} | {} |",
+            row.name,
+            row.seconds.map_or("not measured".into(), human_seconds),
+            row.runs,
+            row.peak_bytes.map_or("-".into(), human_bytes),
+            row.target.unwrap_or(""),
+            row.paper.unwrap_or(""),
+            row.detail
+        );
+    }
+}
+
+/// Title of the mesh bakes' section, which `--meshes-only` rewrites alone.
+const MESH_TITLE: &str = "## Meshes: shell efficiency";
+
+/// The mesh bakes' section; `run` names the machine and command when it
+/// was measured apart from the rest of the page.
+pub fn mesh_section(mesh_rows: &[&Row], run: Option<(&Machine, &str)>) -> String {
+    let mut out = String::new();
+    let w = &mut out;
+    let _ = writeln!(w, "{MESH_TITLE}\n");
+    let _ = writeln!(
+        w,
+        "A (2, 3) torus knot tube of about 100 K triangles baked cold (a fresh tile cache \
+         each) at growing resolutions, with a generated atlas: only the voxels its \
+         texels sample and their dependency chains are synthesized. The shares are of R³, \
+         the cube the mesh's longest side spans (Dong et al. 2008: 0.42 % of 1024³ for a \
+         gargoyle). The load average in each row is the machine's when the bake started: \
+         above 2 on two cores, other processes had part of the cores.\n"
+    );
+    if let Some((m, command)) = run {
+        let _ = writeln!(
+            w,
+            "Measured apart from the rest of the page: `{command}`, {}, revision {}, \
+             {}, {} cores, {:.0} GiB.\n",
+            m.date,
+            m.revision.as_deref().unwrap_or("unknown"),
+            m.cpu,
+            m.cores,
+            m.memory_gib
+        );
+    }
+    if mesh_rows.is_empty() {
+        let _ = writeln!(w, "Not measured in this run.");
+        return out;
+    }
+    let _ = writeln!(
+        w,
+        "| benchmark | time | runs | peak heap | target | papers | detail |\n\
+         | --- | ---: | ---: | ---: | --- | --- | --- |"
+    );
+    rows(w, mesh_rows.iter().copied());
+    out
+}
+
+/// `page` with its mesh section replaced by `section` (inserted before the
+/// dependency sets when it has none).
+pub fn splice(page: &str, section: &str) -> String {
+    let start = page.find(MESH_TITLE);
+    let (head, tail) = match start {
+        Some(s) => {
+            let after = &page[s + MESH_TITLE.len()..];
+            let end = after
+                .find("\n## ")
+                .map_or(page.len(), |e| s + MESH_TITLE.len() + e + 1);
+            (&page[..s], &page[end..])
+        }
+        None => match page.find("## Dependency sets") {
+            Some(d) => (&page[..d], &page[d..]),
+            None => (page, ""),
+        },
+    };
+    let sep = if tail.is_empty() { "" } else { "\n" };
+    format!("{head}{section}{sep}{tail}")
+}
+
 /// "finest level" or "N finest levels".
 fn finest(n: u32) -> String {
     match n {
         1 => "finest level".to_string(),
         n => format!("{n} finest levels"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_mesh_section_is_replaced_or_inserted_and_nothing_else_moves() {
+        let page = "# B\n\n## Engine\n\nx\n\n## Dependency sets: y\n\nz\n";
+        let once = splice(page, &format!("{MESH_TITLE}\n\nold\n"));
+        assert_eq!(
+            once,
+            format!("# B\n\n## Engine\n\nx\n\n{MESH_TITLE}\n\nold\n\n## Dependency sets: y\n\nz\n")
+        );
+        let twice = splice(&once, &format!("{MESH_TITLE}\n\nnew\n"));
+        assert_eq!(twice, once.replace("old", "new"));
     }
 }

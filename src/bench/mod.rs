@@ -814,7 +814,9 @@ pub fn print(r: &Results) -> std::io::Result<()> {
             row.detail
         )?;
     }
-    outln!("\nvoxels/corrections per level (finest first):")?;
+    if !r.plans.is_empty() {
+        outln!("\nvoxels/corrections per level (finest first):")?;
+    }
     for p in &r.plans {
         outln!(
             "  {:<10} {:<40} {}",

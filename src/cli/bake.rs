@@ -4,7 +4,7 @@ use super::cut::parse_vec3;
 use super::source::{SourceArgs, load_source, progress_bar, summary};
 use anyhow::Context;
 use clap::Args;
-use solidtex_core::mesh::{Bake, BakeOptions, Colours, Mesh, MeshFormat, Uvs};
+use solidtex_core::mesh::{Bake, BakeOptions, Colours, Mesh, MeshFormat, Plane, Uvs};
 use solidtex_core::{Filter, Request};
 use solidtex_server::write_atomic;
 use std::path::PathBuf;
@@ -39,6 +39,15 @@ pub struct BakeArgs {
     /// Read the solid between voxel centres trilinearly.
     #[arg(long)]
     trilinear: bool,
+    /// Cut the mesh by the plane `nx,ny,nz,d` (the points p with n·p = d, in
+    /// the mesh file's coordinates) into closed pieces whose caps show the
+    /// inside; repeat for a fracture (at most 8 planes).
+    #[arg(long, allow_hyphen_values = true)]
+    cut: Vec<String>,
+    /// Pull the pieces of a cut apart by this share of the mesh's longest
+    /// side (0 to 1), each away from the planes.
+    #[arg(long, default_value_t = 0.0)]
+    spread: f32,
     /// Output `.glb`.
     #[arg(short, long)]
     output: PathBuf,
@@ -58,7 +67,11 @@ pub fn run(a: BakeArgs) -> anyhow::Result<()> {
         Some(ext) => MeshFormat::from_name(ext).ok(),
         None => None,
     };
-    let mesh = Mesh::parse(&bytes, format).with_context(|| a.mesh.display().to_string())?;
+    let mut mesh = Mesh::parse(&bytes, format).with_context(|| a.mesh.display().to_string())?;
+    if !a.cut.is_empty() {
+        let planes = Plane::parse_list(&a.cut.join(";"))?;
+        mesh = mesh.cut(&planes)?;
+    }
     let tex = load_source(&a.src)?;
     let mut options = BakeOptions::new(a.resolution);
     options.placement.rotation = a.rotation;
@@ -72,6 +85,7 @@ pub fn run(a: BakeArgs) -> anyhow::Result<()> {
     if a.vertex_colours {
         options.colours = Colours::Vertex;
     }
+    options.spread = a.spread;
     if a.trilinear {
         options.filter = Filter::Trilinear;
     }
@@ -93,8 +107,12 @@ pub fn run(a: BakeArgs) -> anyhow::Result<()> {
         Some(s) => format!("a {s}² texture in a generated atlas"),
         None => "vertex colours".to_string(),
     };
+    let pieces = match bake.mesh().pieces().len() {
+        1 => String::new(),
+        n => format!(", {n} pieces"),
+    };
     let what = format!(
-        "{triangles} triangles ({dropped} degenerate dropped) at resolution {} with {layout}",
+        "{triangles} triangles ({dropped} degenerate dropped{pieces}) at resolution {} with {layout}",
         a.resolution
     );
     eprintln!("{}", summary(&what, &a.output, t0, &stats));

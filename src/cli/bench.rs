@@ -86,7 +86,20 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             .chain(std::env::args().skip(1))
             .collect::<Vec<_>>()
             .join(" ");
-        let page = bench::markdown::page(&results, &bench::machine::current(), &command);
+        let machine = bench::machine::current();
+        let page = if a.meshes_only {
+            // The rest of the page stays as it was measured.
+            let rows: Vec<&bench::Row> = results
+                .rows
+                .iter()
+                .filter(|r| r.name.starts_with(bench::meshes::ROW_PREFIX))
+                .collect();
+            let section = bench::markdown::mesh_section(&rows, Some((&machine, &command)));
+            let old = std::fs::read_to_string(path).unwrap_or_default();
+            bench::markdown::splice(&old, &section)
+        } else {
+            bench::markdown::page(&results, &machine, &command)
+        };
         write_atomic(path, page.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
         eprintln!("wrote {}", path.display());

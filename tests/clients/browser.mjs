@@ -89,6 +89,17 @@ function viewerProxy(upstream, dir) {
   });
 }
 
+/// Waits until the bundled `default` texture (precomputed at start) is ready.
+export async function defaultReady(base) {
+  const deadline = Date.now() + 180_000;
+  for (;;) {
+    const t = await (await fetch(`${base}/v1/textures/default`)).json();
+    if (t.status === "ready") return t;
+    if (t.status !== "pending" || Date.now() > deadline) throw new Error(`the bundled texture: ${JSON.stringify(t)}`);
+    await new Promise((r) => setTimeout(r, 250));
+  }
+}
+
 /// Uploads an exemplar with query parameters and waits until it is ready.
 export async function readyTexture(base, pngPath, query) {
   const res = await fetch(`${base}/v1/textures?${query}`, {

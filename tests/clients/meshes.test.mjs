@@ -1,6 +1,7 @@
 // Baked meshes read by Khronos' glTF validator (npm `gltf-validator`):
 // every bake the server answers (the mesh's own UVs, a generated atlas,
-// vertex colours, trilinear reads, a GLB sent back in) and one
+// vertex colours, trilinear reads, a cut and a fracture into pieces, a GLB
+// sent back in) and one
 // `solidtex bake` writes report no errors; the command line's file is the
 // server's byte for byte. The files are left in ARTEFACTS.
 //
@@ -43,6 +44,9 @@ try {
   await validate("torus-atlas", await bake("resolution=64&uvs=atlas", torus));
   await validate("torus-vertex-colours", await bake("resolution=64&colours=vertex", torus));
   await validate("torus-trilinear", await bake("resolution=48&uvs=atlas&filter=trilinear&rotation=30,0,45", torus));
+  // Cut across the hole and through the ring: pieces as nodes, capped.
+  await validate("torus-cut", await bake("resolution=48&cut=0,0,1,0", torus));
+  await validate("torus-fracture", await bake("resolution=48&cut=0,0,1,0.05;1,0.3,0,-0.1&spread=0.1", torus));
   // A baked GLB sent back in, on its own UVs.
   await validate("torus-rebaked", await bake("resolution=64&uvs=mesh&format=glb", own));
   const out = join(ARTEFACTS, "torus-cli.glb");

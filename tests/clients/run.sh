@@ -5,6 +5,7 @@
 #    against region.raw;
 #  - viewer.test.mjs: the browser viewer in headless Chromium;
 #  - viewer_zoom.test.mjs: how soon the viewer shows a cold view sharp;
+#  - viewer_mesh.test.mjs: the viewer baking the shipped torus and cutting it;
 #  - neuroglancer.test.mjs: Neuroglancer itself rendering the texture;
 #  - test_exports.py: pynrrd and numpy reading the NRRD and raw exports,
 #    ome-zarr-models validating the OME-Zarr view;
@@ -61,6 +62,7 @@ export CLIENTS_NODE_DIR=$C/node CLIENTS_ARTEFACTS=$C/artefacts
 (cd tests/clients && "$C/venv/bin/python" -m pytest -q -p no:cacheprovider test_formats.py test_exports.py)
 node tests/clients/viewer.test.mjs
 node tests/clients/viewer_zoom.test.mjs
+node tests/clients/viewer_mesh.test.mjs
 PYTHON=$C/venv/bin/python node tests/clients/neuroglancer.test.mjs
 node tests/clients/exports.test.mjs
 node tests/clients/meshes.test.mjs

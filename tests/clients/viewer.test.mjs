@@ -1,12 +1,17 @@
 // The browser viewer in headless Chromium: an exemplar dropped on the page
 // is uploaded with the API's default parameters under its file name and
 // becomes ready; the list shows its name and thumbnail, and the exemplar is
-// shown beside the view; its slice fills the canvas and is not blank; the
-// position slider and a typed far position change it; the oblique cut and
-// the 3D preview draw; the texture is deleted; a field preset applied from
-// the field panel switches to a texture that follows it, with its arrows
-// over the slice, and curves clicked on the slice make another; and the
-// console stays free of errors. Screenshots go to ARTEFACTS.
+// shown beside the view, with the grain the analysis detected; its slice
+// fills the canvas and is not blank; the position slider and a typed far
+// position change it; the oblique cut draws, another angle never shows
+// half of the old cut beside the new one, and magnified it has no seams
+// where tiles meet; an address edited in the open tab moves the view; the
+// 3D preview draws and settles at the finest level; the texture is
+// deleted; a field preset applied from the field panel switches to a
+// texture that follows it, listed under its field (and another seed under
+// its seed), with its arrows over the slice, and curves clicked on the
+// slice make another; and the console stays free of errors. Screenshots go
+// to ARTEFACTS.
 
 import assert from "node:assert/strict";
 import { mkdirSync, readFileSync } from "node:fs";
@@ -62,6 +67,11 @@ try {
   }, null, { timeout: 10_000 });
   assert.ok(await page.locator("#info").textContent().then((t) => t.includes(textures[0].id)), "the selected texture's id is shown");
   assert.equal(await page.locator("#params td").first().textContent(), "seed", "the selected texture's parameters are shown");
+  // The grain the analysis measured on the exemplar is shown.
+  assert.ok(textures[0].orientation, `no orientation in ${JSON.stringify(textures[0])}`);
+  const grainText = await page.locator("#info .grain").textContent();
+  assert.ok(grainText.includes(`grain ${Math.round(textures[0].orientation.grain_degrees)}°`), grainText);
+  assert.ok(grainText.includes(textures[0].orientation.coherence.toFixed(2)), grainText);
 
   // The ready texture is selected and its slice drawn: every visible tile
   // of the level of detail that matches the screen.
@@ -131,6 +141,70 @@ try {
   assert.ok(stats(await pixels()).std > 8, "cut looks blank");
   await page.screenshot({ path: join(ARTEFACTS, "viewer-cut.png") });
 
+  // Another cut angle: each frame until the new cut is whole shows the old
+  // cut whole or the new one (coarse at first), never half of each.
+  const shares = await page.evaluate(() => new Promise((done) => {
+    const c = document.getElementById("plane");
+    const ctx = c.getContext("2d");
+    const old = ctx.getImageData(0, 0, c.width, c.height).data;
+    const yaw = document.getElementById("yaw");
+    yaw.value = "75";
+    yaw.dispatchEvent(new Event("input"));
+    yaw.dispatchEvent(new Event("change"));
+    const out = [];
+    const t0 = performance.now();
+    const poll = () => {
+      const d = ctx.getImageData(0, 0, c.width, c.height).data;
+      let same = 0;
+      for (let i = 0; i < d.length; i += 4) if (d[i] === old[i] && d[i + 1] === old[i + 1] && d[i + 2] === old[i + 2]) same++;
+      out.push(same / (d.length / 4));
+      if (c.dataset.complete === "1" || performance.now() - t0 > 60_000) done(out);
+      else requestAnimationFrame(poll);
+    };
+    requestAnimationFrame(poll);
+  }));
+  await waitComplete("yaw 75°");
+  const mixed = shares.filter((f) => f > 0.15 && f < 0.85);
+  assert.deepEqual(mixed, [], `frames with old and new cut side by side (share of old pixels per frame: ${shares.map((f) => f.toFixed(2)).join(" ")})`);
+
+  // Magnified 4 times, the cut is smoothed as one image: no step in the
+  // column or row differences where tiles meet.
+  await page.evaluate(() => window.solidtex.setView({ scale: 4, center: [256 + 23, 256 + 17] }));
+  await waitComplete("yaw 75°");
+  const seams = await page.evaluate(() => {
+    const c = document.getElementById("plane");
+    const { data } = c.getContext("2d").getImageData(0, 0, c.width, c.height);
+    const W = c.width, H = c.height, st = window.solidtex.state;
+    const lum = (x, y) => { const i = 4 * (y * W + x); return data[i] + data[i + 1] + data[i + 2]; };
+    // Mean |difference| between neighbours across each column (rows) gap.
+    const across = (n, m, at) => {
+      const d = [];
+      for (let a = 0; a + 1 < n; a++) {
+        let s = 0;
+        for (let b = 0; b < m; b++) s += Math.abs(at(a + 1, b) - at(a, b));
+        d.push(s / m);
+      }
+      return d;
+    };
+    const median = (d) => d.slice().sort((p, q) => p - q)[Math.floor(d.length / 2)];
+    const ps = st.scale * Math.max(1, Math.min(2, window.devicePixelRatio || 1));
+    const xb = Math.round((256 - st.center[0]) * ps + W / 2), yb = Math.round((256 - st.center[1]) * ps + H / 2);
+    const dx = across(W, H, (x, y) => lum(x, y)), dy = across(H, W, (y, x) => lum(x, y));
+    const peak = (d, b) => Math.max(...d.slice(b - 3, b + 2));
+    return { x: peak(dx, xb) / median(dx), y: peak(dy, yb) / median(dy), xb, yb };
+  });
+  assert.ok(seams.x < 2 && seams.y < 2, `seams where the cut's tiles meet: ${JSON.stringify(seams)}`);
+  await page.screenshot({ path: join(ARTEFACTS, "viewer-cut-magnified.png") });
+
+  // An address edited in the open tab moves the view there.
+  const tid = textures[0].id;
+  await page.evaluate((id) => { location.hash = `#t=${id}&m=slice&a=x&p=123&c=5,6&s=2&yaw=30&pitch=35`; }, tid);
+  await waitComplete("x = 123");
+  assert.equal(await page.locator("#axis").inputValue(), "x");
+  assert.equal(await page.locator("#at").inputValue(), "123");
+  await page.keyboard.press("c");
+  await waitComplete("yaw 30°");
+
   // The raw brick link points at a 64³ region around the view centre.
   const raw = await page.locator("#download-raw").getAttribute("href");
   assert.match(raw, /region\.raw\?x=-?\d+&y=-?\d+&z=-?\d+&w=64&h=64&d=64&lod=\d+$/);
@@ -139,6 +213,8 @@ try {
   // The 3D preview: a carved sphere, then a deeper cut redraws it.
   await page.keyboard.press("v");
   await page.waitForFunction(() => Number(document.getElementById("solid").dataset.drawn) > 0, null, { timeout: 120_000 });
+  // It settles at the finest level (the coarsest only stands in meanwhile).
+  await page.waitForFunction(() => document.getElementById("solid").dataset.lod === "0" && /· lod 0 ·/.test(document.getElementById("hud").textContent), null, { timeout: 120_000 });
   const box = await page.locator("#solid").boundingBox();
   const shot1 = await page.screenshot({ clip: box });
   const s1 = await pngStats(browser.context, shot1);
@@ -193,6 +269,14 @@ try {
   })).json();
   assert.equal(variant.id, slanted.id, "the viewer's variant is the API's");
   assert.match(await page.locator("#f-current").textContent(), /slant 40°/);
+  // The variant is listed under its field, not under its base's name alone;
+  // another seed of the same image and name says its seed.
+  await readyTexture(server.base, join(HERE, "exemplar32.png"), "name=field.png&seed=7");
+  await page.waitForFunction(() => document.querySelectorAll("#textures li").length === 3, null, { timeout: 10_000 });
+  const names = await page.locator("#textures li .name").allTextContents();
+  assert.equal(new Set(names).size, 3, `names alike: ${JSON.stringify(names)}`);
+  assert.ok(names.includes("field.png · slant 40°"), JSON.stringify(names));
+  assert.ok(names.includes("field.png · seed 7"), JSON.stringify(names));
   await page.waitForFunction((id) => location.hash.includes(`t=${id}`), slanted.id, { timeout: 10_000 });
   await waitComplete("z = 0");
   const guided = await pixels();

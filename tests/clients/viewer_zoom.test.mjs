@@ -10,12 +10,14 @@
 // lines (the goal is 2 s on two cores), with the same for 1 px/voxel and
 // an oblique cut at 1 px/voxel. The zoom-out is asserted within a generous
 // bound that only a broken viewer misses, SOLIDTEX_ZOOM_BOUND_MS (default 30000); the
-// others are only printed. Screenshots go to ARTEFACTS.
+// others are only printed. Then a zoom out of a whole view must show no
+// background in its first frame (a coarser level scaled up instead).
+// Screenshots go to ARTEFACTS.
 
 import assert from "node:assert/strict";
 import { mkdirSync } from "node:fs";
 import { join } from "node:path";
-import { ARTEFACTS, launch, startServer } from "./browser.mjs";
+import { ARTEFACTS, defaultReady, launch, startServer } from "./browser.mjs";
 
 const BOUND = Number(process.env.SOLIDTEX_ZOOM_BOUND_MS || 30_000);
 
@@ -24,14 +26,7 @@ const server = await startServer([], { defaultTexture: true });
 let browser = null;
 const errors = [];
 try {
-  // The bundled texture is precomputed at start.
-  const deadline = Date.now() + 180_000;
-  for (;;) {
-    const t = await (await fetch(`${server.base}/v1/textures/default`)).json();
-    if (t.status === "ready") break;
-    assert.ok(t.status === "pending" && Date.now() < deadline, `the bundled texture: ${JSON.stringify(t)}`);
-    await new Promise((r) => setTimeout(r, 250));
-  }
+  await defaultReady(server.base);
 
   browser = await launch({ width: 820, height: 540 });
   const page = await browser.context.newPage();
@@ -86,6 +81,28 @@ try {
     await page.screenshot({ path: join(ARTEFACTS, c.file) });
     if (c.bound && r.ms > BOUND) slow.push(`${c.what}: ${r.ms} ms`);
   }
+  // Zooming out of a whole view shows a coarser level scaled up in the
+  // very first frame, not background: the viewer keeps a coarse backdrop
+  // around the view once the view is whole.
+  await page.evaluate(() => window.solidtex.setView({ mode: "slice", axis: "z", scale: 1, position: 4_000_009, center: [1_000_000, 9_000_000] }));
+  await page.waitForFunction(() => {
+    const s = window.solidtex.stats();
+    return document.getElementById("plane").dataset.complete === "1" && s.inflight === 0 && s.queued === 0;
+  }, null, { timeout: 120_000 });
+  const background = await page.evaluate(() => new Promise((done) => {
+    window.solidtex.setView({ scale: 0.5 });
+    requestAnimationFrame(() => {
+      const c = document.getElementById("plane");
+      const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+      let bg = 0;
+      for (let i = 0; i < d.length; i += 4) if (d[i] === 13 && d[i + 1] === 14 && d[i + 2] === 16) bg++;
+      done(bg / (d.length / 4));
+    });
+  }));
+  console.log(`zoom-out to 0.5 px/voxel: ${(100 * background).toFixed(1)} % background in the first frame`);
+  assert.ok(background < 0.01, `the first frame after a zoom-out is ${(100 * background).toFixed(1)} % background`);
+  await page.screenshot({ path: join(ARTEFACTS, "viewer-zoom-out-first-frame.png") });
+
   if (overloaded) console.log(`(${overloaded} tile requests answered 503 and retried)`);
   assert.deepEqual(slow, [], `views slower than ${BOUND} ms`);
   assert.deepEqual(errors, [], "console errors");

@@ -48,7 +48,14 @@ pub struct BakeOptions {
     pub colours: Colours,
     /// How a surface point reads the voxels around it.
     pub filter: Filter,
+    /// How far the pieces of a cut mesh are pulled apart in the output,
+    /// each away from the planes, as a share of the mesh's longest side
+    /// (0 to [`MAX_SPREAD`]); the texture is baked where they were.
+    pub spread: f32,
 }
+
+/// Largest [`BakeOptions::spread`].
+pub const MAX_SPREAD: f32 = 1.0;
 
 impl BakeOptions {
     /// A texture baked at `resolution` with every other choice left to the
@@ -60,6 +67,7 @@ impl BakeOptions {
             uvs: Uvs::Auto,
             colours: Colours::Texture,
             filter: Filter::Nearest,
+            spread: 0.0,
         }
     }
 }
@@ -87,6 +95,22 @@ impl Bake {
     /// Places `mesh` and lays out its texture as `options` ask.
     pub fn new(mesh: Arc<Mesh>, options: BakeOptions) -> Result<Bake> {
         options.placement.check()?;
+        if !(0.0..=MAX_SPREAD).contains(&options.spread) {
+            return Err(Error::InvalidRange {
+                name: "spread",
+                value: f64::from(options.spread),
+                min: 0.0,
+                max: f64::from(MAX_SPREAD),
+            });
+        }
+        if mesh.is_cut() && options.colours == Colours::Vertex {
+            return Err(Error::InvalidParameter {
+                name: "colours",
+                reason: "a cut mesh needs a texture: colours at the vertices cannot show \
+                         the inside of its caps"
+                    .into(),
+            });
+        }
         let transform = options.placement.transform(&mesh);
         let layout = match options.colours {
             Colours::Vertex => None,
@@ -152,6 +176,14 @@ impl Bake {
         Some([0, 1, 2].map(|a| p[0][a] + v * (p[1][a] - p[0][a]) + w * (p[2][a] - p[0][a])))
     }
 
+    /// The triangle texel `i` of the baked texture shows (`None` for a
+    /// texel no triangle shows, and for vertex colours).
+    pub fn texel_triangle(&self, i: usize) -> Option<usize> {
+        let layout = self.0.layout.as_ref()?;
+        let tris = self.mesh().triangles().len();
+        layout.texel(i, tris, &|t| self.chart(t)).map(|(t, _)| t)
+    }
+
     /// Triangle `t`'s chart in texels of the baked texture.
     pub(super) fn chart(&self, t: usize) -> [[f32; 2]; 3] {
         match &self.0.layout {
@@ -185,7 +217,7 @@ impl Bake {
         let p = &o.placement;
         let bits = |a: [f64; 3]| a.map(|x| format!("{:x}", (x + 0.0).to_bits())).join(",");
         format!(
-            "bake/{:x}/{}/{}/{}/{:?}/{:?}/{:?}/{:?}/{lod}",
+            "bake/{:x}/{}/{}/{}/{:?}/{:?}/{:?}/{:?}/{:x}/{lod}",
             self.0.fingerprint,
             p.resolution,
             bits(p.rotation),
@@ -194,6 +226,7 @@ impl Bake {
             self.uses_mesh_uvs(),
             o.colours,
             o.filter,
+            o.spread.to_bits(),
         )
     }
 }
@@ -225,6 +258,14 @@ fn layout(mesh: &Mesh, options: &BakeOptions, transform: &Transform) -> Result<L
         (Uvs::Atlas, _) => None,
         (Uvs::Auto, uv) => uv,
         (Uvs::Mesh, Some(uv)) => Some(uv),
+        (Uvs::Mesh, None) if mesh.is_cut() => {
+            return Err(Error::InvalidParameter {
+                name: "uvs",
+                reason: "a cut mesh has no texture coordinates of its own (its caps are new): \
+                         use a generated atlas"
+                    .into(),
+            });
+        }
         (Uvs::Mesh, None) => {
             return Err(Error::InvalidParameter {
                 name: "uvs",

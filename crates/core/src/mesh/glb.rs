@@ -20,8 +20,17 @@ struct Parts {
     normals: Vec<[f32; 3]>,
     /// Texture coordinates or linear colours, per vertex.
     third: Third,
-    indices: Vec<u32>,
+    /// One mesh and node per piece of a cut (one for an uncut mesh).
+    pieces: Vec<PieceOut>,
     png: Option<Vec<u8>>,
+}
+
+/// A piece's vertices (a range of the parts'), its triangles (indices
+/// into that range) and where its node moves it.
+struct PieceOut {
+    vertices: std::ops::Range<usize>,
+    indices: Vec<u32>,
+    translation: [f32; 3],
 }
 
 enum Third {
@@ -32,6 +41,16 @@ enum Third {
 pub(super) fn write(bake: &Bake, rgb: &[u8]) -> Result<Vec<u8>> {
     let parts = parts(bake, rgb)?;
     Ok(pack(&parts))
+}
+
+/// The whole mesh as one piece on shared vertices.
+fn whole(bake: &Bake) -> Vec<PieceOut> {
+    let mesh = bake.mesh();
+    vec![PieceOut {
+        vertices: 0..mesh.positions().len(),
+        indices: mesh.triangles().iter().flatten().copied().collect(),
+        translation: [0.0; 3],
+    }]
 }
 
 fn parts(bake: &Bake, rgb: &[u8]) -> Result<Parts> {
@@ -47,7 +66,7 @@ fn parts(bake: &Bake, rgb: &[u8]) -> Result<Parts> {
             positions: mesh.positions().to_vec(),
             normals,
             third: Third::Colours(colours),
-            indices: tris.iter().flatten().copied().collect(),
+            pieces: whole(bake),
             png: None,
         });
     };
@@ -58,30 +77,53 @@ fn parts(bake: &Bake, rgb: &[u8]) -> Result<Parts> {
             positions: mesh.positions().to_vec(),
             normals,
             third: Third::Uvs(mesh.uvs().unwrap_or_default().to_vec()),
-            indices: tris.iter().flatten().copied().collect(),
+            pieces: whole(bake),
             png: Some(png),
         });
     }
-    // The generated atlas: three vertices of its own per triangle.
+    // The generated atlas: three vertices of its own per triangle, so a
+    // cap's corners take its flat normal beside the surface's smooth one.
     let s = side as f32;
     let mut positions = Vec::with_capacity(tris.len() * 3);
     let mut normal_out = Vec::with_capacity(tris.len() * 3);
     let mut uvs = Vec::with_capacity(tris.len() * 3);
     for (i, t) in tris.iter().enumerate() {
         let chart = bake.chart(i);
+        let flat = mesh.is_cap(i).then(|| mesh.face_normal(i));
         for (corner, &k) in t.iter().enumerate() {
             positions.push(mesh.positions()[k as usize]);
-            normal_out.push(normals[k as usize]);
+            normal_out.push(flat.unwrap_or(normals[k as usize]));
             uvs.push(chart[corner].map(|c| c / s));
         }
     }
+    let shift = bake.options().spread * longest_side(mesh.positions());
+    let pieces = mesh
+        .pieces()
+        .iter()
+        .map(|p| PieceOut {
+            vertices: p.triangles.start * 3..p.triangles.end * 3,
+            indices: (0..(p.triangles.len() * 3) as u32).collect(),
+            translation: p.away.map(|c| c * shift),
+        })
+        .collect();
     Ok(Parts {
-        indices: (0..positions.len() as u32).collect(),
         positions,
         normals: normal_out,
         third: Third::Uvs(uvs),
+        pieces,
         png: Some(png),
     })
+}
+
+/// The longest side of the points' bounding box.
+fn longest_side(points: &[[f32; 3]]) -> f32 {
+    (0..3)
+        .map(|a| {
+            let lo = points.iter().map(|p| p[a]).fold(f32::MAX, f32::min);
+            let hi = points.iter().map(|p| p[a]).fold(f32::MIN, f32::max);
+            hi - lo
+        })
+        .fold(0.0, f32::max)
 }
 
 /// sRGB-encoded 8-bit to linear, as glTF's `COLOR_0` is.
@@ -156,21 +198,37 @@ impl Packer {
 
 fn pack(parts: &Parts) -> Vec<u8> {
     let mut p = Packer::default();
-    let position = p.floats(&parts.positions, true);
-    let normal = p.floats(&parts.normals, false);
-    let mut attributes = json!({"POSITION": position, "NORMAL": normal});
-    match &parts.third {
-        Third::Uvs(uv) => attributes["TEXCOORD_0"] = json!(p.floats(uv, false)),
-        Third::Colours(c) => attributes["COLOR_0"] = json!(p.floats(c, false)),
+    let mut meshes = Vec::with_capacity(parts.pieces.len());
+    let mut nodes = Vec::with_capacity(parts.pieces.len());
+    for (i, piece) in parts.pieces.iter().enumerate() {
+        let r = piece.vertices.clone();
+        let position = p.floats(&parts.positions[r.clone()], true);
+        let normal = p.floats(&parts.normals[r.clone()], false);
+        let mut attributes = json!({"POSITION": position, "NORMAL": normal});
+        match &parts.third {
+            Third::Uvs(uv) => attributes["TEXCOORD_0"] = json!(p.floats(&uv[r], false)),
+            Third::Colours(c) => attributes["COLOR_0"] = json!(p.floats(&c[r], false)),
+        }
+        let indices = p.indices(&piece.indices);
+        meshes.push(json!({
+            "primitives": [{"attributes": attributes, "indices": indices, "material": 0}]
+        }));
+        let mut node = json!({"mesh": i});
+        if parts.pieces.len() > 1 {
+            node["name"] = json!(format!("piece {i}"));
+        }
+        if piece.translation != [0.0; 3] {
+            node["translation"] = json!(piece.translation.to_vec());
+        }
+        nodes.push(node);
     }
-    let indices = p.indices(&parts.indices);
     let mut pbr = json!({"metallicFactor": 0.0, "roughnessFactor": 1.0});
     let mut doc = json!({
         "asset": {"version": "2.0", "generator": "solidtex"},
         "scene": 0,
-        "scenes": [{"nodes": [0]}],
-        "nodes": [{"mesh": 0}],
-        "meshes": [{"primitives": [{"attributes": attributes, "indices": indices, "material": 0}]}],
+        "scenes": [{"nodes": (0..nodes.len()).collect::<Vec<_>>()}],
+        "nodes": nodes,
+        "meshes": meshes,
     });
     if let Some(png) = &parts.png {
         let view = p.view(png, None);

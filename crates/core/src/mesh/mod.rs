@@ -3,7 +3,8 @@
 //! the voxels its surface samples, the thin shell around it, never the
 //! volume it encloses.
 //!
-//! [`Mesh`] reads OBJ and glTF binary (GLB) from bytes and checks it;
+//! [`Mesh`] reads OBJ and glTF binary (GLB) from bytes and checks it, and
+//! [`Mesh::cut`] splits it by planes into closed pieces;
 //! [`Placement`] puts it in texture space; [`Bake`] lays out the texels of
 //! its base-colour texture (the mesh's own UVs or a generated atlas) and is
 //! answered as a [`crate::Request`] like any other; [`Bake::glb`] writes
@@ -11,11 +12,13 @@
 
 mod atlas;
 mod bake;
+mod cut;
 mod glb;
 mod place;
 mod read;
 
-pub use bake::{Bake, BakeOptions, Colours, Uvs};
+pub use bake::{Bake, BakeOptions, Colours, MAX_SPREAD, Uvs};
+pub use cut::{MAX_CUTS, Plane};
 pub use place::{MAX_RESOLUTION, Placement};
 
 use crate::error::{Error, Result};
@@ -69,6 +72,20 @@ pub struct Mesh {
     triangles: Vec<[u32; 3]>,
     uvs: Option<Vec<[f32; 2]>>,
     dropped: usize,
+    /// Per triangle, whether it closes a cut (empty for an uncut mesh).
+    caps: Vec<bool>,
+    pieces: Vec<Piece>,
+}
+
+/// A piece of a cut mesh: one side of every plane.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Piece {
+    /// Its triangles, a range of [`Mesh::triangles`].
+    pub triangles: std::ops::Range<usize>,
+    /// The unit direction away from the planes (the sum of their normals,
+    /// each turned to the piece's side), for pulling pieces apart;
+    /// zero for an uncut mesh.
+    pub away: [f32; 3],
 }
 
 impl Mesh {
@@ -136,10 +153,39 @@ impl Mesh {
         let uvs = uvs.filter(|u| u.len() == n);
         Ok(Mesh {
             dropped: total - kept.len(),
+            pieces: vec![Piece {
+                triangles: 0..kept.len(),
+                away: [0.0; 3],
+            }],
+            caps: Vec::new(),
             positions,
             triangles: kept,
             uvs,
         })
+    }
+
+    /// The mesh cut by `planes` (in its own coordinates) into pieces, one
+    /// per side of every plane that holds any of it, each closed by caps
+    /// where a plane crossed it (see [`Plane`]). Texture coordinates are
+    /// dropped: the caps have none. A plane that misses the mesh, more than
+    /// [`MAX_CUTS`] planes or a degenerate plane are refused.
+    pub fn cut(&self, planes: &[Plane]) -> Result<Mesh> {
+        cut::cut(self, planes)
+    }
+
+    /// The pieces of a cut, or the whole mesh as one piece.
+    pub fn pieces(&self) -> &[Piece] {
+        &self.pieces
+    }
+
+    /// Whether triangle `t` is part of a cut's cap.
+    pub fn is_cap(&self, t: usize) -> bool {
+        self.caps.get(t).copied().unwrap_or(false)
+    }
+
+    /// Whether the mesh was cut.
+    pub fn is_cut(&self) -> bool {
+        !self.caps.is_empty()
     }
 
     /// Vertex positions, in the file's own units.
@@ -174,15 +220,25 @@ impl Mesh {
         for uv in self.uvs.iter().flatten() {
             bytes.extend(uv.iter().flat_map(|c| c.to_le_bytes()));
         }
+        bytes.extend(self.caps.iter().map(|&c| u8::from(c)));
+        for p in &self.pieces {
+            bytes.extend((p.triangles.end as u64).to_le_bytes());
+            bytes.extend(p.away.iter().flat_map(|c| c.to_le_bytes()));
+        }
         crate::hash::fingerprint(&bytes)
     }
 
     /// Unit normal per vertex: the area-weighted mean of the normals of
     /// the triangles around it (the first such triangle's where they cancel).
+    /// Caps are left out, so the surface stays smooth up to a cut's edge
+    /// (a cap's corners take its own flat normal, [`Mesh::face_normal`]).
     pub(crate) fn vertex_normals(&self) -> Vec<[f32; 3]> {
         let mut sum = vec![[0f64; 3]; self.positions.len()];
         let mut first = vec![None; self.positions.len()];
-        for t in &self.triangles {
+        for (i, t) in self.triangles.iter().enumerate() {
+            if self.is_cap(i) {
+                continue;
+            }
             let n = cross_of(t.map(|i| self.positions[i as usize]));
             for &i in t {
                 let s = &mut sum[i as usize];
@@ -200,6 +256,16 @@ impl Mesh {
                     .unwrap_or([0.0, 0.0, 1.0])
             })
             .collect()
+    }
+}
+
+impl Mesh {
+    /// Triangle `t`'s unit normal, by its winding.
+    pub(crate) fn face_normal(&self, t: usize) -> [f32; 3] {
+        unit(cross_of(
+            self.triangles[t].map(|i| self.positions[i as usize]),
+        ))
+        .unwrap_or([0.0, 0.0, 1.0])
     }
 }
 

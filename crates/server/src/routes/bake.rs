@@ -1,7 +1,8 @@
 //! `POST /v1/textures/{id}/bake`: a mesh (OBJ or GLB, the request body)
 //! textured from the solid, answered as a glTF binary. The mesh is read
 //! and laid out off the async threads; the bake then goes through
-//! [`answer`] like any voxel request, under the budget of an export
+//! [`answer`] like any voxel request (cut by the `cut` planes first,
+//! when given), under the budget of an export
 //! (`--max-export-work`), and stops when the client hangs up.
 
 use super::AppState;
@@ -14,7 +15,9 @@ use axum::extract::{Path, State};
 use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
-use solidtex_core::mesh::{Bake, BakeOptions, Colours, MAX_RESOLUTION, Mesh, MeshFormat, Uvs};
+use solidtex_core::mesh::{
+    Bake, BakeOptions, Colours, MAX_RESOLUTION, Mesh, MeshFormat, Plane, Uvs,
+};
 use solidtex_core::{Filter, MAX_SLICE_SIDE, Request};
 use std::sync::Arc;
 
@@ -36,6 +39,10 @@ pub(super) struct BakeQuery {
     filter: Filter,
     format: Option<String>,
     lod: Lod,
+    /// Planes `nx,ny,nz,d` separated by `;`, in the mesh's coordinates.
+    cut: Option<String>,
+    /// A number; its range is checked with the rest of the bake.
+    spread: Option<String>,
 }
 
 /// `POST /v1/textures/{id}/bake`
@@ -53,8 +60,21 @@ pub(super) async fn bake(
     options.placement.offset = q.offset.map_or([0.0; 3], |v| v.0);
     options.texture_size = q.texture_size.map(Int::get_u32);
     (options.uvs, options.colours, options.filter) = (q.uvs, q.colours, q.filter);
+    if let Some(v) = &q.spread {
+        options.spread = v
+            .trim()
+            .parse()
+            .map_err(|_| solidtex_core::Error::InvalidParameter {
+                name: "spread",
+                reason: format!("`{v}` is not a number"),
+            })?;
+    }
+    let planes = q.cut.as_deref().map(Plane::parse_list).transpose()?;
     let bake = tokio::task::spawn_blocking(move || -> Result<Bake, ApiError> {
-        let mesh = Mesh::parse(&body, format)?;
+        let mut mesh = Mesh::parse(&body, format)?;
+        if let Some(planes) = planes.filter(|p| !p.is_empty()) {
+            mesh = mesh.cut(&planes)?;
+        }
         Ok(Bake::new(Arc::new(mesh), options)?)
     })
     .await

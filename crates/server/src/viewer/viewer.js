@@ -11,11 +11,22 @@
 //   scroll away are cancelled, a few requests run at once, and 503 answers
 //   are retried after `Retry-After`. The canvas says `data-complete="1"`
 //   once every visible tile of the target level (`data-lod`) is drawn.
+//   A smoothly magnified level is laid out whole before it is scaled, so
+//   tiles meet without seams; another cut angle or axis holds the last
+//   whole frame until the new plane is covered; a whole view keeps a
+//   coarse backdrop around it so that zooming out shows no background.
 // - The address holds the view (texture, mode, axis, position, centre,
-//   zoom, cut angles), so that a place can be bookmarked.
+//   zoom, cut angles), so that a place can be bookmarked; editing it in
+//   an open tab moves there.
 // - The 3D preview fetches one brick as raw RGB8 into a WebGL2 3D texture
 //   and ray-casts a carved shape (cube or sphere, cut by a plane) through
-//   it, so every face shows the solid texture.
+//   it, so every face shows the solid texture; the finest level, with the
+//   same block at a coarse level shown while it loads.
+// - The mesh view bakes a model (the shipped torus, or an OBJ or GLB the
+//   user drops) through the bake route, draws it lit with a bump from the
+//   texture's luminance, and clips it by a plane whose cap is the cut
+//   route's image of the solid on that plane (stencil parity marks where
+//   the plane lies inside the model).
 // - The field panel gives the selected texture a field of local frames (a
 //   preset, or curves clicked on the slice) by asking for a variant of it,
 //   which shares its candidates, and switches to that texture; arrows of
@@ -48,6 +59,7 @@ const state = {
   shape: "sphere",
   carve: 0.1,
   blockLod: null,
+  meshCut: 0.15, // the mesh view's plane, -1 … 1 across the model (1: whole)
   orbit: { yaw: -35, pitch: 25, distance: 3.6 },
   uploading: null, // id of a texture being precomputed after an upload
   progressive: true, // coarse tiles first while the target level arrives
@@ -59,13 +71,45 @@ const state = {
   },
 };
 
+/// Whether the view is a plane of tiles (slice or cut).
+const planar = () => state.mode === "slice" || state.mode === "cut";
+
 const clampCoord = (v) => Math.max(COORD_MIN, Math.min(COORD_MAX, v));
 
-/// A texture's label: the uploaded file's name, else a short id.
+/// A texture's label: the uploaded file's name, else a short id; then
+/// its field, and its seed when another listed texture would read the same
+/// (variants keep their base's name).
 function label(t) {
   if (!t) return "";
-  if (t.name) return t.name;
-  return t.id.length > 12 ? t.id.slice(0, 8) + "…" : t.id;
+  const base = (x) => {
+    const name = x.name || (x.id.length > 12 ? x.id.slice(0, 8) + "…" : x.id);
+    const f = x.params && x.params.field;
+    return f ? `${name} · ${describeField(f)}` : name;
+  };
+  const text = base(t);
+  const twin = state.textures.some((x) => x.id !== t.id && base(x) === text);
+  return twin && t.params && t.params.seed != null ? `${text} · seed ${t.params.seed}` : text;
+}
+
+/// How a field reads in a sentence.
+function describeField(f) {
+  if (!f) return "no field";
+  if (f.kind === "slant") return `slant ${f.angle}°`;
+  if (f.kind === "zigzag") return `zigzag ±${f.angle}° every ${f.period}`;
+  if (f.kind === "sketch") return `${f.curves.length} drawn curve${f.curves.length > 1 ? "s" : ""}`;
+  if (f.kind === "slant3d") return `3D slant towards ${f.direction.join(", ")}`;
+  if (f.centre) return `${f.kind} about ${f.centre.join(", ")}`;
+  return f.kind;
+}
+
+/// The grain the analysis detected on the exemplar, in words, or null.
+function describeGrain(t) {
+  const o = t && t.orientation;
+  if (!o || o.grain_degrees == null) return null;
+  const deg = Math.round(o.grain_degrees);
+  const strength = o.coherence >= 0.6 ? "strong" : o.coherence >= 0.3 ? "weak" : "none to speak of";
+  return `grain ${deg}° from u (coherence ${o.coherence.toFixed(2)}, ${strength})` +
+    (o.detected ? "; planes arranged along it" : "");
 }
 
 /// Device pixels per CSS pixel, capped: the level of detail follows the
@@ -243,6 +287,14 @@ function renderInfo() {
   else bits.push(t.status);
   if (t.precompute_seconds != null) bits.push(`precomputed in ${t.precompute_seconds.toFixed(1)} s`);
   head.querySelector(".what").textContent = bits.join(" · ");
+  const grain = describeGrain(t);
+  if (grain) {
+    const g = document.createElement("div");
+    g.className = "grain";
+    g.textContent = grain;
+    g.title = "Measured on the exemplar's luminance by the structure tensor: the direction the stripes run, in degrees from the image's u axis towards v";
+    head.append(g);
+  }
   const det = document.createElement("details");
   det.id = "params";
   det.open = wasOpen;
@@ -293,6 +345,14 @@ function renderInset() {
     img.src = src;
   }
   fig.querySelector("figcaption").textContent = `exemplar ${t.exemplar.width}×${t.exemplar.height}`;
+  // The detected grain as a line across the exemplar (v points down).
+  const line = fig.querySelector(".grain");
+  const o = t.orientation;
+  line.hidden = !o || o.grain_degrees == null || !(o.coherence >= 0.3);
+  if (!line.hidden) {
+    line.style.transform = `translate(-50%, -50%) rotate(${o.grain_degrees}deg)`;
+    line.title = describeGrain(t);
+  }
 }
 
 function select(t) {
@@ -315,16 +375,19 @@ function select(t) {
     for (let k = t.max_lod; k >= 0; k--) {
       const o = document.createElement("option");
       o.value = String(k);
-      o.textContent = `lod ${k}`;
+      o.textContent = k === 0 ? "lod 0 (finest)" : `lod ${k}`;
       lodSel.append(o);
     }
-    state.blockLod = t.max_lod;
-    lodSel.value = String(t.max_lod);
+    // The finest level: coarse levels lose the exemplar's small features
+    // (wood's grain), and the preview shows the coarsest first anyway.
+    state.blockLod = 0;
+    lodSel.value = "0";
   }
   state.scale = Math.max(minScale(), state.scale);
   if (linkedView) applyLinkedView();
   plane.invalidate(true);
   solid.invalidate();
+  meshView.bake();
 }
 
 async function remove(t) {
@@ -465,10 +528,36 @@ function centreVoxel() {
 // The view in the address (#t=ID&m=slice&a=z&p=0&c=0,0&s=2&yaw=30&pitch=35),
 // so that a place in the infinite texture can be bookmarked and shared.
 
-let linkedView = (() => {
+function viewInAddress() {
   const q = new URLSearchParams(location.hash.slice(1));
   return q.has("t") ? Object.fromEntries(q) : null;
-})();
+}
+let linkedView = viewInAddress();
+
+/// An address edited in an open tab (or Back and Forward between views)
+/// moves the view there, selecting its texture when it is another.
+function followAddress() {
+  const q = viewInAddress();
+  if (!q || location.hash === lastLink) return;
+  const t = state.textures.find((x) => x.id === q.t);
+  if (!t) {
+    say(`the address names a texture this server does not list: ${q.t}`, true);
+    return;
+  }
+  linkedView = q;
+  if (state.selected && state.selected.id === t.id && t.status === "ready") {
+    const mode = state.mode;
+    applyLinkedView();
+    if (state.mode === mode) {
+      if (mode === "solid") solid.invalidate();
+      else if (mode === "mesh") meshView.bake();
+      else plane.invalidate(true);
+    }
+    updateDownloads();
+  } else {
+    select(t);
+  }
+}
 
 /// Applies the view named in the address, once its texture is selected.
 function applyLinkedView() {
@@ -490,10 +579,11 @@ function applyLinkedView() {
     $(`${k}-out`).textContent = String(state[k]);
   }
   setPosition(num(q.p, state.position));
-  if (["slice", "cut", "solid"].includes(q.m) && q.m !== state.mode) setMode(q.m);
+  if (["slice", "cut", "solid", "mesh"].includes(q.m) && q.m !== state.mode) setMode(q.m);
 }
 
 let linkTimer = null;
+let lastLink = location.hash; // the address as the viewer last wrote it
 function updateLink() {
   clearTimeout(linkTimer);
   linkTimer = setTimeout(() => {
@@ -503,6 +593,7 @@ function updateLink() {
     const q = `t=${encodeURIComponent(t.id)}&m=${state.mode}&a=${state.axis}&p=${state.position}&c=${c}` +
       `&s=${+state.scale.toPrecision(4)}&yaw=${state.yaw}&pitch=${state.pitch}`;
     if (location.hash !== `#${q}`) history.replaceState(null, "", `#${q}`);
+    lastLink = location.hash;
   }, 400);
 }
 
@@ -533,7 +624,7 @@ function updateDownloads() {
 
 function setupDownloads() {
   $("download-png").addEventListener("click", (e) => {
-    const canvas = state.mode === "solid" ? $("solid") : $("plane");
+    const canvas = state.mode === "solid" ? $("solid") : state.mode === "mesh" ? $("mesh") : $("plane");
     const a = $("download-png");
     if (a.dataset.ready === "1") {
       a.dataset.ready = "0";
@@ -619,7 +710,7 @@ const plane = (() => {
   /// What the canvas shows now: the plane, where, and at which scale.
   function currentView() {
     const t = state.selected;
-    if (!t || t.status !== "ready" || state.mode === "solid") return null;
+    if (!t || t.status !== "ready" || !planar()) return null;
     const [W, H] = size();
     const ps = state.scale * dpr(); // device pixels per finest voxel
     const v = {
@@ -642,8 +733,9 @@ const plane = (() => {
       // nearest voxel, which depends on a thinner sheet of voxels (a cold
       // cut costs about a quarter less) and looks the same there.
       const filter = 2 ** v.target * ps >= 1.5 ? "trilinear" : "nearest";
-      // A stale frame of another cut still stands in while tiles arrive.
-      v.plane = `${t.id}|c`;
+      // Another angle is another plane: its old frame is held whole until
+      // the new one covers the view, never drawn under the new tiles.
+      v.plane = `${t.id}|c|${yaw}|${pitch}`;
       v.source = () => `${v.plane}|${yaw}|${pitch}|${pos}|${filter}`;
       const f = (a) => a.map((x) => (Math.abs(x) < 5e-7 ? 0 : x).toFixed(6)).join(",");
       // Pixel (x, y) of tile (i, j) at lod l is n·pos + u·(i·T + x)·2^l +
@@ -662,11 +754,12 @@ const plane = (() => {
 
   /// The tiles of `lod` that the view `v` shows, nearest the centre first,
   /// each with the part `need` of it that shows.
-  function tiles(v, lod) {
+  function tiles(v, lod, grow = 1) {
     const k = 2 ** lod, span = TILE * k;
-    // The view in lod-l pixels.
-    const x0 = (v.cx - v.W / 2 / v.ps) / k, x1 = (v.cx + v.W / 2 / v.ps) / k;
-    const y0 = (v.cy - v.H / 2 / v.ps) / k, y1 = (v.cy + v.H / 2 / v.ps) / k;
+    // The view (grown `grow` times about its centre) in lod-l pixels.
+    const hw = (grow * v.W) / 2 / v.ps, hh = (grow * v.H) / 2 / v.ps;
+    const x0 = (v.cx - hw) / k, x1 = (v.cx + hw) / k;
+    const y0 = (v.cy - hh) / k, y1 = (v.cy + hh) / k;
     const i0 = Math.floor(x0 / TILE), i1 = Math.ceil(x1 / TILE) - 1;
     const j0 = Math.floor(y0 / TILE), j1 = Math.ceil(y1 / TILE) - 1;
     const src = v.source(lod);
@@ -730,6 +823,30 @@ const plane = (() => {
     ctx.drawImage(e.bmp, sx0, sy0, sx1 - sx0, sy1 - sy0);
   }
 
+  // A level magnified smoothly is laid out whole at its own pixels first
+  // and scaled once: each tile scaled on its own would be smoothed against
+  // its own clamped edge, a cross of seams where tiles meet.
+  const mosaic = document.createElement("canvas");
+  const mosaicCtx = mosaic.getContext("2d");
+  function drawMosaic(v, list) {
+    const k = 2 ** v.target, s = k * v.ps;
+    const x0 = Math.floor((v.cx - v.W / 2 / v.ps) / k) - 1, x1 = Math.ceil((v.cx + v.W / 2 / v.ps) / k) + 1;
+    const y0 = Math.floor((v.cy - v.H / 2 / v.ps) / k) - 1, y1 = Math.ceil((v.cy + v.H / 2 / v.ps) / k) + 1;
+    const w = x1 - x0, h = y1 - y0;
+    if (mosaic.width !== w || mosaic.height !== h) {
+      mosaic.width = w;
+      mosaic.height = h;
+    } else {
+      mosaicCtx.clearRect(0, 0, w, h);
+    }
+    for (const tile of list) {
+      const e = touch(tile.key);
+      if (e) mosaicCtx.drawImage(e.bmp, tile.i * TILE + e.r[0] - x0, tile.j * TILE + e.r[1] - y0);
+    }
+    ctx.imageSmoothingEnabled = true;
+    ctx.drawImage(mosaic, (x0 * k - v.cx) * v.ps + v.W / 2, (y0 * k - v.cy) * v.ps + v.H / 2, w * s, h * s);
+  }
+
   function requestDraw() {
     if (drawQueued) return;
     drawQueued = true;
@@ -750,13 +867,33 @@ const plane = (() => {
     const want = tiles(v, v.target);
     const done = want.filter(have).length;
     const complete = done === want.length;
+    // Whether some level covers the whole view already (coarse at first).
+    let covered = complete;
+    for (let lod = v.target + 1; lod <= v.t.max_lod && !covered; lod++) covered = tiles(v, lod).every(have);
+    // The last complete frame of another plane of this texture (another
+    // cut angle, axis or view) stays whole until the new one covers the
+    // view: half of one against half of the other reads as neither.
+    const held = !covered && snapshot && snapshot.plane !== v.plane && snapshot.tid === v.t.id;
+    canvas.dataset.held = held ? "1" : "0";
     if (!complete) {
-      if (snapshot && snapshot.plane === v.plane) {
+      if (snapshot && (snapshot.plane === v.plane || held)) {
         // The last complete frame, where it lies in this one.
         const s = snapshot, f = v.ps / s.ps;
         ctx.imageSmoothingEnabled = true;
         ctx.drawImage(s.canvas, (s.cx - s.W / 2 / s.ps - v.cx) * v.ps + W / 2, (s.cy - s.H / 2 / s.ps - v.cy) * v.ps + H / 2, s.W * f, s.H * f);
       }
+    }
+    if (held) {
+      canvas.dataset.lod = String(v.target);
+      canvas.dataset.tiles = `${done}/${want.length}`;
+      canvas.dataset.complete = "0";
+      canvas.dataset.covered = "0";
+      $("progress").firstChild.style.width = `${(100 * Math.max(done, 0.3)) / want.length}%`;
+      hud(v, done, want.length);
+      fieldUi.draw(v);
+      return;
+    }
+    if (!complete) {
       // Coarser levels scaled up (smoothly), then a finer level cached
       // from before a zoom-out.
       ctx.imageSmoothingEnabled = true;
@@ -778,17 +915,19 @@ const plane = (() => {
     }
     // The target level: crisp voxels when magnified twice or more, except
     // in cuts, whose pixels are trilinear samples of the plane.
-    ctx.imageSmoothingEnabled = v.mode === "cut" || 2 ** v.target * v.ps < 2;
-    for (const tile of want) {
-      const e = touch(tile.key);
-      if (e) drawTile(v, tile, e);
+    const smooth = v.mode === "cut" || 2 ** v.target * v.ps < 2;
+    if (smooth && 2 ** v.target * v.ps > 1.01) {
+      drawMosaic(v, want);
+    } else {
+      ctx.imageSmoothingEnabled = smooth;
+      for (const tile of want) {
+        const e = touch(tile.key);
+        if (e) drawTile(v, tile, e);
+      }
     }
     canvas.dataset.lod = String(v.target);
     canvas.dataset.tiles = `${done}/${want.length}`;
     canvas.dataset.complete = complete ? "1" : "0";
-    // Whether some level covers the whole view already (coarse at first).
-    let covered = complete;
-    for (let lod = v.target + 1; lod <= v.t.max_lod && !covered; lod++) covered = tiles(v, lod).every(have);
     canvas.dataset.covered = covered ? "1" : "0";
     $("progress").firstChild.style.width = complete ? "0" : `${(100 * Math.max(done, 0.3)) / want.length}%`;
     if (complete) {
@@ -800,7 +939,7 @@ const plane = (() => {
         snapshot = { canvas: c };
       }
       snapshot.canvas.getContext("2d").drawImage(canvas, 0, 0);
-      Object.assign(snapshot, { plane: v.plane, cx: v.cx, cy: v.cy, ps: v.ps, W, H });
+      Object.assign(snapshot, { plane: v.plane, tid: v.t.id, cx: v.cx, cy: v.cy, ps: v.ps, W, H });
     }
     hud(v, done, want.length);
     fieldUi.draw(v);
@@ -833,6 +972,13 @@ const plane = (() => {
         for (let lod = coarse; lod > v.target && !covered; lod--) covered = tiles(v, lod).every(have);
         if (state.progressive && coarse > v.target && !covered) wanted.push(...tiles(v, coarse).filter((x) => !have(x)));
         wanted.push(...want);
+      } else if (state.progressive) {
+        // The view is whole: a coarse backdrop twice its size, so that a
+        // zoom out (or a pan) shows a coarser level scaled up at once
+        // rather than background while its own tiles arrive.
+        const coarse = Math.min(v.t.max_lod, v.target + 2);
+        const backdrop = coarse > v.target ? tiles(v, coarse, 2) : [];
+        if (backdrop.length <= 40) wanted.push(...backdrop.filter((x) => !have(x)));
       }
     }
     const keys = new Set(wanted.map((x) => x.key));
@@ -921,7 +1067,7 @@ const plane = (() => {
   // Redraws at once from the cache; asks for missing tiles now
   // (`immediate`) or within a few frames while the view keeps moving.
   function invalidate(immediate) {
-    if (!state.selected || state.selected.status !== "ready" || state.mode === "solid") return;
+    if (!state.selected || state.selected.status !== "ready" || !planar()) return;
     canvas.dataset.complete = "0";
     canvas.dataset.covered = "0";
     requestDraw();
@@ -996,7 +1142,7 @@ const plane = (() => {
   // the first image and every later one fill it.
   new ResizeObserver(() => {
     size();
-    if (state.mode !== "solid") invalidate(false);
+    if (planar()) invalidate(false);
   }).observe(canvas);
 
   return {
@@ -1021,6 +1167,7 @@ const plane = (() => {
       if (o.scale != null) state.scale = Math.max(minScale(), Math.min(MAX_SCALE, o.scale));
       if (o.mode && o.mode !== state.mode) setMode(o.mode);
       else if (state.mode === "solid") solid.invalidate();
+      else if (state.mode === "mesh") meshView.bake();
       else invalidate(true);
     },
     stats: () => ({ cached: cache.size, inflight: inflight.size, queued: queue.length, failed: failed.size }),
@@ -1030,9 +1177,27 @@ const plane = (() => {
 // ---------------------------------------------------------------------
 // 3D preview (WebGL2 ray casting through one brick)
 
+/// A linked WebGL2 program; `attributes` get locations 0, 1, … in order.
+function glProgram(gl, vs, fs, attributes) {
+  const sh = (type, src) => {
+    const s = gl.createShader(type);
+    gl.shaderSource(s, src);
+    gl.compileShader(s);
+    if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+    return s;
+  };
+  const prog = gl.createProgram();
+  gl.attachShader(prog, sh(gl.VERTEX_SHADER, vs));
+  gl.attachShader(prog, sh(gl.FRAGMENT_SHADER, fs));
+  attributes.forEach((n, i) => gl.bindAttribLocation(prog, i, n));
+  gl.linkProgram(prog);
+  if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(prog));
+  return prog;
+}
+
 const solid = (() => {
   const canvas = $("solid");
-  let gl = null, prog = null, tex = null, loaded = null, controller = null, uniforms = {};
+  let gl = null, prog = null, tex = null, loaded = null, shown = false, controller = null, uniforms = {};
   canvas.dataset.drawn = "0";
 
   const VS = `#version 300 es
@@ -1050,8 +1215,9 @@ const solid = (() => {
     out vec4 color;
     uniform sampler3D volume;
     uniform vec3 eye, right, up, fwd;
-    uniform float aspect, sphere, carve;
+    uniform float aspect, sphere, carve, texel;
     uniform vec3 cutNormal;
+    float lum(vec3 q) { return dot(texture(volume, q).rgb, vec3(0.299, 0.587, 0.114)); }
     void main() {
       vec3 dir = normalize(fwd + ndc.x * aspect * 0.55 * right + ndc.y * 0.55 * up);
       vec3 inv = 1.0 / dir;
@@ -1080,27 +1246,27 @@ const solid = (() => {
       }
       if (enter >= leave || leave <= 0.0) { color = vec4(0.08, 0.085, 0.1, 1.0); return; }
       vec3 p = eye + max(enter, 0.0) * dir;
-      vec3 rgb = texture(volume, clamp(p * 0.5 + 0.5, 0.0, 1.0)).rgb;
-      float light = 0.45 + 0.55 * max(dot(normal, -dir), 0.0);
-      color = vec4(rgb * light, 1.0);
+      vec3 q = clamp(p * 0.5 + 0.5, 0.0, 1.0);
+      vec3 rgb = texture(volume, q).rgb;
+      // Relief: the luminance as a height of two voxels, its slope along
+      // the surface tilting the normal, so that veins and pores catch the
+      // light.
+      vec3 g = vec3(lum(q + vec3(texel, 0, 0)) - lum(q - vec3(texel, 0, 0)),
+                    lum(q + vec3(0, texel, 0)) - lum(q - vec3(0, texel, 0)),
+                    lum(q + vec3(0, 0, texel)) - lum(q - vec3(0, 0, texel)));
+      g -= normal * dot(g, normal);
+      vec3 nb = normalize(normal - g);
+      vec3 key = normalize(-dir + vec3(-0.35, -0.55, 0.0));
+      float light = 0.32 + 0.78 * max(dot(nb, key), 0.0);
+      float spec = pow(max(dot(nb, normalize(key - dir)), 0.0), 40.0) * 0.15;
+      color = vec4(rgb * light + spec, 1.0);
     }`;
 
   function init() {
     if (gl) return true;
     gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true });
     if (!gl) return false;
-    const sh = (type, src) => {
-      const s = gl.createShader(type);
-      gl.shaderSource(s, src);
-      gl.compileShader(s);
-      if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
-      return s;
-    };
-    prog = gl.createProgram();
-    gl.attachShader(prog, sh(gl.VERTEX_SHADER, VS));
-    gl.attachShader(prog, sh(gl.FRAGMENT_SHADER, FS));
-    gl.linkProgram(prog);
-    if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(prog));
+    prog = glProgram(gl, VS, FS, []);
     gl.useProgram(prog);
     const buf = gl.createBuffer();
     gl.bindBuffer(gl.ARRAY_BUFFER, buf);
@@ -1108,7 +1274,7 @@ const solid = (() => {
     const loc = gl.getAttribLocation(prog, "corner");
     gl.enableVertexAttribArray(loc);
     gl.vertexAttribPointer(loc, 2, gl.FLOAT, false, 0, 0);
-    for (const n of ["volume", "eye", "right", "up", "fwd", "aspect", "sphere", "carve", "cutNormal"]) {
+    for (const n of ["volume", "eye", "right", "up", "fwd", "aspect", "sphere", "carve", "cutNormal", "texel"]) {
       uniforms[n] = gl.getUniformLocation(prog, n);
     }
     tex = gl.createTexture();
@@ -1116,7 +1282,7 @@ const solid = (() => {
   }
 
   function render() {
-    if (!gl || !loaded) return;
+    if (!gl || !shown) return;
     const r = canvas.getBoundingClientRect();
     const w = Math.max(1, Math.round(r.width)), h = Math.max(1, Math.round(r.height));
     if (canvas.width !== w || canvas.height !== h) {
@@ -1166,43 +1332,86 @@ const solid = (() => {
       say(`WebGL setup failed: ${e.message}`, true);
       return;
     }
-    const lod = state.blockLod ?? t.max_lod;
-    const e = t.brick_size, k = 2 ** lod;
+    const e = t.brick_size;
     const c = { x: 0, y: 0, z: 0 };
     const frame = { z: ["x", "y"], x: ["y", "z"], y: ["z", "x"] }[state.axis];
     c[frame[0]] = state.center[0];
     c[frame[1]] = state.center[1];
     c[state.axis] = state.position;
-    const b = ["x", "y", "z"].map((a) => Math.floor(c[a] / k / e));
-    const key = `${t.id}/${lod}/${b.join("_")}`;
+    let lod = state.blockLod ?? 0;
+    const brick = (l) => ["x", "y", "z"].map((a) => Math.floor(c[a] / 2 ** l / e));
+    const key = `${t.id}/${lod}/${brick(lod).join("_")}`;
     if (loaded === key) {
       render();
       return;
     }
     if (controller) controller.abort();
-    controller = new AbortController();
-    $("hud").textContent = `loading brick ${b.join(", ")} at lod ${lod} (${e}³ voxels)…`;
-    let data;
-    try {
-      const res = await fetch(`${API}/${t.id}/bricks/${lod}/${b.join("_")}.raw`, { signal: controller.signal });
-      if (!res.ok) throw new Error(await errorText(res));
-      data = new Uint8Array(await res.arrayBuffer());
-    } catch (err) {
-      if (err.name !== "AbortError") say(`could not load the brick: ${err.message}`, true);
-      return;
+    const ctrl = new AbortController();
+    controller = ctrl;
+    const get = async (url) => {
+      const res = await fetch(url, { signal: ctrl.signal });
+      if (!res.ok) {
+        const err = new Error(await errorText(res));
+        err.status = res.status;
+        throw err;
+      }
+      return new Uint8Array(await res.arrayBuffer());
+    };
+    // The same block at the coarsest level first (a few voxels, quick),
+    // drawn until the chosen level arrives.
+    let fine = null;
+    const coarseLod = Math.min(t.max_lod, lod + 3, lod + Math.log2(e) - 1);
+    if (coarseLod > lod) {
+      const f = 2 ** (coarseLod - lod), n = e / f, o = brick(lod).map((x) => (x * e) / f);
+      get(`${API}/${t.id}/region.raw?x=${o[0]}&y=${o[1]}&z=${o[2]}&w=${n}&h=${n}&d=${n}&lod=${coarseLod}`)
+        .then((data) => {
+          if (!fine && controller === ctrl) upload(data, n, coarseLod, `coarse preview at lod ${coarseLod} while lod ${lod} loads…`);
+        })
+        .catch(() => {});
     }
+    // The chosen level, or the finest the server's work budget allows.
+    for (;;) {
+      const b = brick(lod);
+      $("hud").textContent = `loading brick ${b.join(", ")} at lod ${lod} (${e}³ voxels)…`;
+      try {
+        fine = await get(`${API}/${t.id}/bricks/${lod}/${b.join("_")}.raw`);
+        break;
+      } catch (err) {
+        if (err.name === "AbortError") return;
+        if (err.status === 400 && /over_budget|too_large/.test(err.message) && lod < t.max_lod) {
+          lod++;
+          continue;
+        }
+        say(`could not load the brick: ${err.message}`, true);
+        return;
+      }
+    }
+    if (controller !== ctrl) return;
+    upload(fine, e, lod, null);
+    loaded = key;
+    const b = brick(lod);
+    $("hud").textContent = `brick ${b.join(", ")} · lod ${lod} · ${e}³ voxels · drag to orbit, wheel to zoom`;
+    render();
+  }
+
+  function upload(data, n, lod, hud) {
     gl.activeTexture(gl.TEXTURE0);
     gl.bindTexture(gl.TEXTURE_3D, tex);
     gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
-    gl.texImage3D(gl.TEXTURE_3D, 0, gl.RGB8, e, e, e, 0, gl.RGB, gl.UNSIGNED_BYTE, data);
+    gl.texImage3D(gl.TEXTURE_3D, 0, gl.RGB8, n, n, n, 0, gl.RGB, gl.UNSIGNED_BYTE, data);
+    gl.useProgram(prog);
+    gl.uniform1f(uniforms.texel, 1 / n);
     gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
     gl.texParameteri(gl.TEXTURE_3D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
     for (const w of [gl.TEXTURE_WRAP_S, gl.TEXTURE_WRAP_T, gl.TEXTURE_WRAP_R]) {
       gl.texParameteri(gl.TEXTURE_3D, w, gl.CLAMP_TO_EDGE);
     }
-    loaded = key;
-    $("hud").textContent = `brick ${b.join(", ")} · lod ${lod} · ${e}³ voxels · drag to orbit, wheel to zoom`;
-    render();
+    canvas.dataset.lod = String(lod);
+    shown = true;
+    if (hud) {
+      $("hud").textContent = hud;
+      render();
+    }
   }
 
   let drag = null;
@@ -1227,6 +1436,7 @@ const solid = (() => {
 
   function clear() {
     loaded = null;
+    shown = false;
     if (gl) {
       gl.clearColor(0.08, 0.085, 0.1, 1);
       gl.clear(gl.COLOR_BUFFER_BIT);
@@ -1236,20 +1446,554 @@ const solid = (() => {
   return { invalidate, render, clear, orbit(dy, dp) { state.orbit.yaw += dy; state.orbit.pitch = Math.max(-89, Math.min(89, state.orbit.pitch + dp)); render(); } };
 })();
 
+
+// ---------------------------------------------------------------------
+// Mesh view: a model baked through the bake route, lit so that the
+// texture's relief shows, cut by a plane whose cap is the solid's own
+// image on that plane (the cut route).
+
+/// The model shipped with the repository (tests/fixtures/meshes/torus.obj,
+/// CC0 1.0), written the way its generator torus.py writes it.
+function torusObj() {
+  const RINGS = 48, SIDES = 24, R = 1.0, r = 0.35, f = (x) => x.toFixed(6);
+  const lines = ["# torus, 48 x 24 quads, generated by torus.py (CC0 1.0)"];
+  for (let i = 0; i <= RINGS; i++) {
+    const a = (2 * Math.PI * i) / RINGS;
+    for (let j = 0; j <= SIDES; j++) {
+      const b = (2 * Math.PI * j) / SIDES;
+      const x = (R + r * Math.cos(b)) * Math.cos(a), y = (R + r * Math.cos(b)) * Math.sin(a), z = r * Math.sin(b);
+      lines.push(`v ${f(x)} ${f(y)} ${f(z)}`);
+    }
+  }
+  for (let i = 0; i <= RINGS; i++) for (let j = 0; j <= SIDES; j++) lines.push(`vt ${f(i / RINGS)} ${f(j / SIDES)}`);
+  const W = SIDES + 1;
+  for (let i = 0; i < RINGS; i++) {
+    for (let j = 0; j < SIDES; j++) {
+      const a = i * W + j + 1, b = (i + 1) * W + j + 1, c = (i + 1) * W + j + 2, d = i * W + j + 2;
+      lines.push(`f ${a}/${a} ${b}/${b} ${c}/${c} ${d}/${d}`);
+    }
+  }
+  return lines.join("\n") + "\n";
+}
+
+/// The parts of a glTF binary the mesh view draws: positions, normals,
+/// texture coordinates or colours, indices and the base colour image.
+function parseGlb(buf) {
+  const dv = new DataView(buf);
+  if (buf.byteLength < 28 || dv.getUint32(0, true) !== 0x46546c67) throw new Error("not a glTF binary");
+  const jsonLen = dv.getUint32(12, true);
+  const doc = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 20, jsonLen)));
+  const binStart = 20 + jsonLen + 8;
+  const bin = new Uint8Array(buf, binStart, dv.getUint32(20 + jsonLen, true));
+  const view = (i) => {
+    const v = doc.bufferViews[i];
+    return bin.slice(v.byteOffset || 0, (v.byteOffset || 0) + v.byteLength);
+  };
+  const SIZE = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4 };
+  const accessor = (i) => {
+    const a = doc.accessors[i];
+    const bytes = view(a.bufferView).slice(a.byteOffset || 0);
+    const n = a.count * SIZE[a.type];
+    if (a.componentType === 5126) return new Float32Array(bytes.buffer, 0, n);
+    if (a.componentType === 5125) return new Uint32Array(bytes.buffer, 0, n);
+    if (a.componentType === 5123) return Uint32Array.from(new Uint16Array(bytes.buffer, 0, n));
+    throw new Error(`accessor component type ${a.componentType}`);
+  };
+  const prim = doc.meshes[0].primitives[0];
+  const at = prim.attributes;
+  const out = {
+    positions: accessor(at.POSITION),
+    normals: at.NORMAL != null ? accessor(at.NORMAL) : null,
+    uvs: at.TEXCOORD_0 != null ? accessor(at.TEXCOORD_0) : null,
+    colours: at.COLOR_0 != null ? accessor(at.COLOR_0) : null,
+    indices: prim.indices != null ? accessor(prim.indices) : null,
+    image: null,
+  };
+  const mat = doc.materials && doc.materials[prim.material || 0];
+  const bct = mat && mat.pbrMetallicRoughness && mat.pbrMetallicRoughness.baseColorTexture;
+  if (bct) {
+    const img = doc.images[doc.textures[bct.index].source];
+    out.image = new Blob([view(img.bufferView)], { type: img.mimeType });
+  }
+  return out;
+}
+
+// 4×4 matrices, column-major as WebGL reads them.
+const mat4 = {
+  mul(a, b) {
+    const o = new Float32Array(16);
+    for (let c = 0; c < 4; c++) for (let r = 0; r < 4; r++) {
+      let s = 0;
+      for (let k = 0; k < 4; k++) s += a[k * 4 + r] * b[c * 4 + k];
+      o[c * 4 + r] = s;
+    }
+    return o;
+  },
+  perspective(fovy, aspect, near, far) {
+    const f = 1 / Math.tan(fovy / 2), nf = 1 / (near - far);
+    return new Float32Array([f / aspect, 0, 0, 0, 0, f, 0, 0, 0, 0, (far + near) * nf, -1, 0, 0, 2 * far * near * nf, 0]);
+  },
+  lookAt(eye, at, up) {
+    const sub = (a, b) => a.map((x, i) => x - b[i]);
+    const norm = (a) => { const l = Math.hypot(...a); return a.map((x) => x / l); };
+    const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    const z = norm(sub(eye, at)), x = norm(cross(up, z)), y = cross(z, x);
+    return new Float32Array([x[0], y[0], z[0], 0, x[1], y[1], z[1], 0, x[2], y[2], z[2], 0, -dot(x, eye), -dot(y, eye), -dot(z, eye), 1]);
+  },
+};
+
+const CAP_PART = 160; // side of the parts a cap is asked for in
+
+const meshView = (() => {
+  const canvas = $("mesh");
+  let gl = null, prog = null, u = {};
+  let model = null; // { vao, count, tex, lo, hi, longest, resolution, key }
+  let cap = null; // { tex, key, url, w, h, pixels }
+  let capWant = null, capCtrl = null, bakeCtrl = null;
+  let source = { name: "torus.obj (shipped, CC0)", body: null, format: "obj" };
+  const cam = { yaw: 35, pitch: 28, distance: 2.6 };
+  canvas.dataset.drawn = "0";
+
+  const VS = `#version 300 es
+    in vec3 position;
+    in vec3 normal;
+    in vec2 uv;
+    in vec3 colour;
+    uniform mat4 viewProj;
+    out vec3 vPos;
+    out vec3 vNormal;
+    out vec2 vUv;
+    out vec3 vColour;
+    void main() {
+      vPos = position; vNormal = normal; vUv = uv; vColour = colour;
+      gl_Position = viewProj * vec4(position, 1.0);
+    }`;
+  // Base colour from the baked texture (or the cap's cut image); a bump
+  // from its luminance (surface gradient of the height, without tangents)
+  // so that the grain and pores catch the light; a warm key light, a cool
+  // fill, sky and ground ambient and a little gloss.
+  const FS = `#version 300 es
+    precision highp float;
+    in vec3 vPos;
+    in vec3 vNormal;
+    in vec2 vUv;
+    in vec3 vColour;
+    uniform sampler2D base;
+    uniform int useTexture;
+    uniform vec4 clipPlane; // keeps dot(n, p) <= d
+    uniform int clip;
+    uniform vec3 eye;
+    uniform float bump;
+    uniform vec3 keyDir;
+    out vec4 color;
+    void main() {
+      if (clip == 1 && dot(clipPlane.xyz, vPos) > clipPlane.w) discard;
+      vec3 albedo = useTexture == 1 ? texture(base, vUv).rgb : vColour;
+      vec3 n = normalize(vNormal);
+      vec3 v = normalize(eye - vPos);
+      if (dot(n, v) < 0.0) n = -n;
+      float h = dot(albedo, vec3(0.299, 0.587, 0.114)) * bump;
+      vec3 dpdx = dFdx(vPos), dpdy = dFdy(vPos);
+      vec3 r1 = cross(dpdy, n), r2 = cross(n, dpdx);
+      float det = dot(dpdx, r1);
+      vec3 grad = sign(det) * (dFdx(h) * r1 + dFdy(h) * r2);
+      n = normalize(abs(det) * n - grad);
+      // The key light follows the camera (above and to its left), so that
+      // whatever faces the viewer, caps included, is lit from one side.
+      vec3 key = normalize(keyDir), fill = normalize(-keyDir + vec3(0.0, -0.3, 0.0));
+      float sky = 0.5 + 0.5 * n.y;
+      vec3 ambient = mix(vec3(0.10, 0.09, 0.08), vec3(0.22, 0.24, 0.28), sky);
+      vec3 light = ambient + vec3(1.0, 0.93, 0.82) * max(dot(n, key), 0.0) * 0.9
+                 + vec3(0.35, 0.42, 0.55) * max(dot(n, fill), 0.0) * 0.45;
+      float spec = pow(max(dot(n, normalize(key + v)), 0.0), 40.0) * 0.18;
+      vec3 rgb = albedo * light + spec;
+      color = vec4(pow(rgb, vec3(1.0 / 1.1)), 1.0);
+    }`;
+
+  function init() {
+    if (gl) return true;
+    gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, stencil: true, antialias: true });
+    if (!gl) return false;
+    prog = glProgram(gl, VS, FS, ["position", "normal", "uv", "colour"]);
+    for (const n of ["viewProj", "base", "useTexture", "clipPlane", "clip", "eye", "bump", "keyDir"]) u[n] = gl.getUniformLocation(prog, n);
+    return true;
+  }
+
+  function buffer(loc, data, size) {
+    const b = gl.createBuffer();
+    gl.bindBuffer(gl.ARRAY_BUFFER, b);
+    gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
+    gl.enableVertexAttribArray(loc);
+    gl.vertexAttribPointer(loc, size, gl.FLOAT, false, 0, 0);
+  }
+
+  function texture(img) {
+    const t = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, t);
+    gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, gl.RGBA, gl.UNSIGNED_BYTE, img);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+    return t;
+  }
+
+  /// Bakes the model for the selected texture and shows it.
+  async function bake() {
+    const t = state.selected;
+    if (!t || t.status !== "ready" || state.mode !== "mesh") return;
+    try {
+      if (!init()) {
+        say("WebGL2 is not available in this browser: the mesh view is off", true);
+        return;
+      }
+    } catch (e) {
+      say(`WebGL setup failed: ${e.message}`, true);
+      return;
+    }
+    const resolution = Number($("mesh-res").value);
+    const body = source.body || torusObj();
+    const key = `${t.id}|${source.name}|${resolution}`;
+    if (model && model.key === key) {
+      render();
+      updateCap();
+      return;
+    }
+    if (bakeCtrl) bakeCtrl.abort();
+    const ctrl = new AbortController();
+    bakeCtrl = ctrl;
+    canvas.dataset.baked = "0";
+    const t0 = performance.now();
+    $("hud").textContent = `baking ${source.name} at resolution ${resolution}…`;
+    let parts;
+    try {
+      const q = `resolution=${resolution}&filter=trilinear&format=${source.format}`;
+      const res = await fetch(`${API}/${encodeURIComponent(t.id)}/bake?${q}`, {
+        method: "POST", body, signal: ctrl.signal,
+        headers: { "Content-Type": source.format === "obj" ? "text/plain" : "model/gltf-binary" },
+      });
+      if (!res.ok) throw new Error(await errorText(res));
+      parts = parseGlb(await res.arrayBuffer());
+      if (parts.image) parts.bitmap = await createImageBitmap(parts.image);
+    } catch (e) {
+      if (e.name !== "AbortError") {
+        say(`could not bake ${source.name}: ${e.message}`, true);
+        $("hud").textContent = "";
+      }
+      return;
+    }
+    if (bakeCtrl !== ctrl) return;
+    const vao = gl.createVertexArray();
+    gl.bindVertexArray(vao);
+    buffer(0, parts.positions, 3);
+    if (parts.normals) buffer(1, parts.normals, 3);
+    else gl.vertexAttrib3f(1, 0, 0, 1);
+    if (parts.uvs) buffer(2, parts.uvs, 2);
+    if (parts.colours) buffer(3, parts.colours.length === parts.positions.length ? parts.colours : rgbOf(parts.colours), 3);
+    else gl.vertexAttrib3f(3, 0.7, 0.7, 0.7);
+    const ib = gl.createBuffer();
+    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, ib);
+    const indices = parts.indices || Uint32Array.from(parts.positions.filter((_, i) => i % 3 === 0).map((_, i) => i));
+    gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, indices, gl.STATIC_DRAW);
+    gl.bindVertexArray(null);
+    // The bake route's placement (unturned, from the origin): the bounding
+    // box's longest side spans `resolution` voxels from its lowest corner.
+    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+    for (let i = 0; i < parts.positions.length; i += 3) {
+      for (let a = 0; a < 3; a++) {
+        lo[a] = Math.min(lo[a], parts.positions[i + a]);
+        hi[a] = Math.max(hi[a], parts.positions[i + a]);
+      }
+    }
+    if (model) dispose(model);
+    model = {
+      vao, count: indices.length, tex: parts.bitmap ? texture(parts.bitmap) : null, lo, hi,
+      longest: Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]), resolution, key,
+      triangles: indices.length / 3, texels: parts.bitmap ? `${parts.bitmap.width}×${parts.bitmap.height}` : "vertex colours",
+      seconds: (performance.now() - t0) / 1000,
+    };
+    if (parts.bitmap && parts.bitmap.close) parts.bitmap.close();
+    canvas.dataset.baked = "1";
+    canvas.dataset.triangles = String(model.triangles);
+    render();
+    updateCap();
+  }
+
+  function rgbOf(rgba) {
+    const out = new Float32Array((rgba.length / 4) * 3);
+    for (let i = 0, k = 0; i < rgba.length; i += 4) for (let c = 0; c < 3; c++) out[k++] = rgba[i + c];
+    return out;
+  }
+
+  function dispose(m) {
+    gl.deleteVertexArray(m.vao);
+    if (m.tex) gl.deleteTexture(m.tex);
+  }
+
+  /// The cutting plane in the model's units: normal n (the oblique cut's),
+  /// offset d through the box centre moved by the plane slider, and the
+  /// cap: a square on the plane around the box, with the cut route's URL
+  /// of the solid's image over it at about one pixel per voxel.
+  function capPlane() {
+    if (!model) return null;
+    const { u: U, v: V, n } = cutBasis();
+    const c0 = [0, 1, 2].map((a) => (model.lo[a] + model.hi[a]) / 2);
+    const half = Math.hypot(...[0, 1, 2].map((a) => model.hi[a] - model.lo[a])) / 2;
+    const d = n[0] * c0[0] + n[1] * c0[1] + n[2] * c0[2] + state.meshCut * half;
+    const c = c0.map((x, a) => x + (d - (n[0] * c0[0] + n[1] * c0[1] + n[2] * c0[2])) * n[a]);
+    const scale = model.resolution / model.longest; // voxels per model unit
+    const N = Math.max(16, Math.min(1024, Math.ceil(2 * half * scale)));
+    const step = (2 * half) / N; // model units per cap pixel
+    // Voxel coordinates of a model point: (p − lo)·scale (the bake's
+    // offset is 0); cap pixel (a, b) samples its centre.
+    const vox = (p) => p.map((x, a) => (x - model.lo[a]) * scale);
+    const corner = c.map((x, a) => x + (step / 2 - half) * (U[a] + V[a]));
+    const f = (a) => a.map((x) => (Math.abs(x) < 5e-7 ? 0 : x).toFixed(6)).join(",");
+    const o = vox(corner), du = U.map((x) => x * step * scale), dv = V.map((x) => x * step * scale);
+    // The cut route's image of the square, from pixel (a, b), w × h.
+    const part = (a, b, w, h) => `${API}/${encodeURIComponent(state.selected.id)}/cut.png?` +
+      `origin=${f(o.map((x, k) => x + a * du[k] + b * dv[k]))}&u=${f(du)}&v=${f(dv)}&w=${w}&h=${h}&lod=0&filter=trilinear`;
+    return { n, d, c, U, V, half, N, url: part(0, 0, N, N), part };
+  }
+
+  /// Asks for the cap's image when the plane moved (the latest plane wins).
+  async function updateCap() {
+    const p = capPlane();
+    if (!p || (cap && cap.url === p.url) || capWant === p.url) return;
+    capWant = p.url;
+    if (capCtrl) capCtrl.abort();
+    const ctrl = new AbortController();
+    capCtrl = ctrl;
+    canvas.dataset.capped = "0";
+    try {
+      // In parts of CAP_PART² pixels: the whole square at once can be over
+      // the server's work budget for one request.
+      const img = new OffscreenCanvas(p.N, p.N);
+      const g = img.getContext("2d");
+      const parts = [];
+      for (let b = 0; b < p.N; b += CAP_PART) for (let a = 0; a < p.N; a += CAP_PART) parts.push([a, b]);
+      const next = async () => {
+        for (let x; (x = parts.shift());) {
+          const [a, b] = x;
+          const res = await fetch(p.part(a, b, Math.min(CAP_PART, p.N - a), Math.min(CAP_PART, p.N - b)), { signal: ctrl.signal });
+          if (!res.ok) throw new Error(await errorText(res));
+          const bmp = await createImageBitmap(await res.blob());
+          g.drawImage(bmp, a, b);
+          if (bmp.close) bmp.close();
+        }
+      };
+      await Promise.all([next(), next(), next()]);
+      if (capCtrl !== ctrl) return;
+      if (cap && cap.tex) gl.deleteTexture(cap.tex);
+      cap = { tex: texture(img), url: p.url, img };
+      canvas.dataset.capped = "1";
+      canvas.dataset.cap = p.url;
+      render();
+    } catch (e) {
+      if (e.name !== "AbortError") say(`could not load the cap: ${e.message}`, true);
+    } finally {
+      if (capWant === p.url) capWant = null;
+    }
+  }
+
+  let capQuad = null;
+  function drawCap(p) {
+    if (!capQuad) {
+      capQuad = { vao: gl.createVertexArray(), pos: gl.createBuffer() };
+      gl.bindVertexArray(capQuad.vao);
+      gl.bindBuffer(gl.ARRAY_BUFFER, capQuad.pos);
+      gl.enableVertexAttribArray(0);
+      gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+      const uv = gl.createBuffer();
+      gl.bindBuffer(gl.ARRAY_BUFFER, uv);
+      gl.bufferData(gl.ARRAY_BUFFER, new Float32Array([0, 0, 1, 0, 1, 1, 0, 0, 1, 1, 0, 1]), gl.STATIC_DRAW);
+      gl.enableVertexAttribArray(2);
+      gl.vertexAttribPointer(2, 2, gl.FLOAT, false, 0, 0);
+      gl.bindVertexArray(null);
+    }
+    const at = (s, t) => p.c.map((x, a) => x + p.half * (s * p.U[a] + t * p.V[a]));
+    const q = [at(-1, -1), at(1, -1), at(1, 1), at(-1, -1), at(1, 1), at(-1, 1)].flat();
+    gl.bindVertexArray(capQuad.vao);
+    gl.bindBuffer(gl.ARRAY_BUFFER, capQuad.pos);
+    gl.bufferData(gl.ARRAY_BUFFER, new Float32Array(q), gl.DYNAMIC_DRAW);
+    gl.vertexAttrib3f(1, ...p.n); // the cap faces the removed side
+    gl.drawArrays(gl.TRIANGLES, 0, 6);
+    gl.bindVertexArray(null);
+  }
+
+  function render() {
+    if (!gl || !model || state.mode !== "mesh") return;
+    const r = canvas.getBoundingClientRect();
+    const d = dpr();
+    const w = Math.max(1, Math.round(r.width * d)), h = Math.max(1, Math.round(r.height * d));
+    if (canvas.width !== w || canvas.height !== h) {
+      canvas.width = w;
+      canvas.height = h;
+    }
+    gl.viewport(0, 0, w, h);
+    gl.clearColor(0.075, 0.08, 0.095, 1);
+    gl.clearStencil(0);
+    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT | gl.STENCIL_BUFFER_BIT);
+    const centre = [0, 1, 2].map((a) => (model.lo[a] + model.hi[a]) / 2);
+    const size = model.longest;
+    const cy = Math.cos((cam.yaw * Math.PI) / 180), sy = Math.sin((cam.yaw * Math.PI) / 180);
+    const cp = Math.cos((cam.pitch * Math.PI) / 180), sp = Math.sin((cam.pitch * Math.PI) / 180);
+    const dist = cam.distance * size;
+    const eye = [centre[0] + dist * cp * sy, centre[1] + dist * sp, centre[2] + dist * cp * cy];
+    const viewProj = mat4.mul(mat4.perspective(0.6, w / h, size * 0.05, size * 20), mat4.lookAt(eye, centre, [0, 1, 0]));
+    gl.useProgram(prog);
+    gl.uniformMatrix4fv(u.viewProj, false, viewProj);
+    gl.uniform3fv(u.eye, eye);
+    // Towards the camera, turned 35° to its left and 25° up.
+    const ky = ((cam.yaw - 35) * Math.PI) / 180, kp = (Math.max(-60, Math.min(80, cam.pitch + 25)) * Math.PI) / 180;
+    gl.uniform3f(u.keyDir, Math.cos(kp) * Math.sin(ky), Math.sin(kp), Math.cos(kp) * Math.cos(ky));
+    gl.uniform1i(u.base, 0);
+    gl.activeTexture(gl.TEXTURE0);
+    const p = capPlane();
+    const cutting = state.meshCut < 0.999;
+    gl.uniform4f(u.clipPlane, p.n[0], p.n[1], p.n[2], p.d);
+    gl.uniform1i(u.clip, cutting ? 1 : 0);
+    // Relief of a few voxels, in model units.
+    gl.uniform1f(u.bump, (3 * model.longest) / model.resolution);
+    gl.enable(gl.DEPTH_TEST);
+    gl.disable(gl.CULL_FACE);
+    gl.disable(gl.STENCIL_TEST);
+    gl.uniform1i(u.useTexture, model.tex ? 1 : 0);
+    if (model.tex) gl.bindTexture(gl.TEXTURE_2D, model.tex);
+    gl.bindVertexArray(model.vao);
+    gl.drawElements(gl.TRIANGLES, model.count, gl.UNSIGNED_INT, 0);
+    if (cutting && cap) {
+      // Where the plane lies inside the solid, the kept surfaces behind it
+      // are crossed an odd number of times: the stencil's parity marks
+      // the cap.
+      gl.enable(gl.STENCIL_TEST);
+      gl.stencilFunc(gl.ALWAYS, 0, 0xff);
+      gl.stencilOp(gl.KEEP, gl.KEEP, gl.INVERT);
+      gl.colorMask(false, false, false, false);
+      gl.depthMask(false);
+      gl.disable(gl.DEPTH_TEST);
+      gl.drawElements(gl.TRIANGLES, model.count, gl.UNSIGNED_INT, 0);
+      gl.colorMask(true, true, true, true);
+      gl.depthMask(true);
+      gl.enable(gl.DEPTH_TEST);
+      gl.stencilFunc(gl.NOTEQUAL, 0, 0xff);
+      gl.stencilOp(gl.KEEP, gl.KEEP, gl.KEEP);
+      gl.uniform1i(u.clip, 0);
+      gl.uniform1i(u.useTexture, 1);
+      gl.bindTexture(gl.TEXTURE_2D, cap.tex);
+      drawCap(p);
+      gl.disable(gl.STENCIL_TEST);
+    }
+    gl.bindVertexArray(null);
+    canvas.dataset.drawn = String(Number(canvas.dataset.drawn) + 1);
+    $("hud").textContent = `${source.name} · ${model.triangles} triangles · resolution ${model.resolution} · texture ${model.texels}` +
+      ` · baked in ${model.seconds.toFixed(1)} s\ndrag to orbit, shift-drag or the plane slider to move the cut, wheel to zoom`;
+  }
+
+  // Orbit with the mouse; with Shift held a drag moves the plane along its
+  // normal.
+  let drag = null;
+  canvas.addEventListener("pointerdown", (e) => {
+    canvas.focus();
+    drag = { x: e.clientX, y: e.clientY, yaw: cam.yaw, pitch: cam.pitch, cut: state.meshCut, shift: e.shiftKey };
+    canvas.setPointerCapture(e.pointerId);
+  });
+  canvas.addEventListener("pointermove", (e) => {
+    if (!drag) return;
+    if (drag.shift) {
+      const r = canvas.getBoundingClientRect();
+      setCut(drag.cut - ((e.clientY - drag.y) / r.height) * 2, false);
+      return;
+    }
+    cam.yaw = drag.yaw - (e.clientX - drag.x) * 0.4;
+    cam.pitch = Math.max(-89, Math.min(89, drag.pitch + (e.clientY - drag.y) * 0.4));
+    render();
+  });
+  const end = () => {
+    if (drag && drag.shift) updateCap();
+    drag = null;
+  };
+  canvas.addEventListener("pointerup", end);
+  canvas.addEventListener("pointercancel", end);
+  canvas.addEventListener("wheel", (e) => {
+    e.preventDefault();
+    cam.distance = Math.max(0.8, Math.min(8, cam.distance * Math.exp(e.deltaY * 0.001)));
+    render();
+  }, { passive: false });
+  new ResizeObserver(() => render()).observe(canvas);
+
+  /// Moves the plane: -1 … 1 across the model, 1 leaves it whole.
+  function setCut(x, settled) {
+    state.meshCut = Math.max(-1, Math.min(1, x));
+    $("mesh-cut").value = String(Math.round(state.meshCut * 100));
+    $("mesh-cut-out").textContent = state.meshCut.toFixed(2);
+    render();
+    if (settled !== false) updateCap();
+    else scheduleCap();
+  }
+  let capTimer = null;
+  function scheduleCap() {
+    clearTimeout(capTimer);
+    capTimer = setTimeout(updateCap, 120);
+  }
+
+  /// A mesh file the user chose or dropped: OBJ or glTF binary.
+  async function load(file) {
+    const buf = await file.arrayBuffer();
+    const head = new Uint8Array(buf, 0, Math.min(4, buf.byteLength));
+    const glb = head.length === 4 && String.fromCharCode(...head) === "glTF";
+    source = { name: file.name, body: buf, format: glb ? "glb" : "obj" };
+    model = null;
+    cap = null;
+    bake();
+  }
+  $("mesh-file").addEventListener("change", () => {
+    const f = $("mesh-file").files[0];
+    if (f) load(f);
+  });
+  $("mesh-torus").addEventListener("click", () => {
+    source = { name: "torus.obj (shipped, CC0)", body: null, format: "obj" };
+    bake();
+  });
+  canvas.addEventListener("dragover", (e) => e.preventDefault());
+  canvas.addEventListener("drop", (e) => {
+    e.preventDefault();
+    e.stopPropagation();
+    const f = e.dataTransfer && e.dataTransfer.files[0];
+    if (f) load(f);
+  });
+
+  return {
+    bake, render, setCut, torusObj, capPlane,
+    /// The cap's pixels as shown (RGBA), for checking against the cut route.
+    capPixels() {
+      if (!cap) return null;
+      const c = cap.img;
+      return { url: cap.url, w: c.width, h: c.height, data: Array.from(c.getContext("2d").getImageData(0, 0, c.width, c.height).data) };
+    },
+    model: () => model && { lo: model.lo, hi: model.hi, longest: model.longest, resolution: model.resolution, triangles: model.triangles },
+    orbit(dy, dp) { cam.yaw += dy; cam.pitch = Math.max(-89, Math.min(89, cam.pitch + dp)); render(); },
+  };
+})();
+
 // ---------------------------------------------------------------------
 // Controls
 
 function setMode(mode) {
   state.mode = mode;
   for (const b of document.querySelectorAll("nav .tab")) b.classList.toggle("active", b.dataset.mode === mode);
-  for (const l of document.querySelectorAll(".controls label")) {
+  for (const l of document.querySelectorAll(".controls [data-for]")) {
     l.hidden = !l.dataset.for.split(" ").includes(mode);
   }
-  $("plane").hidden = mode === "solid";
+  $("plane").hidden = !planar();
   $("overlay").hidden = mode !== "slice";
   $("solid").hidden = mode !== "solid";
-  $("progress").hidden = mode === "solid";
+  $("mesh").hidden = mode !== "mesh";
+  $("progress").hidden = mode === "solid" || mode === "mesh";
   if (mode === "solid") solid.invalidate();
+  else if (mode === "mesh") meshView.bake();
   else plane.invalidate(true);
   updateDownloads();
 }
@@ -1263,6 +2007,8 @@ function bindRange(id, apply, fmt) {
       if (id === "position") solid.invalidate();
       else solid.render();
       updateDownloads();
+    } else if (state.mode === "mesh") {
+      meshView.setCut(state.meshCut, settled);
     } else {
       plane.invalidate(settled);
     }
@@ -1324,6 +2070,8 @@ function setupControls() {
   bindRange("yaw", (v) => { state.yaw = v; });
   bindRange("pitch", (v) => { state.pitch = v; });
   bindRange("carve", (v) => { state.carve = v / 100; }, (v) => (v / 100).toFixed(2));
+  bindRange("mesh-cut", (v) => { state.meshCut = v / 100; }, (v) => (v / 100).toFixed(2));
+  $("mesh-res").addEventListener("change", () => meshView.bake());
   $("shape").addEventListener("change", () => {
     state.shape = $("shape").value;
     solid.render();
@@ -1341,6 +2089,7 @@ function setupControls() {
     if (k === "s") setMode("slice");
     else if (k === "c") setMode("cut");
     else if (k === "v") setMode("solid");
+    else if (k === "m") setMode("mesh");
     else if ("xyz".includes(k) && k.length === 1) {
       state.axis = k;
       $("axis").value = k;
@@ -1353,6 +2102,7 @@ function setupControls() {
       e.preventDefault();
       const d = { arrowleft: [-1, 0], arrowright: [1, 0], arrowup: [0, -1], arrowdown: [0, 1] }[k];
       if (state.mode === "solid") solid.orbit(d[0] * 5, d[1] * 5);
+      else if (state.mode === "mesh") meshView.orbit(d[0] * 5, d[1] * 5);
       else plane.pan(d[0] * 40, d[1] * 40);
     } else if (k === "+" || k === "=") {
       plane.zoom(1.25);
@@ -1385,16 +2135,7 @@ const fieldUi = (() => {
 
   const kind = () => $("f-kind").value;
 
-  /// How a field reads in a sentence.
-  function describe(f) {
-    if (!f) return "no field";
-    if (f.kind === "slant") return `slant ${f.angle}°`;
-    if (f.kind === "zigzag") return `zigzag ±${f.angle}° every ${f.period}`;
-    if (f.kind === "sketch") return `${f.curves.length} drawn curve${f.curves.length > 1 ? "s" : ""}`;
-    if (f.kind === "slant3d") return `3D slant towards ${f.direction.join(", ")}`;
-    if (f.centre) return `${f.kind} about ${f.centre.join(", ")}`;
-    return f.kind;
-  }
+  const describe = describeField;
 
   function setDrawing(on) {
     state.field.drawing = on;
@@ -1714,8 +2455,10 @@ const fieldUi = (() => {
 })();
 
 // Exposed for tests and for poking at from the console.
-window.solidtex = { state, select, setMode, upload, setView: plane.setView, stats: plane.stats, field: fieldUi };
+window.solidtex = { state, select, setMode, upload, setView: plane.setView, stats: plane.stats, field: fieldUi, mesh: meshView };
 
+window.addEventListener("hashchange", followAddress);
+window.addEventListener("popstate", followAddress);
 setupUpload();
 setupDownloads();
 setupControls();
