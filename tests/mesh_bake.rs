@@ -516,3 +516,125 @@ async fn the_served_bake_agrees_with_the_region_route() {
     }
     assert!(matched >= 24, "{matched} of 25 triangle centres");
 }
+
+/// The torus as a PLY: ASCII, or binary little- or big-endian, with a
+/// comment, texture coordinates, an extra element and int or uchar counts.
+fn torus_ply(encoding: &str) -> Vec<u8> {
+    let m = torus();
+    let (p, t, uv) = (m.positions(), m.triangles(), m.uvs().unwrap());
+    let mut out = format!(
+        "ply\nformat {encoding} 1.0\ncomment torus\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\n\
+         property float s\nproperty float t\n\
+         element face {}\nproperty list uchar int vertex_indices\n\
+         element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n",
+        p.len(),
+        t.len()
+    )
+    .into_bytes();
+    let big = encoding == "binary_big_endian";
+    let f = |out: &mut Vec<u8>, v: f32| {
+        out.extend(if big {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        })
+    };
+    let i = |out: &mut Vec<u8>, v: i32| {
+        out.extend(if big {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        })
+    };
+    for (k, q) in p.iter().enumerate() {
+        let (s, tt) = (uv[k][0], 1.0 - uv[k][1]);
+        if encoding == "ascii" {
+            out.extend(format!("{} {} {} {s} {tt}\n", q[0], q[1], q[2]).bytes());
+        } else {
+            for c in [q[0], q[1], q[2], s, tt] {
+                f(&mut out, c);
+            }
+        }
+    }
+    for tri in t {
+        if encoding == "ascii" {
+            out.extend(format!("3 {} {} {}\n", tri[0], tri[1], tri[2]).bytes());
+        } else {
+            out.push(3);
+            for &c in tri {
+                i(&mut out, c as i32);
+            }
+        }
+    }
+    if encoding == "ascii" {
+        out.extend(b"0 1\n");
+    } else {
+        i(&mut out, 0);
+        i(&mut out, 1);
+    }
+    out
+}
+
+#[test]
+fn ply_meshes_read_as_their_obj_does_and_bad_ones_are_refused() {
+    let obj = torus();
+    for encoding in ["ascii", "binary_little_endian", "binary_big_endian"] {
+        let bytes = torus_ply(encoding);
+        assert_eq!(MeshFormat::sniff(&bytes), MeshFormat::Ply);
+        let m = Mesh::parse(&bytes, None).unwrap();
+        assert_eq!(m.triangles(), obj.triangles(), "{encoding}");
+        assert_eq!(m.positions(), obj.positions(), "{encoding}");
+        assert_eq!(m.uvs(), obj.uvs(), "{encoding}");
+    }
+    let good = torus_ply("binary_little_endian");
+    let header_end = good.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let ascii = String::from_utf8(torus_ply("ascii")).unwrap();
+    let bad: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("truncated binary", good[..good.len() / 2].to_vec(), "invalid_request"),
+        ("header only", good[..header_end].to_vec(), "invalid_request"),
+        (
+            "10 M faces claimed",
+            String::from_utf8_lossy(&good[..header_end])
+                .replace("element face 2304", "element face 10000000")
+                .into_bytes(),
+            "too_large",
+        ),
+        (
+            "2^60 vertices claimed",
+            ascii.replace("element vertex 1225", "element vertex 1152921504606846976").into_bytes(),
+            "invalid_request",
+        ),
+        (
+            "NaN vertex",
+            ascii.replacen("\n1.35 0 0 ", "\nnan 0 0 ", 1).into_bytes(),
+            "invalid_request",
+        ),
+        (
+            "index past the vertices",
+            ascii.replacen("\n3 0 ", "\n3 99999 ", 1).into_bytes(),
+            "invalid_request",
+        ),
+        (
+            "negative index",
+            ascii.replacen("\n3 0 ", "\n3 -1 ", 1).into_bytes(),
+            "invalid_request",
+        ),
+        (
+            "no z",
+            ascii.replacen("property float z\n", "", 1).into_bytes(),
+            "invalid_request",
+        ),
+        ("no faces", b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n".to_vec(), "invalid_request"),
+        ("not PLY at all", b"ply\nhello\n".to_vec(), "invalid_request"),
+    ];
+    for (what, bytes, code) in bad {
+        let e = Mesh::parse(&bytes, None).expect_err(what);
+        let got = match e {
+            solidtex_core::Error::TooLarge(_) => "too_large",
+            solidtex_core::Error::InvalidRequest(_) => "invalid_request",
+            ref other => panic!("{what}: {other:?}"),
+        };
+        assert_eq!(got, code, "{what}: {e}");
+    }
+}

@@ -13,7 +13,7 @@ use std::time::Instant;
 
 #[derive(Args)]
 pub struct BakeArgs {
-    /// The mesh: OBJ or glTF binary (GLB).
+    /// The mesh: OBJ, PLY or glTF binary (GLB).
     mesh: PathBuf,
     #[command(flatten)]
     src: SourceArgs,

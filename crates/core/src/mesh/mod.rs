@@ -3,7 +3,7 @@
 //! the voxels its surface samples, the thin shell around it, never the
 //! volume it encloses.
 //!
-//! [`Mesh`] reads OBJ and glTF binary (GLB) from bytes and checks it, and
+//! [`Mesh`] reads OBJ, PLY and glTF binary (GLB) from bytes and checks it, and
 //! [`Mesh::cut`] splits it by planes into closed pieces;
 //! [`Placement`] puts it in texture space; [`Bake`] lays out the texels of
 //! its base-colour texture (the mesh's own UVs or a generated atlas) and is
@@ -36,27 +36,32 @@ pub enum MeshFormat {
     /// glTF 2.0 binary: every triangle primitive of the default scene
     /// (or of every mesh when there is no scene), with node transforms.
     Glb,
+    /// Stanford PLY, ASCII or binary (polygons are triangulated).
+    Ply,
 }
 
 impl MeshFormat {
     /// The format of a file by its first bytes: GLB starts with `glTF`,
-    /// anything else is read as OBJ text.
+    /// PLY with `ply` and a line end, anything else is read as OBJ text.
     pub fn sniff(bytes: &[u8]) -> MeshFormat {
         if bytes.starts_with(b"glTF") {
             MeshFormat::Glb
+        } else if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
+            MeshFormat::Ply
         } else {
             MeshFormat::Obj
         }
     }
 
-    /// The format by name (`obj`, `glb`), in either case.
+    /// The format by name (`obj`, `glb`, `ply`), in either case.
     pub fn from_name(name: &str) -> Result<MeshFormat> {
         match name.to_ascii_lowercase().as_str() {
             "obj" => Ok(MeshFormat::Obj),
             "glb" | "gltf" => Ok(MeshFormat::Glb),
+            "ply" => Ok(MeshFormat::Ply),
             _ => Err(Error::InvalidParameter {
                 name: "format",
-                reason: format!("unknown mesh format `{name}` (expected obj or glb)"),
+                reason: format!("unknown mesh format `{name}` (expected obj, glb or ply)"),
             }),
         }
     }
@@ -103,6 +108,7 @@ impl Mesh {
         let (positions, triangles, uvs) = match format.unwrap_or(MeshFormat::sniff(bytes)) {
             MeshFormat::Obj => read::obj(bytes)?,
             MeshFormat::Glb => read::glb(bytes)?,
+            MeshFormat::Ply => read::ply(bytes)?,
         };
         Mesh::new(positions, triangles, uvs)
     }

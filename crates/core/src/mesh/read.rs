@@ -4,6 +4,10 @@
 
 use super::MAX_TRIANGLES;
 use crate::error::{Error, Result};
+use ply_rs_bw::parser::{Parser, Reader};
+use ply_rs_bw::ply::{
+    ElementDef, Encoding, Property, PropertyAccess, PropertyAccessResult, PropertyType, ScalarType,
+};
 
 type Parts = (Vec<[f32; 3]>, Vec<[u32; 3]>, Option<Vec<[f32; 2]>>);
 
@@ -52,6 +56,183 @@ pub(super) fn obj(bytes: &[u8]) -> Result<Parts> {
         );
     }
     Ok((positions, tris, with_uvs.then_some(uvs)))
+}
+
+/// A vertex of a PLY file: its position and, when given, its texture
+/// coordinates (`s`/`t`, `u`/`v` or `texture_u`/`texture_v`).
+#[derive(Default)]
+struct PlyVertex {
+    p: [Option<f32>; 3],
+    uv: [Option<f32>; 2],
+}
+
+/// A face of a PLY file: its polygon's vertex indices (negative ones
+/// become an index past every vertex, refused as such).
+#[derive(Default)]
+struct PlyFace(Vec<u32>);
+
+/// An element of a PLY file that is read past (edges, materials, ...).
+struct PlySkip;
+
+fn ply_scalar(p: &Property) -> Option<f32> {
+    Some(match *p {
+        Property::Char(v) => f32::from(v),
+        Property::UChar(v) => f32::from(v),
+        Property::Short(v) => f32::from(v),
+        Property::UShort(v) => f32::from(v),
+        Property::Int(v) => v as f32,
+        Property::UInt(v) => v as f32,
+        Property::Float(v) => v,
+        Property::Double(v) => v as f32,
+        _ => return None,
+    })
+}
+
+impl PropertyAccess for PlyVertex {
+    fn new() -> Self {
+        PlyVertex::default()
+    }
+    fn set_property(&mut self, name: &str, p: Property) -> PropertyAccessResult {
+        let slot = match name {
+            "x" => &mut self.p[0],
+            "y" => &mut self.p[1],
+            "z" => &mut self.p[2],
+            "s" | "u" | "texture_u" | "texture_s" => &mut self.uv[0],
+            "t" | "v" | "texture_v" | "texture_t" => &mut self.uv[1],
+            _ => return PropertyAccessResult::Ignored,
+        };
+        match ply_scalar(&p) {
+            Some(v) => {
+                *slot = Some(v);
+                PropertyAccessResult::Set
+            }
+            None => PropertyAccessResult::UnsupportedType,
+        }
+    }
+}
+
+impl PropertyAccess for PlyFace {
+    fn new() -> Self {
+        PlyFace::default()
+    }
+    fn set_property(&mut self, name: &str, p: Property) -> PropertyAccessResult {
+        if name != "vertex_indices" && name != "vertex_index" {
+            return PropertyAccessResult::Ignored;
+        }
+        let neg = |v: i64| u32::try_from(v).unwrap_or(u32::MAX);
+        self.0 = match p {
+            Property::ListChar(v) => v.into_iter().map(|i| neg(i.into())).collect(),
+            Property::ListUChar(v) => v.into_iter().map(u32::from).collect(),
+            Property::ListShort(v) => v.into_iter().map(|i| neg(i.into())).collect(),
+            Property::ListUShort(v) => v.into_iter().map(u32::from).collect(),
+            Property::ListInt(v) => v.into_iter().map(|i| neg(i.into())).collect(),
+            Property::ListUInt(v) => v,
+            _ => return PropertyAccessResult::UnsupportedType,
+        };
+        PropertyAccessResult::Set
+    }
+}
+
+impl PropertyAccess for PlySkip {
+    fn new() -> Self {
+        PlySkip
+    }
+}
+
+/// The fewest bytes one element of `e` takes in `encoding`: a count
+/// claiming more elements than the file could hold is refused before
+/// anything is allocated for them.
+fn ply_min_bytes(e: &ElementDef, encoding: Encoding) -> usize {
+    let scalar = |t: &ScalarType| match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    };
+    e.properties
+        .values()
+        .map(|p| match (&p.data_type, encoding) {
+            // A number and its separator.
+            (_, Encoding::Ascii) => 2,
+            (PropertyType::Scalar(t), _) => scalar(t),
+            (PropertyType::List(count, _), _) => scalar(count),
+        })
+        .sum::<usize>()
+        .max(1)
+}
+
+/// A Stanford PLY, ASCII or binary: the `vertex` element's x, y, z (and
+/// texture coordinates when every vertex has them), the `face` element's
+/// polygons fanned into triangles; other elements are read past. PLY's v
+/// grows upwards; it is flipped to glTF's.
+pub(super) fn ply(bytes: &[u8]) -> Result<Parts> {
+    let bad = |e: &dyn std::fmt::Display| malformed("PLY", e);
+    let mut reader = Reader::new(std::io::BufReader::new(bytes));
+    let header = Parser::<PlySkip>::new()
+        .read_header(&mut reader)
+        .map_err(|e| bad(&e))?;
+    // The count first: a file claiming too many is refused as such.
+    if let Some(faces) = header
+        .elements
+        .get("face")
+        .filter(|f| f.count > MAX_TRIANGLES)
+    {
+        return Err(too_many(faces.count));
+    }
+    for e in header.elements.values() {
+        let least = e.count.checked_mul(ply_min_bytes(e, header.encoding));
+        if least.is_none_or(|n| n > bytes.len()) {
+            return Err(bad(&format!(
+                "the header claims {} {} elements, more than the file holds (truncated?)",
+                e.count, e.name
+            )));
+        }
+    }
+    let (mut vertices, mut faces) = (Vec::new(), Vec::new());
+    for e in header.elements.values() {
+        match e.name.as_str() {
+            "vertex" => {
+                vertices = Parser::<PlyVertex>::new()
+                    .read_payload_for_element(&mut reader, e, &header)
+                    .map_err(|e| bad(&e))?;
+            }
+            "face" => {
+                faces = Parser::<PlyFace>::new()
+                    .read_payload_for_element(&mut reader, e, &header)
+                    .map_err(|e| bad(&e))?;
+            }
+            _ => {
+                Parser::<PlySkip>::new()
+                    .read_payload_for_element(&mut reader, e, &header)
+                    .map_err(|e| bad(&e))?;
+            }
+        }
+    }
+    let mut positions = Vec::with_capacity(vertices.len());
+    for (i, v) in vertices.iter().enumerate() {
+        match v.p {
+            [Some(x), Some(y), Some(z)] => positions.push([x, y, z]),
+            _ => return Err(bad(&format!("vertex {i} lacks one of x, y and z"))),
+        }
+    }
+    let with_uvs =
+        !vertices.is_empty() && vertices.iter().all(|v| v.uv.iter().all(Option::is_some));
+    let uvs = with_uvs.then(|| {
+        vertices
+            .iter()
+            .map(|v| [v.uv[0].unwrap_or(0.0), 1.0 - v.uv[1].unwrap_or(0.0)])
+            .collect()
+    });
+    let mut tris = Vec::new();
+    for f in &faces {
+        for k in 1..f.0.len().saturating_sub(1) {
+            tris.push([f.0[0], f.0[k], f.0[k + 1]]);
+            if tris.len() > MAX_TRIANGLES {
+                return Err(too_many(tris.len()));
+            }
+        }
+    }
+    Ok((positions, tris, uvs))
 }
 
 /// Deepest node hierarchy followed (a cycle is refused by validation; a
