@@ -1,6 +1,6 @@
 //! `openapi.yaml` is a valid OpenAPI 3 document, describes exactly the
 //! routes the router serves, and its parameter sections are the ones
-//! generated from the knobs' declaration.
+//! generated from their declarations in Rust.
 
 mod common;
 mod server_support;
@@ -33,7 +33,8 @@ fn doc_routes() -> BTreeSet<(String, String)> {
 }
 
 /// The parameter sections are generated from
-/// crates/core/src/params/knobs.rs (`solidtex_server::openapi`); with
+/// crates/core/src/params/knobs.rs and the voxel routes' query structs
+/// (`solidtex_server::openapi`); with
 /// `SOLIDTEX_WRITE_OPENAPI=1` this test writes them into openapi.yaml.
 #[test]
 fn parameter_sections_are_generated_from_the_knobs() {
@@ -54,7 +55,8 @@ fn parameter_sections_are_generated_from_the_knobs() {
         .unwrap_or(on_disk.lines().count().min(generated.lines().count()));
     panic!(
         "openapi.yaml's generated sections are out of date with the knobs of \
-         crates/core/src/params/knobs.rs (first difference at line {}).\n\
+         crates/core/src/params/knobs.rs or the query structs of \
+         crates/server/src/routes (first difference at line {}).\n\
          Regenerate them with:\n    \
          SOLIDTEX_WRITE_OPENAPI=1 cargo test --release --test server_openapi \
          parameter_sections\nand commit openapi.yaml.",

@@ -1,7 +1,7 @@
 // Baked meshes read by Khronos' glTF validator (npm `gltf-validator`):
 // every bake the server answers (the mesh's own UVs, a generated atlas,
-// vertex colours, trilinear reads, a cut and a fracture into pieces, a GLB
-// sent back in) and one
+// vertex colours, trilinear reads, a cut and a fracture into pieces, a
+// PLY, a GLB sent back in) and one
 // `solidtex bake` writes report no errors; the command line's file is the
 // server's byte for byte. The files are left in ARTEFACTS.
 //
@@ -47,6 +47,16 @@ try {
   // Cut across the hole and through the ring: pieces as nodes, capped.
   await validate("torus-cut", await bake("resolution=48&cut=0,0,1,0", torus));
   await validate("torus-fracture", await bake("resolution=48&cut=0,0,1,0.05;1,0.3,0,-0.1&spread=0.1", torus));
+  // The torus as an ASCII PLY, cut.
+  const lines = torus.toString("utf8").split("\n");
+  const vs = lines.filter((l) => l.startsWith("v ")).map((l) => l.slice(2));
+  const fs = lines.filter((l) => l.startsWith("f ")).map((l) => l.slice(2).trim().split(/\s+/).map((t) => parseInt(t, 10) - 1));
+  const ply = [
+    "ply", "format ascii 1.0", `element vertex ${vs.length}`, "property float x", "property float y", "property float z",
+    `element face ${fs.length}`, "property list uchar int vertex_indices", "end_header",
+    ...vs, ...fs.map((f) => `${f.length} ${f.join(" ")}`), "",
+  ].join("\n");
+  await validate("torus-ply-cut", await bake("resolution=48&cut=1,0,0,0.1", ply));
   // A baked GLB sent back in, on its own UVs.
   await validate("torus-rebaked", await bake("resolution=64&uvs=mesh&format=glb", own));
   const out = join(ARTEFACTS, "torus-cli.glb");

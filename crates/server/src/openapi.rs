@@ -1,11 +1,14 @@
-//! The parts of openapi.yaml generated from the knobs' one declaration
-//! ([`solidtex_core::knobs`]): the upload's query parameters, each knob's
-//! parameter component, and the properties of the `Params` and
-//! `VariantParams` schemas. Each sits in the document between a marker
+//! The parts of openapi.yaml generated from the one declaration of what
+//! they describe: from the knobs ([`solidtex_core::knobs`]) the upload's
+//! query parameters, each knob's parameter component, and the properties
+//! of the `Params` and `VariantParams` schemas; from the voxel routes'
+//! query structs ([`crate::routes::documented_queries`]) their operations'
+//! query parameters, the `Lod` component and the `Vector` schema. Each sits in the document between a marker
 //! line `# generated: NAME` and `# end generated: NAME`; [`regenerate`]
 //! rewrites what is between them and leaves the rest as written.
 //! tests/server_openapi.rs checks that the file is what it gives.
 
+use crate::routes::{self, QueryParam, ValueSchema};
 use serde_json::Value;
 use solidtex_core::knobs::{self, Knob, Part, Values};
 
@@ -236,10 +239,66 @@ fn preset_schema() -> Vec<(&'static str, Node)> {
     ]
 }
 
+/// The pattern of three numbers `x,y,z` (the parser takes more: any
+/// number Rust reads, spaces around each).
+const VECTOR: &str = r"^-?[0-9]+(\.[0-9]+)?,-?[0-9]+(\.[0-9]+)?,-?[0-9]+(\.[0-9]+)?$";
+
+/// A route's query parameter as a parameter object.
+fn query_parameter(p: &QueryParam) -> Node {
+    let mut schema = match p.schema {
+        ValueSchema::Integer { min, max } => {
+            let mut s = vec![("type", text("integer"))];
+            if min < i64::from(i32::MIN) || max > i64::from(i32::MAX) {
+                s.push(("format", text("int64")));
+            }
+            s.push(("minimum", Node::Scalar(min.to_string())));
+            s.push(("maximum", Node::Scalar(max.to_string())));
+            s
+        }
+        ValueSchema::Vector => vec![("type", text("string")), ("pattern", text(VECTOR))],
+        ValueSchema::Choice(names) => vec![
+            ("type", text("string")),
+            (
+                "enum",
+                Node::Flow(names.iter().map(|n| quoted(n)).collect()),
+            ),
+        ],
+    };
+    if let Some(d) = &p.default {
+        let written = match p.schema {
+            ValueSchema::Integer { .. } => d.clone(),
+            _ => quoted(d),
+        };
+        schema.push(("default", Node::Scalar(written)));
+    }
+    Node::Map(vec![
+        ("name", text(p.name)),
+        ("in", text("query")),
+        ("description", Node::Prose(p.about.to_string())),
+        ("schema", Node::Map(schema)),
+    ])
+}
+
 /// The region called `name`, at `indent`.
 fn region(name: &str, indent: usize) -> Option<String> {
     let mut out = String::new();
     let node = match name {
+        "vector-schema" => Node::Map(vec![(
+            "Vector",
+            Node::Map(vec![
+                ("type", text("string")),
+                ("pattern", text(VECTOR)),
+                ("example", text("0.5,-3,12")),
+            ]),
+        )]),
+        "lod-parameter" => Node::Map(vec![("Lod", query_parameter(&routes::lod_parameter()))]),
+        _ if name.starts_with("query ") => {
+            let operation = &name["query ".len()..];
+            let (_, params) = routes::documented_queries()
+                .into_iter()
+                .find(|(op, _)| *op == operation)?;
+            Node::List(params.iter().map(query_parameter).collect())
+        }
         "upload-query" => Node::List(
             std::iter::once("preset")
                 .chain(knobs::KNOBS.iter().map(|k| k.name))

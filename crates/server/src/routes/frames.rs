@@ -11,8 +11,8 @@
 use super::AppState;
 use super::IMMUTABLE;
 use super::answer::{ETag, body, texture};
-use super::params::{Int, Json, Stem, TypedPath, TypedQuery};
-use super::voxels::{Coord, Lod, Side};
+use super::params::{Int, Json, Stem, TypedPath, TypedQuery, document_query};
+use super::voxels::{Coord, LOD, Lod, Side};
 use crate::error::ApiError;
 use axum::extract::State;
 use axum::http::HeaderMap;
@@ -44,6 +44,15 @@ pub(super) struct FramesQuery {
     lod: Lod,
     step: Int<1, { MAX_SLICE_SIDE as i64 }, 16>,
 }
+
+document_query!(FramesQuery {
+    u0: "First u coordinate of the sampled window.",
+    v0: "First v coordinate of the sampled window.",
+    w: "Width of the sampled window, in voxels of `lod`.",
+    h: "Height of the sampled window, in voxels of `lod`.",
+    lod: LOD,
+    step: "Distance between samples along u and v, in voxels of `lod`.",
+});
 
 fn axis_name(i: usize) -> &'static str {
     ["x", "y", "z"][i]

@@ -17,6 +17,7 @@ mod viewer;
 mod volumes;
 mod voxels;
 
+pub use params::{QueryParam, ValueSchema};
 pub use volumes::{WINDOW_LOG2, window};
 
 use super::decodes::Decodes;
@@ -69,6 +70,24 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/"),
     ("GET", "/viewer.js"),
 ];
+
+/// The query parameters of the operations whose query struct declares
+/// them, by operationId; openapi.yaml's sections `query OPERATION` are
+/// generated from these ([`crate::openapi`]).
+pub fn documented_queries() -> Vec<(&'static str, Vec<QueryParam>)> {
+    use params::DocumentedQuery;
+    vec![
+        ("getFrames", frames::FramesQuery::params()),
+        ("getSlice", voxels::SliceQuery::params()),
+        ("getCut", voxels::CutQuery::params()),
+        ("getRegion", voxels::RegionQuery::params()),
+    ]
+}
+
+/// The `lod` query parameter every voxel route takes.
+pub fn lod_parameter() -> QueryParam {
+    params::query_param(|l: voxels::Lod| l, "lod", voxels::LOD)
+}
 
 /// What handlers share.
 pub struct Shared {
@@ -444,6 +463,24 @@ mod tests {
     use crate::{ServeArgs, Server};
     use axum::body::Body;
     use tower::ServiceExt;
+
+    #[test]
+    fn documented_queries_name_every_field_in_order() {
+        use params::fields_of;
+        let fields = [
+            fields_of::<frames::FramesQuery>(),
+            fields_of::<voxels::SliceQuery>(),
+            fields_of::<voxels::CutQuery>(),
+            fields_of::<voxels::RegionQuery>(),
+        ];
+        let documented = documented_queries();
+        assert_eq!(documented.len(), fields.len());
+        for ((operation, params), fields) in documented.into_iter().zip(fields) {
+            let names: Vec<&str> = params.iter().map(|p| p.name).collect();
+            assert_eq!(names, fields, "{operation}");
+            assert!(params.iter().all(|p| !p.about.is_empty()), "{operation}");
+        }
+    }
 
     async fn boom() -> StatusCode {
         let v: Vec<u8> = Vec::new();

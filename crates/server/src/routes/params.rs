@@ -479,6 +479,187 @@ impl<'de, E: Extension, T: DeserializeOwned> Deserialize<'de> for Stem<E, T> {
     }
 }
 
+/// What a query parameter takes, as the API document states it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ValueSchema {
+    /// An integer in `min..=max`.
+    Integer {
+        /// The least accepted.
+        min: i64,
+        /// The greatest accepted.
+        max: i64,
+    },
+    /// Three numbers written `x,y,z`.
+    Vector,
+    /// One of these names.
+    Choice(&'static [&'static str]),
+}
+
+/// One query parameter as the API document describes it: declared beside
+/// the route's query struct ([`document_query!`]), its values and default
+/// read from the field's type and the struct's `Default`.
+#[derive(Clone, Debug)]
+pub struct QueryParam {
+    /// The name in the query string.
+    pub name: &'static str,
+    /// What it means, for the document.
+    pub about: &'static str,
+    /// What it takes.
+    pub schema: ValueSchema,
+    /// The value taken when it is not given, as the query writes it.
+    pub default: Option<String>,
+}
+
+/// A query struct whose parameters the document describes.
+pub(super) trait DocumentedQuery: DeserializeOwned {
+    /// Its parameters, in the struct's order.
+    fn params() -> Vec<QueryParam>;
+}
+
+/// A field type of a query struct, as the document describes its values.
+pub(super) trait QueryValue {
+    /// What the field takes.
+    fn schema() -> ValueSchema;
+    /// The value as a query writes it; `None` for one that is absent.
+    fn written(&self) -> Option<String>;
+}
+
+impl<const MIN: i64, const MAX: i64, const DEFAULT: i64> QueryValue for Int<MIN, MAX, DEFAULT> {
+    fn schema() -> ValueSchema {
+        ValueSchema::Integer { min: MIN, max: MAX }
+    }
+
+    fn written(&self) -> Option<String> {
+        Some(self.0.to_string())
+    }
+}
+
+impl QueryValue for Vec3 {
+    fn schema() -> ValueSchema {
+        ValueSchema::Vector
+    }
+
+    fn written(&self) -> Option<String> {
+        Some(self.0.map(|c| c.to_string()).join(","))
+    }
+}
+
+impl<T: QueryValue> QueryValue for Option<T> {
+    fn schema() -> ValueSchema {
+        T::schema()
+    }
+
+    fn written(&self) -> Option<String> {
+        self.as_ref().and_then(T::written)
+    }
+}
+
+/// A unit enum deserialized from its serde name.
+macro_rules! named_value {
+    ($($t:ty),*) => {$(
+        impl QueryValue for $t {
+            fn schema() -> ValueSchema {
+                ValueSchema::Choice(variants_of::<$t>())
+            }
+
+            fn written(&self) -> Option<String> {
+                serde_json::to_value(self).ok()?.as_str().map(str::to_string)
+            }
+        }
+    )*};
+}
+
+named_value!(solidtex_core::Filter);
+
+/// The names serde reads a unit enum from, in declaration order.
+fn variants_of<T: DeserializeOwned>() -> &'static [&'static str] {
+    /// Stops the enum's deserialization at the names it hands over.
+    struct Names;
+    #[derive(Debug)]
+    struct Found(&'static [&'static str]);
+    impl fmt::Display for Found {
+        fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            write!(f, "{}", self.0.join(", "))
+        }
+    }
+    impl std::error::Error for Found {}
+    impl de::Error for Found {
+        fn custom<M: fmt::Display>(_: M) -> Self {
+            Found(&[])
+        }
+    }
+    impl<'de> Deserializer<'de> for Names {
+        type Error = Found;
+        fn deserialize_any<W: Visitor<'de>>(self, _: W) -> Result<W::Value, Found> {
+            Err(Found(&[]))
+        }
+        fn deserialize_enum<W: Visitor<'de>>(
+            self,
+            _: &'static str,
+            variants: &'static [&'static str],
+            _: W,
+        ) -> Result<W::Value, Found> {
+            Err(Found(variants))
+        }
+        forward_to_deserialize_any! {
+            bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string
+            bytes byte_buf option unit unit_struct newtype_struct seq tuple
+            tuple_struct map struct identifier ignored_any
+        }
+    }
+    match T::deserialize(Names) {
+        Err(Found(names)) => names,
+        Ok(_) => &[],
+    }
+}
+
+/// The parameter `name` of the query struct `S`, read from `field`.
+pub(super) fn query_param<S: Default, T: QueryValue>(
+    field: fn(S) -> T,
+    name: &'static str,
+    about: &'static str,
+) -> QueryParam {
+    QueryParam {
+        name,
+        about,
+        schema: T::schema(),
+        default: field(S::default()).written(),
+    }
+}
+
+/// The fields a query struct takes, as serde names them when refusing a
+/// stranger.
+#[cfg(test)]
+pub(super) fn fields_of<T: DeserializeOwned>() -> &'static [&'static str] {
+    match T::deserialize(Pairs(std::iter::once(("\u{1}", "")))) {
+        Err(ParamError {
+            problem: Problem::Unknown { expected },
+            ..
+        }) => expected,
+        _ => panic!("the struct should refuse an unknown field"),
+    }
+}
+
+/// Declares what each field of a query struct means, in the struct's
+/// order: `document_query!(SliceQuery { u0: "First u.", … })`. The field's
+/// type gives its values, the struct's `Default` its default; a test checks
+/// that the list is every field serde reads.
+macro_rules! document_query {
+    ($query:ident { $($field:ident: $about:expr),* $(,)? }) => {
+        impl $crate::routes::params::DocumentedQuery for $query {
+            fn params() -> Vec<$crate::routes::params::QueryParam> {
+                vec![$($crate::routes::params::query_param(
+                    |q: $query| q.$field,
+                    stringify!($field),
+                    $about,
+                )),*]
+            }
+        }
+    };
+}
+
+pub(super) use document_query;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -541,6 +722,53 @@ mod tests {
         struct None_ {}
         let e = from_pairs::<None_, _, _>([("x", "1")].into_iter()).unwrap_err();
         assert_eq!(e.code, "unknown_parameter");
+    }
+
+    #[test]
+    fn documented_values_come_from_the_types_and_defaults() {
+        use solidtex_core::Filter;
+        assert_eq!(variants_of::<Filter>(), ["nearest", "trilinear"]);
+        assert_eq!(variants_of::<Axis>(), ["x", "y", "z"]);
+        assert_eq!(Filter::Trilinear.written().as_deref(), Some("trilinear"));
+        assert_eq!(
+            Vec3([1.0, -0.5, 0.0]).written().as_deref(),
+            Some("1,-0.5,0")
+        );
+        assert_eq!(None::<Small>.written(), None);
+        assert_eq!(
+            <Option<Small>>::schema(),
+            ValueSchema::Integer { min: -10, max: 10 }
+        );
+        #[derive(Deserialize, Default)]
+        #[serde(default, deny_unknown_fields)]
+        struct D {
+            a: Small,
+            o: Option<Vec3>,
+            f: Filter,
+        }
+        document_query!(D {
+            a: "A.",
+            o: "O.",
+            f: "F.",
+        });
+        let params = D::params();
+        let shown: Vec<_> = params
+            .iter()
+            .map(|p| (p.name, p.about, p.default.as_deref()))
+            .collect();
+        assert_eq!(
+            shown,
+            [
+                ("a", "A.", Some("3")),
+                ("o", "O.", None),
+                ("f", "F.", Some("nearest"))
+            ]
+        );
+        assert_eq!(fields_of::<D>(), ["a", "o", "f"]);
+        assert_eq!(
+            params[2].schema,
+            ValueSchema::Choice(&["nearest", "trilinear"])
+        );
     }
 
     #[test]

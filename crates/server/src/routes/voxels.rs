@@ -4,7 +4,9 @@
 
 use super::AppState;
 use super::answer::{Encoding, answer, texture};
-use super::params::{Int, NoQuery, Png, Raw, Stem, Triple, TypedPath, TypedQuery, Vec3};
+use super::params::{
+    Int, NoQuery, Png, Raw, Stem, Triple, TypedPath, TypedQuery, Vec3, document_query,
+};
 use crate::error::ApiError;
 use axum::extract::{Path, State};
 use axum::http::HeaderMap;
@@ -42,6 +44,18 @@ pub(super) struct SliceQuery {
     lod: Lod,
 }
 
+document_query!(SliceQuery {
+    u0: "First u coordinate of the slice's window.",
+    v0: "First v coordinate of the slice's window.",
+    w: "Image width in pixels.",
+    h: "Image height in pixels.",
+    lod: LOD,
+});
+
+/// The `lod` query parameter's meaning.
+pub(super) const LOD: &str = "Level of detail, 0 … the texture's `max_lod`; lod k serves level \
+                              L−k, voxels 2^k finest voxels wide.";
+
 /// `GET /v1/textures/{id}/slices/{axis}/{at}.png`
 pub(super) async fn slice(
     State(s): State<AppState>,
@@ -67,6 +81,17 @@ pub(super) struct CutQuery {
     lod: Lod,
     filter: Filter,
 }
+
+document_query!(CutQuery {
+    origin: "Position of pixel (0, 0), `x,y,z`.",
+    u: "Step per pixel to the right, `x,y,z`.",
+    v: "Step per pixel downwards, `x,y,z`.",
+    w: "Image width in pixels.",
+    h: "Image height in pixels.",
+    lod: LOD,
+    filter: "`nearest`: the nearest voxel; `trilinear`: a blend of the eight around the \
+             sample point.",
+});
 
 /// The xy plane from the origin, unless asked otherwise.
 impl Default for CutQuery {
@@ -114,6 +139,16 @@ pub(super) struct RegionQuery {
     d: RegionSide,
     lod: Lod,
 }
+
+document_query!(RegionQuery {
+    x: "Lowest x.",
+    y: "Lowest y.",
+    z: "Lowest z.",
+    w: "Extent along x.",
+    h: "Extent along y.",
+    d: "Extent along z.",
+    lod: LOD,
+});
 
 /// `GET /v1/textures/{id}/region.raw`
 pub(super) async fn region(
