@@ -128,6 +128,18 @@ function minScale() {
 // ---------------------------------------------------------------------
 // Status line
 
+// Runs a view's WebGL set-up (`setup` returns whether WebGL2 is there);
+// says why the view is off when it fails.
+function webglReady(setup, view) {
+  try {
+    if (setup()) return true;
+    say(`WebGL2 is not available in this browser: ${view} is off`, true);
+  } catch (e) {
+    say(`WebGL setup failed: ${e.message}`, true);
+  }
+  return false;
+}
+
 function say(text, isError) {
   const s = $("status");
   s.textContent = text;
@@ -1323,15 +1335,7 @@ const solid = (() => {
   async function invalidate() {
     const t = state.selected;
     if (!t || t.status !== "ready" || state.mode !== "solid") return;
-    try {
-      if (!init()) {
-        say("WebGL2 is not available in this browser: the 3D preview is off", true);
-        return;
-      }
-    } catch (e) {
-      say(`WebGL setup failed: ${e.message}`, true);
-      return;
-    }
+    if (!webglReady(init, "the 3D preview")) return;
     const e = t.brick_size;
     const c = { x: 0, y: 0, z: 0 };
     const frame = { z: ["x", "y"], x: ["y", "z"], y: ["z", "x"] }[state.axis];
@@ -1644,15 +1648,7 @@ const meshView = (() => {
   async function bake() {
     const t = state.selected;
     if (!t || t.status !== "ready" || state.mode !== "mesh") return;
-    try {
-      if (!init()) {
-        say("WebGL2 is not available in this browser: the mesh view is off", true);
-        return;
-      }
-    } catch (e) {
-      say(`WebGL setup failed: ${e.message}`, true);
-      return;
-    }
+    if (!webglReady(init, "the mesh view")) return;
     const resolution = Number($("mesh-res").value);
     const body = source.body || torusObj();
     const key = `${t.id}|${source.name}|${resolution}`;
