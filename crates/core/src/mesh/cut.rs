@@ -722,5 +722,19 @@ mod tests {
             assert!(Plane::parse_list(bad).is_err(), "{bad}");
         }
         assert!(Plane::parse_list(&["0,0,1,0"; MAX_CUTS + 1].join(";")).is_err());
+        // At the limit: accepted.
+        assert_eq!(
+            Plane::parse_list(&["0,0,1,0"; MAX_CUTS].join(";"))
+                .unwrap()
+                .len(),
+            MAX_CUTS
+        );
+        let fan: Vec<Plane> = (0..MAX_CUTS)
+            .map(|k| {
+                let a = k as f64 * TAU / (2.0 * MAX_CUTS as f64) + 0.05;
+                Plane::new([a.cos(), a.sin(), 0.0], 0.0).unwrap()
+            })
+            .collect();
+        assert!(m.cut(&fan).is_ok());
     }
 }
