@@ -128,6 +128,18 @@ function minScale() {
 // ---------------------------------------------------------------------
 // Status line
 
+// Sizes a canvas to its box in device pixels; returns [width, height].
+function fitCanvas(canvas) {
+  const r = canvas.getBoundingClientRect();
+  const d = dpr();
+  const w = Math.max(1, Math.round(r.width * d)), h = Math.max(1, Math.round(r.height * d));
+  if (canvas.width !== w || canvas.height !== h) {
+    canvas.width = w;
+    canvas.height = h;
+  }
+  return [w, h];
+}
+
 // Runs a view's WebGL set-up (`setup` returns whether WebGL2 is there);
 // says why the view is off when it fails.
 function webglReady(setup, view) {
@@ -696,14 +708,7 @@ const plane = (() => {
 
   // Canvas size in device pixels, following its box.
   function size() {
-    const r = canvas.getBoundingClientRect();
-    const d = dpr();
-    const w = Math.max(1, Math.round(r.width * d)), h = Math.max(1, Math.round(r.height * d));
-    if (canvas.width !== w || canvas.height !== h) {
-      canvas.width = w;
-      canvas.height = h;
-    }
-    return [w, h];
+    return fitCanvas(canvas);
   }
 
   /// The level of detail whose voxels match the screen's pixels: the
@@ -1821,13 +1826,7 @@ const meshView = (() => {
 
   function render() {
     if (!gl || !model || state.mode !== "mesh") return;
-    const r = canvas.getBoundingClientRect();
-    const d = dpr();
-    const w = Math.max(1, Math.round(r.width * d)), h = Math.max(1, Math.round(r.height * d));
-    if (canvas.width !== w || canvas.height !== h) {
-      canvas.width = w;
-      canvas.height = h;
-    }
+    const [w, h] = fitCanvas(canvas);
     gl.viewport(0, 0, w, h);
     gl.clearColor(0.075, 0.08, 0.095, 1);
     gl.clearStencil(0);
