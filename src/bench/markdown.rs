@@ -4,7 +4,7 @@
 //! load.
 
 use super::machine::Machine;
-use super::{PlanRow, Results, Row, human_bytes, human_seconds, meshes};
+use super::{PlanRow, Results, Row, human_bytes, human_seconds, meshes, structure};
 use std::fmt::Write;
 
 /// The command that regenerates the page with the issue's full sizes.
@@ -125,10 +125,15 @@ pub fn page(r: &Results, m: &Machine, command: &str) -> String {
         "| benchmark | time | runs | peak heap | target | papers | detail |\n\
          | --- | ---: | ---: | ---: | --- | --- | --- |"
     );
-    let is_mesh = |row: &&Row| row.name.starts_with(meshes::ROW_PREFIX);
-    rows(w, r.rows.iter().filter(|row| !is_mesh(row)));
-    let mesh_rows: Vec<&Row> = r.rows.iter().filter(is_mesh).collect();
-    let _ = write!(w, "\n{}", mesh_section(&mesh_rows, None));
+    let apart = |row: &&Row| {
+        [&MESHES, &STRUCTURE]
+            .iter()
+            .any(|sec| row.name.starts_with(sec.prefix))
+    };
+    rows(w, r.rows.iter().filter(|row| !apart(row)));
+    for sec in [&MESHES, &STRUCTURE] {
+        let _ = write!(w, "\n{}", section(sec, &rows_of(sec, &r.rows), None));
+    }
     let _ = writeln!(w, "\n## Dependency sets: standard vs dual grid\n");
     let _ = writeln!(
         w,
@@ -205,24 +210,54 @@ fn rows<'a>(w: &mut String, rows: impl Iterator<Item = &'a Row>) {
     }
 }
 
-/// Title of the mesh bakes' section, which `--meshes-only` rewrites alone.
-const MESH_TITLE: &str = "## Meshes: shell efficiency";
+/// A section of the page that can be measured apart from the rest
+/// (`--meshes-only`, `--structure-only`) and rewritten alone.
+pub struct Section {
+    /// Its heading, which finds it in the page.
+    pub title: &'static str,
+    /// What its rows measure.
+    pub intro: &'static str,
+    /// The prefix of its rows' names.
+    pub prefix: &'static str,
+}
 
-/// The mesh bakes' section; `run` names the machine and command when it
-/// was measured apart from the rest of the page.
-pub fn mesh_section(mesh_rows: &[&Row], run: Option<(&Machine, &str)>) -> String {
-    let mut out = String::new();
-    let w = &mut out;
-    let _ = writeln!(w, "{MESH_TITLE}\n");
-    let _ = writeln!(
-        w,
-        "A (2, 3) torus knot tube of about 100 K triangles baked cold (a fresh tile cache \
+/// The mesh bakes' section.
+pub const MESHES: Section = Section {
+    title: "## Meshes: shell efficiency",
+    intro: "A (2, 3) torus knot tube of about 100 K triangles baked cold (a fresh tile cache \
          each) at growing resolutions, with a generated atlas: only the voxels its \
          texels sample and their dependency chains are synthesized. The shares are of R³, \
          the cube the mesh's longest side spans (Dong et al. 2008: 0.42 % of 1024³ for a \
          gargoyle). The load average in each row is the machine's when the bake started: \
-         above 2 on two cores, other processes had part of the cores.\n"
-    );
+         above 2 on two cores, other processes had part of the cores.",
+    prefix: meshes::ROW_PREFIX,
+};
+
+/// The quality preset's and the reference's section.
+pub const STRUCTURE: Section = Section {
+    title: "## Structure: the quality preset and the reference",
+    intro: "On the synthesis exemplar, in one run: the quality preset's precompute \
+         (`solidtex precompute --quality`: the reference's blocks at every level), a cold \
+         256² axis slice and a cold 128³ volume with the default and with the preset, and \
+         the global reference's periodic blocks (`solidtex reference`). docs/quality.md \
+         (\"Structure\") weighs what each gives.",
+    prefix: structure::ROW_PREFIX,
+};
+
+/// The rows of `section` among `all`.
+pub fn rows_of<'a>(section: &Section, all: &'a [Row]) -> Vec<&'a Row> {
+    all.iter()
+        .filter(|r| r.name.starts_with(section.prefix))
+        .collect()
+}
+
+/// `section`'s text; `run` names the machine and command when it was
+/// measured apart from the rest of the page.
+pub fn section(section: &Section, rows_in: &[&Row], run: Option<(&Machine, &str)>) -> String {
+    let mut out = String::new();
+    let w = &mut out;
+    let _ = writeln!(w, "{}\n", section.title);
+    let _ = writeln!(w, "{}\n", section.intro);
     if let Some((m, command)) = run {
         let _ = writeln!(
             w,
@@ -235,7 +270,7 @@ pub fn mesh_section(mesh_rows: &[&Row], run: Option<(&Machine, &str)>) -> String
             m.memory_gib
         );
     }
-    if mesh_rows.is_empty() {
+    if rows_in.is_empty() {
         let _ = writeln!(w, "Not measured in this run.");
         return out;
     }
@@ -244,20 +279,21 @@ pub fn mesh_section(mesh_rows: &[&Row], run: Option<(&Machine, &str)>) -> String
         "| benchmark | time | runs | peak heap | target | papers | detail |\n\
          | --- | ---: | ---: | ---: | --- | --- | --- |"
     );
-    rows(w, mesh_rows.iter().copied());
+    rows(w, rows_in.iter().copied());
     out
 }
 
-/// `page` with its mesh section replaced by `section` (inserted before the
+/// `page` with `section`'s text replaced by `text` (inserted before the
 /// dependency sets when it has none).
-pub fn splice(page: &str, section: &str) -> String {
-    let start = page.find(MESH_TITLE);
+pub fn splice(page: &str, section: &Section, text: &str) -> String {
+    let title = section.title;
+    let start = page.find(title);
     let (head, tail) = match start {
         Some(s) => {
-            let after = &page[s + MESH_TITLE.len()..];
+            let after = &page[s + title.len()..];
             let end = after
                 .find("\n## ")
-                .map_or(page.len(), |e| s + MESH_TITLE.len() + e + 1);
+                .map_or(page.len(), |e| s + title.len() + e + 1);
             (&page[..s], &page[end..])
         }
         None => match page.find("## Dependency sets") {
@@ -266,7 +302,7 @@ pub fn splice(page: &str, section: &str) -> String {
         },
     };
     let sep = if tail.is_empty() { "" } else { "\n" };
-    format!("{head}{section}{sep}{tail}")
+    format!("{head}{text}{sep}{tail}")
 }
 
 /// "finest level" or "N finest levels".
@@ -282,14 +318,26 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_mesh_section_is_replaced_or_inserted_and_nothing_else_moves() {
+    fn a_section_is_replaced_or_inserted_and_nothing_else_moves() {
         let page = "# B\n\n## Engine\n\nx\n\n## Dependency sets: y\n\nz\n";
-        let once = splice(page, &format!("{MESH_TITLE}\n\nold\n"));
+        let title = MESHES.title;
+        let once = splice(page, &MESHES, &format!("{title}\n\nold\n"));
         assert_eq!(
             once,
-            format!("# B\n\n## Engine\n\nx\n\n{MESH_TITLE}\n\nold\n\n## Dependency sets: y\n\nz\n")
+            format!("# B\n\n## Engine\n\nx\n\n{title}\n\nold\n\n## Dependency sets: y\n\nz\n")
         );
-        let twice = splice(&once, &format!("{MESH_TITLE}\n\nnew\n"));
+        let twice = splice(&once, &MESHES, &format!("{title}\n\nnew\n"));
         assert_eq!(twice, once.replace("old", "new"));
+        // Another section goes in beside it, and leaves it alone.
+        let other = STRUCTURE.title;
+        let both = splice(&twice, &STRUCTURE, &format!("{other}\n\ns\n"));
+        assert_eq!(
+            both,
+            twice.replace("## Dependency", &format!("{other}\n\ns\n\n## Dependency"))
+        );
+        assert_eq!(
+            splice(&both, &STRUCTURE, &format!("{other}\n\nt\n")),
+            both.replace("\ns\n", "\nt\n")
+        );
     }
 }

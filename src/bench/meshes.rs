@@ -5,7 +5,7 @@
 //! at the finest level and over all levels, the wall time and the peak
 //! memory.
 
-use super::{Row, measure, texture};
+use super::{Row, load_average, measure, texture};
 use solidtex_core::mesh::{Bake, BakeOptions, Mesh};
 use solidtex_core::{Candidates, Request, Scheme};
 use std::f64::consts::TAU;
@@ -95,12 +95,4 @@ pub fn rows(c: &Arc<Candidates>, resolutions: &[u32], rows: &mut Vec<Row>) -> an
         });
     }
     Ok(())
-}
-
-/// The one-minute load average (`/proc/loadavg`), or "unknown".
-fn load_average() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|l| l.split_whitespace().next().map(str::to_string))
-        .unwrap_or_else(|| "unknown".into())
 }

@@ -16,6 +16,7 @@ pub mod machine;
 pub mod markdown;
 pub mod meshes;
 pub mod service;
+pub mod structure;
 
 use anyhow::Context;
 use serde::Serialize;
@@ -41,8 +42,17 @@ pub struct Options {
     pub max_seconds: f64,
     /// Also measure the service under load (see [`service`]).
     pub load: Option<service::LoadOptions>,
-    /// Only the mesh rows (see [`meshes`]).
-    pub meshes_only: bool,
+    /// Only one section's rows.
+    pub only: Option<Only>,
+}
+
+/// A section measured alone.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Only {
+    /// The mesh rows (see [`meshes`]).
+    Meshes,
+    /// The structure rows (see [`structure`]).
+    Structure,
 }
 
 /// One measurement.
@@ -143,6 +153,15 @@ fn measure<T>(runs: usize, mut f: impl FnMut() -> T) -> Measured<T> {
         peak_bytes: peak,
         value: last.expect("at least one run"),
     }
+}
+
+/// The one-minute load average (`/proc/loadavg`), or "unknown": on a
+/// shared machine it says how far to trust a time.
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|l| l.split_whitespace().next().map(str::to_string))
+        .unwrap_or_else(|| "unknown".into())
 }
 
 fn texture(c: &Arc<Candidates>, scheme: Scheme) -> Texture {
@@ -256,7 +275,7 @@ pub fn run(opts: &Options) -> anyhow::Result<Results> {
     let mut rows = Vec::new();
     let mut synthesis = None;
     for name in sizes.precompute {
-        if opts.meshes_only && *name != sizes.synthesis {
+        if opts.only.is_some() && *name != sizes.synthesis {
             continue;
         }
         let path = opts.exemplars.join(name);
@@ -290,22 +309,28 @@ pub fn run(opts: &Options) -> anyhow::Result<Results> {
             ),
         });
         if *name == sizes.synthesis {
-            synthesis = Some(Arc::new(c));
+            synthesis = Some((set, Arc::new(c)));
         }
     }
-    let c = synthesis.expect("the synthesis exemplar is among the precomputed");
+    let (set, c) = synthesis.expect("the synthesis exemplar is among the precomputed");
     let mut predictor = Predictor {
         corrections_per_s: 200_000.0,
         max_seconds: opts.max_seconds,
     };
     let mut plans_made = Vec::new();
-    if !opts.meshes_only {
+    if opts.only.is_none() {
         plans_made = plans(&c, sizes.plan_side)?;
         synthesis_rows(&c, sizes, &mut predictor, &mut rows)?;
         preview_rows(&c, sizes, &mut predictor, &mut rows)?;
         field_rows(&c, sizes, &mut predictor, &mut rows)?;
     }
-    meshes::rows(&c, sizes.mesh_resolutions, &mut rows)?;
+    if opts.only != Some(Only::Structure) {
+        meshes::rows(&c, sizes.mesh_resolutions, &mut rows)?;
+    }
+    // Minutes of precompute and reference: left out of the quick run.
+    if !opts.quick && opts.only != Some(Only::Meshes) {
+        structure::rows(&set, &c, sizes.levels, &mut predictor, &mut rows)?;
+    }
     let plans = plans_made;
     let load = match &opts.load {
         Some(l) => service::measure(&opts.exemplars.join(sizes.synthesis), sizes.levels, l)?,

@@ -43,8 +43,12 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 1.0, value_parser = solidtex_server::config::parse_wait)]
     load_max_wait: f64,
     /// Only the mesh bakes (shell efficiency), on the synthesis exemplar.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "structure_only")]
     meshes_only: bool,
+    /// Only the structure rows (the quality preset and the reference beside
+    /// the default), on the synthesis exemplar.
+    #[arg(long)]
+    structure_only: bool,
     /// Write the results as a Markdown page (e.g. BENCHMARKS.md).
     #[arg(long)]
     markdown: Option<PathBuf>,
@@ -78,7 +82,13 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             brick_size: if quick { 16 } else { 64 },
             max_queue_wait: a.load_max_wait,
         }),
-        meshes_only: a.meshes_only,
+        only: if a.meshes_only {
+            Some(bench::Only::Meshes)
+        } else if a.structure_only {
+            Some(bench::Only::Structure)
+        } else {
+            None
+        },
     };
     let results = bench::run(&opts)?;
     if let Some(path) = &a.markdown {
@@ -87,16 +97,17 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             .collect::<Vec<_>>()
             .join(" ");
         let machine = bench::machine::current();
-        let page = if a.meshes_only {
+        let apart = match opts.only {
+            Some(bench::Only::Meshes) => Some(&bench::markdown::MESHES),
+            Some(bench::Only::Structure) => Some(&bench::markdown::STRUCTURE),
+            None => None,
+        };
+        let page = if let Some(sec) = apart {
             // The rest of the page stays as it was measured.
-            let rows: Vec<&bench::Row> = results
-                .rows
-                .iter()
-                .filter(|r| r.name.starts_with(bench::meshes::ROW_PREFIX))
-                .collect();
-            let section = bench::markdown::mesh_section(&rows, Some((&machine, &command)));
+            let rows = bench::markdown::rows_of(sec, &results.rows);
+            let text = bench::markdown::section(sec, &rows, Some((&machine, &command)));
             let old = std::fs::read_to_string(path).unwrap_or_default();
-            bench::markdown::splice(&old, &section)
+            bench::markdown::splice(&old, sec, &text)
         } else {
             bench::markdown::page(&results, &machine, &command)
         };

@@ -70,7 +70,9 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
     let params = ReferenceParams {
         size: a.size,
         seed: a.seed,
-        levels: a.levels.unwrap_or_else(|| default_levels(a.size, a.grid)),
+        levels: a
+            .levels
+            .unwrap_or_else(|| ReferenceParams::default_levels(a.size, a.grid)),
         neighbourhood: a.neighbourhood,
         grid: a.grid,
         iterations: a.iterations,
@@ -125,28 +127,4 @@ pub fn run(a: ReferenceArgs) -> anyhow::Result<()> {
         write_png(&a.output.join(format!("slice_{name}.png")), s, s, img)?;
     }
     Ok(())
-}
-
-/// Levels that leave a block of 8 voxels per side at the coarsest (at
-/// least 1, at most 5), where the exemplar is blurred enough for the
-/// layout of its largest features.
-fn default_levels(size: u32, grid: u32) -> u32 {
-    let mut levels = 1;
-    while levels < 5 && (size >> levels) >= 8 && size.is_multiple_of(grid << levels) {
-        levels += 1;
-    }
-    levels
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn default_levels_leave_eight_voxels_at_the_coarsest() {
-        assert_eq!(super::default_levels(64, 2), 4);
-        assert_eq!(super::default_levels(128, 2), 5);
-        assert_eq!(super::default_levels(32, 2), 3);
-        assert_eq!(super::default_levels(24, 2), 2);
-        // Every level a multiple of the grid: 36 → 18 → 9 would not be.
-        assert_eq!(super::default_levels(36, 2), 2);
-    }
 }

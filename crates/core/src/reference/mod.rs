@@ -96,6 +96,18 @@ impl Default for ReferenceParams {
 pub const MAX_REFERENCE_SIZE: u32 = 256;
 
 impl ReferenceParams {
+    /// Levels that leave a block of 8 voxels per side at the coarsest (at
+    /// least 1, at most 5), where the exemplar is blurred enough for the
+    /// layout of its largest features; every level's side a multiple of
+    /// the grid.
+    pub fn default_levels(size: u32, grid: u32) -> u32 {
+        let mut levels = 1;
+        while levels < 5 && (size >> levels) >= 8 && size.is_multiple_of(grid << levels) {
+            levels += 1;
+        }
+        levels
+    }
+
     /// Checks every field against its range.
     pub fn validate(&self) -> Result<()> {
         let range = |name: &'static str, v: f64, min: f64, max: f64| {
@@ -920,6 +932,16 @@ fn optimise<'a>(
 mod tests {
     use super::*;
     use crate::analysis::exemplar::Exemplar;
+
+    #[test]
+    fn default_levels_leave_eight_voxels_at_the_coarsest() {
+        assert_eq!(ReferenceParams::default_levels(64, 2), 4);
+        assert_eq!(ReferenceParams::default_levels(128, 2), 5);
+        assert_eq!(ReferenceParams::default_levels(32, 2), 3);
+        assert_eq!(ReferenceParams::default_levels(24, 2), 2);
+        // Every level a multiple of the grid: 36 → 18 → 9 would not be.
+        assert_eq!(ReferenceParams::default_levels(36, 2), 2);
+    }
 
     fn stripes() -> ExemplarSet {
         let w = 32;
