@@ -531,5 +531,6 @@ pub fn regenerate(document: &str) -> Result<String, String> {
 pub(crate) fn keys_in_map_order<T: serde::Serialize>(body: &T) -> bool {
     let text = serde_json::to_string(body).expect("serialises");
     let value = serde_json::to_value(body).expect("serialises");
-    text == value.to_string()
+    let as_map = serde_json::to_string(&value).expect("serialises");
+    text == as_map
 }
