@@ -95,6 +95,8 @@ pub fn documented_queries() -> Vec<(&'static str, Vec<QueryParam>)> {
 pub fn documented_responses(generator: &mut schemars::SchemaGenerator) {
     generator.subschema_for::<crate::error::ErrorBody>();
     generator.subschema_for::<textures::TextureList>();
+    generator.subschema_for::<ops::Health>();
+    generator.subschema_for::<frames::Frames>();
 }
 
 /// The `lod` query parameter every voxel route takes.
