@@ -223,7 +223,7 @@ impl Entry {
             created: self.created,
             exemplar: self.exemplar,
             params: self.params.clone(),
-            layout: self.layout.clone(),
+            layout: self.layout,
             analysis_hash: self.analysis_hash.clone(),
             candidates: Mutex::new(None),
             planes: self.planes.clone(),

@@ -34,13 +34,16 @@ pub(super) async fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Textu
     resolve(s, id.to_string(), 0).await
 }
 
+/// A texture ready to synthesize, with its entry.
+type Ready = Result<(Arc<Entry>, Texture), ApiError>;
+
 /// [`texture`], a region texture's own textures in turn (`depth` region
 /// textures above).
 fn resolve(
     s: &AppState,
     id: String,
     depth: usize,
-) -> Pin<Box<dyn Future<Output = Result<(Arc<Entry>, Texture), ApiError>> + Send + '_>> {
+) -> Pin<Box<dyn Future<Output = Ready> + Send + '_>> {
     Box::pin(async move {
         if let Some(r) = super::textures::region(s, &id).await? {
             if depth >= solidtex_core::region::MAX_DEPTH {
