@@ -4,12 +4,16 @@ use super::cut::parse_vec3;
 use super::source::{SourceArgs, load_source, progress_bar, summary};
 use anyhow::Context;
 use clap::Args;
+use indicatif::ProgressBar;
 use solidtex_core::mesh::{Bake, BakeOptions, Colours, Mesh, MeshFormat, Plane, Uvs};
-use solidtex_core::{Filter, Request};
+use solidtex_core::{
+    CancelFlag, Cancelled, Filter, Request, RequestKind, SynthStats, Texture, run_cancellable,
+};
 use solidtex_server::write_atomic;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Instant;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 
 #[derive(Args)]
 pub struct BakeArgs {
@@ -60,6 +64,47 @@ enum UvArg {
     Atlas,
 }
 
+/// Renders the bake `request`, moving `bar` as it goes: by the texels
+/// answered, a step of about a million at a time, and between them by the
+/// voxels of the shell synthesized against the `predicted` bound.
+fn render_watched(
+    tex: &Texture,
+    request: &Request,
+    lod: u32,
+    predicted: u64,
+    bar: &ProgressBar,
+) -> anyhow::Result<(Vec<u8>, SynthStats)> {
+    let flag = CancelFlag::new();
+    let texels = AtomicU64::new(0);
+    let items = match request.kind() {
+        RequestKind::Bake(b) => b.items().max(1) as f64,
+        _ => 1.0,
+    };
+    let show = |texels: u64| {
+        let share = (texels as f64 / items).max(flag.share_of(predicted));
+        bar.set_position((share * 1000.0) as u64);
+    };
+    bar.set_message("synthesis");
+    std::thread::scope(|scope| {
+        let work = scope.spawn(|| {
+            run_cancellable(&flag, || {
+                tex.render_progress(request, lod, &|done, _| {
+                    texels.fetch_max(done, Ordering::Relaxed);
+                })
+            })
+        });
+        while !work.is_finished() {
+            show(texels.load(Ordering::Relaxed));
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        match work.join() {
+            Ok(Ok(answer)) => Ok(answer?),
+            Ok(Err(Cancelled)) => Err(anyhow::anyhow!("the bake was cancelled")),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    })
+}
+
 /// Runs `solidtex bake`.
 pub fn run(a: BakeArgs) -> anyhow::Result<()> {
     let bytes = std::fs::read(&a.mesh).with_context(|| format!("reading {}", a.mesh.display()))?;
@@ -94,13 +139,14 @@ pub fn run(a: BakeArgs) -> anyhow::Result<()> {
     let bake = Bake::new(Arc::new(mesh), options)?;
     let t0 = Instant::now();
     let bar = progress_bar();
-    bar.set_message("bake");
+    bar.set_message("planning");
     let request = Request::bake(bake.clone())?;
-    let (rgb, stats) = tex.render_progress(&request, a.src.lod, &|done, total| {
-        bar.set_position(done * 1000 / total.max(1));
-    })?;
-    bar.finish_and_clear();
+    let predicted = tex.estimate(&request, a.src.lod, u64::MAX)?.total;
+    let (rgb, stats) = render_watched(&tex, &request, a.src.lod, predicted, &bar)?;
+    bar.set_position(1000);
+    bar.set_message("writing");
     let glb = bake.glb(&rgb)?;
+    bar.finish_and_clear();
     write_atomic(&a.output, &glb).with_context(|| format!("writing {}", a.output.display()))?;
     let layout = match bake.texture_side() {
         Some(s) if bake.uses_mesh_uvs() => format!("a {s}² texture on the mesh's UVs"),

@@ -126,15 +126,21 @@ pub struct ServeArgs {
     #[arg(long, env = "SOLIDTEX_MAX_EXPORT_WORK", default_value_t = 96 << 20, value_parser = clap::value_parser!(u64).range(1..))]
     pub max_export_work: u64,
 
-    /// Exports waiting behind the one that runs; more get 503.
+    /// Exports and background bakes waiting behind the one that runs;
+    /// more get 503.
     #[arg(long, env = "SOLIDTEX_EXPORT_QUEUE", default_value_t = 8)]
     pub export_queue: u32,
 
-    /// Bytes of finished export files kept in memory for their clients to
-    /// fetch (suffixes K, M, G accepted); older ones are made again when
-    /// asked for.
+    /// Bytes of finished export and bake files kept in memory for their
+    /// clients to fetch (suffixes K, M, G accepted), the least recently
+    /// read dropped first; a dropped one is made again when asked for.
     #[arg(long, env = "SOLIDTEX_MAX_EXPORT_BYTES", default_value = "1G", value_parser = parse_bytes)]
     pub max_export_bytes: u64,
+
+    /// Seconds a finished export or background bake is kept after it was
+    /// last asked for.
+    #[arg(long, env = "SOLIDTEX_EXPORT_TTL", default_value_t = 3600, value_parser = clap::value_parser!(u64).range(1..))]
+    pub export_ttl: u64,
 
     /// Compress the chunks of the volume views: Zarr v3 arrays declare the
     /// zstd codec, and Neuroglancer precomputed chunks are sent gzipped to
@@ -286,6 +292,7 @@ impl ServeArgs {
             export_queue: 8,
             chunk_compression: true,
             max_export_bytes: 1 << 30,
+            export_ttl: 3600,
             max_textures: 256,
             max_stored_bytes: 4 << 30,
             max_resident_bytes: 2 << 30,

@@ -31,11 +31,11 @@
 //! stops accepting when its shutdown future resolves and returns once the
 //! requests in flight have been answered.
 
+pub(crate) mod background;
 pub mod config;
 pub(crate) mod conn_io;
 pub(crate) mod decodes;
 pub(crate) mod error;
-pub(crate) mod exports;
 pub(crate) mod host;
 pub(crate) mod jobs;
 pub(crate) mod listen;
@@ -168,10 +168,11 @@ impl Server {
             chunk_size: args.chunk_size,
             max_request_voxels: args.max_request_voxels,
             max_request_work: args.max_request_work,
-            exports: Arc::new(exports::Exports::new(
+            background: Arc::new(background::Background::new(
                 args.export_queue,
                 args.max_export_work,
                 args.max_export_bytes,
+                Duration::from_secs(args.export_ttl),
             )),
             max_export_voxels: args.max_export_voxels,
             max_export_work: args.max_export_work,

@@ -25,6 +25,8 @@ struct State {
     /// Voxels still allowed; `None`: no budget.
     budget: Option<AtomicU64>,
     over_budget: AtomicBool,
+    /// Voxels charged so far, budget or not: what a progress report reads.
+    charged: AtomicU64,
 }
 
 impl CancelFlag {
@@ -65,9 +67,24 @@ impl CancelFlag {
         self.0.over_budget.load(Ordering::Relaxed)
     }
 
+    /// Voxels the syntheses under this flag have set out to synthesize so
+    /// far (all levels; counted as each group of tiles starts, so slightly
+    /// ahead of the finished work).
+    pub fn synthesized(&self) -> u64 {
+        self.0.charged.load(Ordering::Relaxed)
+    }
+
+    /// The share of `predicted` voxels (a cold-cache upper bound, see
+    /// [`crate::Texture::estimate`]) synthesized so far, short of 1: the
+    /// bound is seldom reached, so only the end of the work says it is done.
+    pub fn share_of(&self, predicted: u64) -> f64 {
+        (self.synthesized() as f64 / predicted.max(1) as f64).min(0.99)
+    }
+
     /// Takes `voxels` from the budget; false (and the flag set) when that
     /// is more than is left.
     fn charge(&self, voxels: u64) -> bool {
+        self.0.charged.fetch_add(voxels, Ordering::Relaxed);
         let Some(left) = &self.0.budget else {
             return true;
         };
@@ -151,13 +168,15 @@ mod tests {
         });
         assert_eq!(r, Err(Cancelled));
         assert!(flag.is_over_budget() && flag.is_cancelled());
-        // Without a budget, charges are free.
+        assert_eq!(flag.synthesized(), 101);
+        // Without a budget, charges are free, and still counted.
         let free = CancelFlag::new();
         assert_eq!(
             run_cancellable(&free, || charge(&current(), u64::MAX)),
             Ok(())
         );
         assert!(!free.is_over_budget());
+        assert_eq!(free.synthesized(), u64::MAX);
     }
 
     #[test]

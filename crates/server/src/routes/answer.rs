@@ -301,10 +301,10 @@ fn check_work(
     s: &AppState,
     predicted: solidtex_core::Result<WorkEstimate>,
     budget: u64,
-) -> Result<(), ApiError> {
+) -> Result<u64, ApiError> {
     let e = predicted?;
     if e.complete && e.total <= budget {
-        return Ok(());
+        return Ok(e.total);
     }
     s.metrics.over_budget("predicted");
     Err(ApiError::predicted_over_budget(e.total, e.complete, budget))
@@ -328,6 +328,19 @@ fn account(s: &AppState, stats: &SynthStats) {
     span.record("tiles_cached", stats.tiles_from_cache);
 }
 
+/// Checks `request` at level of detail `lod` against the budgets before
+/// any work; returns its predicted synthesis (voxels, an upper bound).
+pub(super) fn admit(
+    s: &AppState,
+    tex: &Texture,
+    request: &Request,
+    lod: u32,
+) -> Result<u64, ApiError> {
+    check_budget(s, request)?;
+    let budget = work_budget(s, request);
+    check_work(s, tex.estimate(request, lod, budget), budget)
+}
+
 /// Answers `request` at level of detail `lod` of the texture `(entry,
 /// tex)`, sent as `encoding`.
 pub(super) async fn answer(
@@ -338,9 +351,8 @@ pub(super) async fn answer(
     encoding: Encoding,
     headers: &HeaderMap,
 ) -> Result<Response, ApiError> {
-    check_budget(s, &request)?;
+    admit(s, &tex, &request, lod)?;
     let budget = work_budget(s, &request);
-    check_work(s, tex.estimate(&request, lod, budget), budget)?;
     let key = format!("{}{}", encoding.tag(), request.key(lod));
     let tag = ETag::new(&entry, &key);
     let mut res = if tag.matches(headers) {

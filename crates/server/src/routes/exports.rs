@@ -1,11 +1,13 @@
 //! Exports over HTTP: the same files as `solidtex export` (see
 //! [`solidtex_core::export`]).
 //!
-//! `GET /v1/textures/{id}/export` makes the file, or joins the same export
-//! already being made, and answers it when done. With `Prefer:
-//! respond-async` (RFC 7240) it answers at once 202 with the export's
-//! status and its URL in `Location`; `GET /v1/exports/{eid}` then reports
-//! progress, and `/v1/exports/{eid}/file` serves the file once it is done.
+//! `GET /v1/textures/{id}/export` makes the file as a background job
+//! ([`crate::background`]), or joins the same export already being made,
+//! and answers it when done. With `Prefer: respond-async` (RFC 7240) it
+//! answers at once 202 with the export's status and its URL in
+//! `Location`; `GET /v1/exports/{eid}` then reports progress,
+//! `/v1/exports/{eid}/file` serves the file once it is done, and `DELETE`
+//! cancels it (routes in [`super::background`]).
 //! `GET /v1/textures/{id}/export.json` describes an export (the sidecar
 //! JSON) without making it.
 //!
@@ -14,20 +16,39 @@
 //! `--max-export-work` (400 `over_budget`), and the parameters (400).
 
 use super::answer::{ETag, texture};
-use super::params::{Int, NoQuery, TypedPath, TypedQuery};
+use super::background::answer_job;
+use super::params::{Int, TypedQuery};
 use super::voxels::{Coord, Lod};
 use super::{AppState, IMMUTABLE};
+use crate::background::{Kind, Progress, Spec};
 use crate::error::ApiError;
-use crate::exports::{ExportJob, Phase, export_key};
-use axum::Json;
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use serde::Deserialize;
-use serde_json::Value;
+use serde_json::json;
 use solidtex_core::export::{Export, Format, MAX_EXPORT_VOXELS, Mips};
 use solidtex_core::{Region, Texture};
+
+/// The normalised form of an export, for ids and ETags.
+fn export_key(e: &Export) -> String {
+    let r = &e.region;
+    format!(
+        "export/{}/{}/{}/{}/{}/{}/{}/{}/{}/{:?}/{}",
+        e.format.name(),
+        e.lod,
+        r.origin[0],
+        r.origin[1],
+        r.origin[2],
+        r.size[0],
+        r.size[1],
+        r.size[2],
+        u8::from(e.srgb),
+        e.mips,
+        env!("CARGO_PKG_VERSION"),
+    )
+}
 
 /// A side of an export's box, 64 unless given (the voxel budget binds
 /// before the largest).
@@ -152,39 +173,6 @@ fn parse_export(s: &AppState, q: &ExportQuery, tex: &Texture) -> Result<(Export,
     Ok((export, e.total))
 }
 
-/// Whether the client asked for an asynchronous answer.
-fn respond_async(headers: &HeaderMap) -> bool {
-    headers
-        .get_all("prefer")
-        .iter()
-        .filter_map(|v| v.to_str().ok())
-        .flat_map(|v| v.split(','))
-        .any(|p| p.trim().eq_ignore_ascii_case("respond-async"))
-}
-
-/// The file's response: its bytes, type, name and validator.
-fn file_response(job: &ExportJob, bytes: Bytes, tag: &ETag) -> Response {
-    let mut res = Response::new(Body::from(bytes));
-    let h = res.headers_mut();
-    h.insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static(job.export.format.media_type()),
-    );
-    if let Ok(v) = HeaderValue::from_str(&format!("attachment; filename=\"{}\"", job.file_name)) {
-        h.insert(header::CONTENT_DISPOSITION, v);
-    }
-    tag.stamp(res, IMMUTABLE)
-}
-
-/// 202 with the export's status, and where to follow it.
-fn accepted(job: &ExportJob) -> Response {
-    let mut res = (StatusCode::ACCEPTED, Json(job.status())).into_response();
-    if let Ok(v) = HeaderValue::from_str(&format!("/v1/exports/{}", job.id)) {
-        res.headers_mut().insert(header::LOCATION, v);
-    }
-    res
-}
-
 /// `GET /v1/textures/{id}/export`
 pub(super) async fn export(
     State(s): State<AppState>,
@@ -193,20 +181,34 @@ pub(super) async fn export(
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
     let (entry, tex) = texture(&s, &id).await?;
-    let (export, _) = parse_export(&s, &q, &tex)?;
-    let tag = ETag::new(&entry, &export_key(&export));
+    let (export, predicted) = parse_export(&s, &q, &tex)?;
+    let key = export_key(&export);
+    let tag = ETag::new(&entry, &key);
     if tag.matches(&headers) {
         return Ok(tag.not_modified(IMMUTABLE));
     }
-    let job = s.exports.start(&entry, tex, export)?;
-    if respond_async(&headers) && matches!(job.phase(), Phase::Running) {
-        return Ok(accepted(&job));
-    }
-    match job.finished().await {
-        Phase::Done(bytes) => Ok(file_response(&job, bytes, &tag)),
-        Phase::Failed(e) => Err(e),
-        Phase::Running => Err(ApiError::internal("the export stopped unfinished")),
-    }
+    let total = export.voxels(&tex);
+    let spec = Spec {
+        id: Kind::Export.job_id(&entry.content_hash, &key),
+        kind: Kind::Export,
+        texture: entry.id.clone(),
+        file_name: export.file_name(&entry.id),
+        media_type: export.format.media_type(),
+        etag_key: key,
+        unit: "voxels",
+        total,
+        predicted,
+        extra: [("format".to_string(), json!(export.format.name()))]
+            .into_iter()
+            .collect(),
+    };
+    let work = move |p: &Progress| -> Result<Bytes, ApiError> {
+        p.set_stage("synthesis");
+        let (bytes, _) = export.run(&tex, &|done, _| p.set_done(done))?;
+        Ok(Bytes::from(bytes))
+    };
+    let job = s.background.start(spec, Box::new(work))?;
+    answer_job(&s, &job, &headers).await
 }
 
 /// `GET /v1/textures/{id}/export.json`: the sidecar JSON `solidtex
@@ -229,56 +231,4 @@ pub(super) async fn describe(
     );
     h.insert("x-solidtex-predicted-voxels", HeaderValue::from(predicted));
     Ok(res)
-}
-
-/// The path of an export: `/v1/exports/{eid}`.
-#[derive(Deserialize)]
-pub(super) struct ExportPath {
-    eid: String,
-}
-
-fn unknown_export(id: &str) -> ApiError {
-    ApiError::new(
-        StatusCode::NOT_FOUND,
-        "unknown_export",
-        format!("no export `{id}` (finished exports are kept a while; ask for it again)"),
-    )
-}
-
-/// `GET /v1/exports/{eid}`
-pub(super) async fn status(
-    State(s): State<AppState>,
-    TypedPath(ExportPath { eid }): TypedPath<ExportPath>,
-    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Result<Json<Value>, ApiError> {
-    let job = s.exports.get(&eid).ok_or_else(|| unknown_export(&eid))?;
-    Ok(Json(job.status()))
-}
-
-/// `GET /v1/exports/{eid}/file`
-pub(super) async fn file(
-    State(s): State<AppState>,
-    TypedPath(ExportPath { eid }): TypedPath<ExportPath>,
-    TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-    headers: HeaderMap,
-) -> Result<Response, ApiError> {
-    let job = s.exports.get(&eid).ok_or_else(|| unknown_export(&eid))?;
-    let (entry, _) = texture(&s, &job.texture).await?;
-    let tag = ETag::new(&entry, &export_key(&job.export));
-    if tag.matches(&headers) {
-        return Ok(tag.not_modified(IMMUTABLE));
-    }
-    match job.phase() {
-        Phase::Done(bytes) => Ok(file_response(&job, bytes, &tag)),
-        Phase::Failed(e) => Err(e),
-        Phase::Running => Err(ApiError::new(
-            StatusCode::CONFLICT,
-            "export_running",
-            format!(
-                "export `{eid}` is {:.0} % done; its status is at /v1/exports/{eid}",
-                100.0 * job.done_voxels() as f64 / job.total.max(1) as f64
-            ),
-        )
-        .retry_after(1)),
-    }
 }

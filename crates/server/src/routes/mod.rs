@@ -7,6 +7,7 @@
 //! queue, and shape responses; no synthesis logic lives here.
 
 mod answer;
+mod background;
 mod bake;
 mod exports;
 mod frames;
@@ -66,7 +67,11 @@ pub const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/textures/{id}/export"),
     ("GET", "/v1/textures/{id}/export.json"),
     ("GET", "/v1/exports/{eid}"),
+    ("DELETE", "/v1/exports/{eid}"),
     ("GET", "/v1/exports/{eid}/file"),
+    ("GET", "/v1/bakes/{bid}"),
+    ("DELETE", "/v1/bakes/{bid}"),
+    ("GET", "/v1/bakes/{bid}/file"),
     ("GET", "/"),
     ("GET", "/viewer.js"),
 ];
@@ -109,8 +114,8 @@ pub struct Shared {
     pub(crate) max_request_voxels: u64,
     /// Most voxels one request may synthesize (see `ServeArgs`).
     pub(crate) max_request_work: u64,
-    /// Exports running and made.
-    pub(crate) exports: Arc<crate::exports::Exports>,
+    /// Exports and background bakes running and made.
+    pub(crate) background: Arc<crate::background::Background>,
     /// Most voxels in one export.
     pub(crate) max_export_voxels: u64,
     /// Most voxels one export may synthesize.
@@ -219,8 +224,16 @@ pub fn router(state: AppState) -> Router {
         )
         .route("/v1/textures/{id}/export", get(exports::export))
         .route("/v1/textures/{id}/export.json", get(exports::describe))
-        .route("/v1/exports/{eid}", get(exports::status))
-        .route("/v1/exports/{eid}/file", get(exports::file))
+        .route(
+            "/v1/exports/{eid}",
+            get(background::export_status).delete(background::export_cancel),
+        )
+        .route("/v1/exports/{eid}/file", get(background::export_file))
+        .route(
+            "/v1/bakes/{bid}",
+            get(background::bake_status).delete(background::bake_cancel),
+        )
+        .route("/v1/bakes/{bid}/file", get(background::bake_file))
         .route("/", get(viewer::page))
         .route("/viewer.js", get(viewer::script));
     with_middleware(routes, state)
