@@ -70,16 +70,6 @@ fn the_estimate_bounds_the_measured_peak() {
                 ..AnalysisParams::default()
             },
         ),
-        (
-            // The co-occurrence features widen them more, and are kept
-            // per level.
-            ExemplarSet::single(generated_exemplar(48, 9)),
-            AnalysisParams {
-                glcp_weight: 2.0,
-                feature_weight: 4.0,
-                ..AnalysisParams::default()
-            },
-        ),
         (three, AnalysisParams::default()),
     ];
     for (set, params) in cases {

@@ -80,7 +80,6 @@ pub fn precompute(
         Stage::Coherence,
         Stage::Finish,
         Stage::Reference,
-        Stage::Calibration,
     ];
     let cb = |s: Stage, f: f32| {
         let i = stages.iter().position(|&x| x == s).unwrap_or(0);

@@ -41,13 +41,6 @@ pub struct AnalysisParams {
     /// the channel keep their ids.
     #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
     pub feature_weight: f32,
-    /// Weight of the grey-level co-occurrence features (Chang et al.
-    /// 2012; see [`crate::analysis::glcp`]) in the appearance vectors:
-    /// the spread of the twelve features together relative to the
-    /// colours'; 0 leaves them out. Not written when 0, so textures
-    /// without them keep their ids.
-    #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
-    pub glcp_weight: f32,
     /// What the lazy synthesis starts from (see [`Initialisation`]). Not
     /// written when the slab, so textures that start from it keep their
     /// ids.
@@ -64,14 +57,6 @@ pub struct AnalysisParams {
     /// `.stx`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference_level: Option<u32>,
-    /// Strength of the histogram matching calibrated at precompute (see
-    /// [`crate::synth::usage`]): how far, per calibration round, a pixel's
-    /// penalty in the correction moves for its colour's over-use, in
-    /// units of its level's typical distance between close alternatives;
-    /// 0 leaves the correction unweighted. Not written when 0, so textures
-    /// without it keep their ids.
-    #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
-    pub histogram_matching: f32,
 }
 
 /// What the lazy synthesis's first version of a level is made from.
@@ -134,8 +119,6 @@ impl Default for AnalysisParams {
             similar_fine: 2,
             orientation: Orientation::Auto,
             feature_weight: DEFAULT_FEATURE_WEIGHT,
-            glcp_weight: DEFAULT_GLCP_WEIGHT,
-            histogram_matching: 0.0,
             initialisation: Initialisation::default(),
             reference_level: None,
         }
@@ -146,12 +129,6 @@ impl Default for AnalysisParams {
 /// automatically made the shared exemplars' statistics worse
 /// (docs/quality.md).
 pub const DEFAULT_FEATURE_WEIGHT: f32 = 0.0;
-
-/// Default [`AnalysisParams::glcp_weight`]: off. At 0.3 the shared
-/// exemplars' statistics were 2–3 % better on average over two seeds, but
-/// some exemplar's worst plane was 8–9 % worse in each (docs/quality.md,
-/// "Co-occurrence features").
-pub const DEFAULT_GLCP_WEIGHT: f32 = 0.0;
 
 fn is_zero(v: &f32) -> bool {
     *v == 0.0

@@ -355,8 +355,7 @@ fn overall_progress(stage: Stage, f: f32) -> (&'static str, f32) {
         Stage::Search => ("search", 0.05, 0.4),
         Stage::Coherence => ("coherence", 0.45, 0.05),
         Stage::Finish => ("finish", 0.5, 0.1),
-        Stage::Reference => ("reference", 0.6, 0.3),
-        Stage::Calibration => ("calibration", 0.9, 0.1),
+        Stage::Reference => ("reference", 0.6, 0.4),
     };
     (name, (start + span * f.clamp(0.0, 1.0)).min(0.999))
 }
@@ -1489,7 +1488,6 @@ mod tests {
             Stage::Coherence,
             Stage::Finish,
             Stage::Reference,
-            Stage::Calibration,
         ] {
             for f in [0.0, 0.5, 1.0] {
                 let (_, p) = overall_progress(s, f);

@@ -151,6 +151,7 @@ impl TextureParams {
     /// default: the same id keeps serving the same bytes across upgrades.
     pub fn from_stored(obj: &Map<String, Value>) -> Result<TextureParams, SpecError> {
         let mut obj = obj.clone();
+        knobs::strip_removed(&mut obj).map_err(SpecError::InvalidParams)?;
         for (key, then) in KEYS_ADDED_SINCE_VERSION_1 {
             obj.entry(*key)
                 .or_insert_with(|| serde_json::from_str(then).expect("valid JSON"));
@@ -233,8 +234,6 @@ const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
     ("feature_weight", "0"),
     ("parity_levels", "0"),
     ("initialisation", r#""slab""#),
-    ("histogram_matching", "0"),
-    ("glcp_weight", "0"),
 ];
 
 /// The members of a JSON object in the order written, repeated keys kept.
@@ -661,6 +660,19 @@ mod tests {
             format!("{e:?}").contains("colour correction was removed"),
             "{e:?}"
         );
+        // Knobs measured and removed: at 0 as if absent, else refused.
+        for key in knobs::REMOVED {
+            let mut with = new.clone();
+            with.insert((*key).into(), 0.into());
+            assert_eq!(
+                TextureParams::from_stored(&with).unwrap(),
+                TextureParams::default()
+            );
+            with.insert((*key).into(), 0.5.into());
+            let e = TextureParams::from_stored(&with).unwrap_err();
+            assert!(format!("{e}").contains(key), "{e}");
+            assert!(TextureParams::from_flat(&with).is_err());
+        }
         // Its slab was N thick.
         old.remove("slab_thickness");
         old.insert("neighbourhood".into(), 7.into());

@@ -336,7 +336,6 @@ pub fn neighbourhood(stack: &GaussianStack, k: usize, n: u32, x: i64, y: i64, ou
     let h = spacing(k) as i64;
     let (w, hh) = (stack.width() as i64, stack.height() as i64);
     let feature = stack.feature_level(k);
-    let fc = stack.feature_channels();
     let mut o = 0;
     for j in -r..=r {
         for i in -r..=r {
@@ -344,9 +343,8 @@ pub fn neighbourhood(stack: &GaussianStack, k: usize, n: u32, x: i64, y: i64, ou
             out[o..o + 3].copy_from_slice(&stack.at(k, px, py));
             o += 3;
             if let Some(f) = feature {
-                let i = (py.rem_euclid(hh) * w + px.rem_euclid(w)) as usize * fc;
-                out[o..o + fc].copy_from_slice(&f[i..i + fc]);
-                o += fc;
+                out[o] = f[(py.rem_euclid(hh) * w + px.rem_euclid(w)) as usize];
+                o += 1;
             }
         }
     }

@@ -10,6 +10,5 @@ pub mod appearance;
 pub mod decode;
 pub mod exemplar;
 pub mod feature;
-pub mod glcp;
 pub mod orientation;
 pub mod stack;

@@ -26,8 +26,6 @@ pub struct GaussianStack {
     /// The feature-distance channel, blurred like the colours, when the
     /// analysis adds one (see [`crate::analysis::feature`]).
     feature: Option<Arc<Vec<Vec<f32>>>>,
-    /// Values per pixel in `feature`.
-    feature_channels: usize,
 }
 
 impl GaussianStack {
@@ -52,62 +50,28 @@ impl GaussianStack {
             levels: Arc::new(levels),
             padded: Arc::new(padded),
             feature: None,
-            feature_channels: 0,
         }
     }
 
     /// The same stack with a feature-distance channel (one value per
     /// pixel of the finest level), blurred level by level like the colours.
-    pub fn with_feature(self, base: Vec<f32>) -> Self {
-        self.with_features(base, 1)
-    }
-
-    /// The same stack with `channels` more feature values per pixel of the
-    /// finest level (row-major, interleaved), appended to those it has and
-    /// blurred level by level like the colours.
-    pub fn with_features(mut self, base: Vec<f32>, channels: usize) -> Self {
-        let pixels = (self.width * self.height) as usize;
-        debug_assert_eq!(base.len(), pixels * channels);
-        let blurred: Vec<Vec<Vec<f32>>> = (0..channels)
-            .map(|ch| {
-                let one = (0..pixels).map(|i| [base[i * channels + ch]]).collect();
-                blurred_levels(one, self.width, self.height, self.len())
-                    .into_iter()
-                    .map(|l| l.into_iter().map(|[v]| v).collect())
-                    .collect()
-            })
-            .collect();
-        let before = self.feature_channels;
-        let total = before + channels;
-        let levels = (0..self.len())
-            .map(|k| {
-                let mut l = vec![0f32; pixels * total];
-                for i in 0..pixels {
-                    if let Some(f) = &self.feature {
-                        l[i * total..i * total + before]
-                            .copy_from_slice(&f[k][i * before..(i + 1) * before]);
-                    }
-                    for (ch, b) in blurred.iter().enumerate() {
-                        l[i * total + before + ch] = b[k][i];
-                    }
-                }
-                l
-            })
-            .collect();
-        self.feature = Some(Arc::new(levels));
-        self.feature_channels = total;
+    pub fn with_feature(mut self, base: Vec<f32>) -> Self {
+        debug_assert_eq!(base.len(), (self.width * self.height) as usize);
+        let base = base.into_iter().map(|v| [v]).collect();
+        let levels = blurred_levels(base, self.width, self.height, self.len());
+        self.feature = Some(Arc::new(
+            levels
+                .into_iter()
+                .map(|l| l.into_iter().map(|[v]| v).collect())
+                .collect(),
+        ));
         self
     }
 
     /// Values per pixel in an appearance neighbourhood: the three colours,
-    /// and the feature values when there are some.
+    /// and the feature distance when there is one.
     pub fn channels(&self) -> usize {
-        3 + self.feature_channels
-    }
-
-    /// Feature values per pixel.
-    pub fn feature_channels(&self) -> usize {
-        self.feature_channels
+        if self.feature.is_some() { 4 } else { 3 }
     }
 
     /// The feature-distance channel of level `k`, if any.

@@ -9,14 +9,15 @@
 //! feature mask, if it has one. Since version 5 the levels are followed
 //! by the reference's blocks of triples (level, side, then every voxel's
 //! triple); earlier files started from the slab, and read so. Since
-//! version 6 the blocks are followed by the usage penalties of a texture
-//! calibrated for histogram matching (the number of levels, 0 or all of
-//! them, then per level and plane a u16 per pixel). Derived data
+//! version 6 the blocks are followed by a count of levels of usage
+//! penalties, which histogram matching wrote; it was removed, so the count
+//! is written 0 and a file with penalties is refused, as is one whose
+//! parameters use a removed knob (`histogram_matching`, `glcp_weight`). Derived data
 //! (stacks, appearance vectors, quantised neighbourhoods) is recomputed on
 //! load, deterministically. Every read is bounds-checked: a truncated or
 //! corrupt file is an error, never a panic or a wrong result.
 
-use super::{Candidates, PlaneCandidates, PrecomputeReport, StoredLevel, feature_channels};
+use super::{Candidates, PlaneCandidates, PrecomputeReport, StoredLevel};
 use crate::analysis::appearance::Pca;
 use crate::analysis::exemplar::{Exemplar, ExemplarSet};
 use crate::analysis::orientation::{Grain, Layout};
@@ -231,17 +232,8 @@ fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
         }
     }
     if version >= 6 {
-        let levels = (0..c.level_count())
-            .map_while(|k| c.usage_penalty(k))
-            .collect::<Vec<_>>();
-        w.u32(levels.len() as u32);
-        for planes in levels {
-            for plane in planes {
-                for &v in plane {
-                    w.0.extend_from_slice(&v.to_le_bytes());
-                }
-            }
-        }
+        // No usage penalties (see the module's documentation).
+        w.u32(0);
     }
     let payload = w.0;
     let mut out = Vec::with_capacity(HEADER + payload.len());
@@ -290,10 +282,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     params
         .entry("feature_weight")
         .or_insert_with(|| serde_json::json!(0));
-    // Written before the co-occurrence features: none.
-    params
-        .entry("glcp_weight")
-        .or_insert_with(|| serde_json::json!(0));
+    crate::params::knobs::strip_removed(&mut params).map_err(|e| invalid(&e))?;
     // Written before the reference's blocks: started from the slab.
     if version < 5 {
         params
@@ -362,7 +351,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     let planes = if single { 1 } else { 3 };
     let npx = width * height;
     let wide = npx > u16::MAX as u32 + 1;
-    let channels = 3 + feature_channels(&params);
+    let channels = if params.feature_weight > 0.0 { 4 } else { 3 };
     let app_input = (params.neighbourhood * params.neighbourhood) as usize * channels;
     let mut levels = Vec::new();
     for _ in 0..params.levels {
@@ -474,37 +463,23 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
             });
         }
     }
-    let mut usage = Vec::new();
-    if version >= 6 {
-        let count = r.u32()?;
-        if count != 0 && count != params.levels {
-            return Err(invalid("usage level count"));
-        }
-        for _ in 0..count {
-            let mut planes: [Vec<u16>; 3] = Default::default();
-            for plane in &mut planes {
-                let bytes = r.take(npx as usize * 2)?;
-                *plane = bytes
-                    .chunks_exact(2)
-                    .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                    .collect();
-            }
-            usage.push(planes);
-        }
+    if version >= 6 && r.u32()? != 0 {
+        return Err(invalid(
+            "made with `histogram_matching`, which this version no longer has: \
+             precompute the texture again",
+        ));
     }
     if r.pos != payload.len() {
         return Err(invalid("trailing bytes"));
     }
-    let mut c = Candidates::from_stored(
+    Candidates::from_stored(
         set,
         params,
         layout,
         levels,
         blocks,
         PrecomputeReport::default(),
-    )?;
-    c.set_usage_penalty(usage);
-    Ok(c)
+    )
 }
 
 /// The layout record, which must agree with an orientation that was given.
@@ -593,28 +568,44 @@ mod tests {
     }
 
     #[test]
-    fn usage_penalties_read_as_written_and_broken_ones_are_refused() {
-        let mut c = compute(grain(16), Orientation::None);
-        let n = c.dims.len();
-        let usage: Vec<[Vec<u16>; 3]> = (0..2)
-            .map(|k| [0, 1, 2].map(|p| (0..n).map(|i| (i * 7 + p * 3 + k) as u16).collect()))
-            .collect();
-        c.set_usage_penalty(usage.clone());
+    fn files_that_need_a_removed_knob_are_refused() {
+        let c = compute(grain(16), Orientation::None);
         let bytes = c.to_bytes();
-        let loaded = decode(&bytes).unwrap();
-        assert_eq!(loaded.usage, usage);
-        assert_eq!(loaded.to_bytes(), bytes);
         let payload = &bytes[HEADER..];
-        // One value short.
-        assert!(decode(&with_header(VERSION, &payload[..payload.len() - 2])).is_err());
-        // A count that is neither 0 nor the level count.
-        let count_at = payload.len() - 2 * 3 * n * 2 - 4;
-        let mut wrong = payload.to_vec();
-        wrong[count_at..count_at + 4].copy_from_slice(&1u32.to_le_bytes());
-        assert!(decode(&with_header(VERSION, &wrong)).is_err());
-        // Files before version 6 have none, and read so.
-        let v5 = encode_version(&c, 5);
-        assert!(decode(&v5).unwrap().usage_penalty(0).is_none());
+        // Usage penalties (a count of levels above 0) are refused.
+        let count_at = payload.len() - 4;
+        assert_eq!(payload[count_at..], 0u32.to_le_bytes());
+        let mut with_penalties = payload.to_vec();
+        with_penalties[count_at..].copy_from_slice(&2u32.to_le_bytes());
+        let err = decode(&with_header(VERSION, &with_penalties)).unwrap_err();
+        assert!(err.to_string().contains("histogram_matching"), "{err}");
+        // A removed knob in the parameters: at 0 it reads as without it,
+        // above 0 the file is refused.
+        let json_len = u32::from_le_bytes(payload[..4].try_into().unwrap()) as usize;
+        let json: serde_json::Value = serde_json::from_slice(&payload[4..4 + json_len]).unwrap();
+        for (key, value, loads) in [
+            ("glcp_weight", 0.0, true),
+            ("glcp_weight", 0.3, false),
+            ("histogram_matching", 0.0, true),
+            ("histogram_matching", 1.0, false),
+        ] {
+            let mut j = json.clone();
+            j[key] = serde_json::json!(value);
+            let text = serde_json::to_vec(&j).unwrap();
+            let mut p = (text.len() as u32).to_le_bytes().to_vec();
+            p.extend_from_slice(&text);
+            p.extend_from_slice(&payload[4 + json_len..]);
+            match decode(&with_header(VERSION, &p)) {
+                Ok(back) => {
+                    assert!(loads, "{key} {value}");
+                    assert_eq!(back.params(), c.params());
+                }
+                Err(e) => {
+                    assert!(!loads, "{key} {value}: {e}");
+                    assert!(e.to_string().contains(key), "{e}");
+                }
+            }
+        }
     }
 
     #[test]
@@ -641,7 +632,7 @@ mod tests {
                 .map(|b| 8 + b.triples.len() * 6)
                 .sum::<usize>()
             - 4
-            // The usage penalties' count (none) follows the blocks.
+            // The usage penalties' count (always 0) follows the blocks.
             - 4;
         let mut payload = bytes[HEADER..].to_vec();
         let side_at = blocks_at - HEADER + 4 + 4;
@@ -730,33 +721,6 @@ mod tests {
             plain.level(0).appearance[0].vectors,
             c.level(0).appearance[0].vectors
         );
-    }
-
-    #[test]
-    fn co_occurrence_features_widen_the_vectors_beside_the_feature_channel_and_round_trip() {
-        let n = AnalysisParams::default().neighbourhood as usize;
-        for (feature_weight, channels) in [(0.0, 3 + 12), (1.0, 3 + 12 + 1)] {
-            let params = AnalysisParams {
-                levels: 2,
-                glcp_weight: 0.5,
-                feature_weight,
-                ..AnalysisParams::default()
-            };
-            let c =
-                Candidates::compute(&ExemplarSet::single(grain(32)), &params, &|_, _| {}).unwrap();
-            for k in 0..2 {
-                assert_eq!(c.level(k).appearance[0].pca.input, n * n * channels);
-                assert_eq!(c.level(k).appearance[0].channels, channels);
-            }
-            let bytes = encode(&c);
-            let back = decode(&bytes).unwrap();
-            assert_eq!(back.params().glcp_weight, 0.5);
-            assert_eq!(back.level(1).appearance, c.level(1).appearance);
-            assert_eq!(encode(&back), bytes);
-        }
-        let plain = compute(grain(32), Orientation::None);
-        let json = serde_json::to_string(plain.params()).unwrap();
-        assert!(!json.contains("glcp_weight"), "{json}");
     }
 
     #[test]

@@ -12,9 +12,9 @@ pub mod search;
 
 use crate::analysis::appearance::{self, AppearanceLevel, Pca};
 use crate::analysis::exemplar::ExemplarSet;
+use crate::analysis::feature;
 use crate::analysis::orientation::Layout;
 use crate::analysis::stack::{GaussianStack, spacing};
-use crate::analysis::{feature, glcp};
 use crate::error::{Error, Result};
 use crate::params::AnalysisParams;
 use crate::synth::cancel::CancelFlag;
@@ -41,9 +41,6 @@ pub enum Stage {
     /// The reference's blocks of triples (texture optimisation of a
     /// periodic block), when the synthesis starts from them.
     Reference,
-    /// The histogram matching's usage penalties, when asked for (see
-    /// [`crate::synth::usage`]).
-    Calibration,
 }
 
 /// Per-level summary of the candidate sets.
@@ -206,9 +203,6 @@ pub struct Candidates {
     /// The reference's blocks of triples, one per level that starts from
     /// one, finest first (none for the slab).
     blocks: Vec<crate::reference::TripleBlock>,
-    /// Per level, finest first, each plane's usage penalty per exemplar
-    /// pixel (see [`crate::synth::usage`]); empty when not calibrated.
-    usage: Vec<[Vec<u16>; 3]>,
     report: PrecomputeReport,
     /// Content fingerprint, the texture part of tile cache keys: taken
     /// from the file when loaded, else from the encoding on first use.
@@ -280,14 +274,7 @@ impl Candidates {
         let n = f64::from(params.neighbourhood);
         let wider = 11.0 * (n * n - 25.0).max(0.0);
         let kept = 40.0 * (f64::from(params.max_candidates) - 12.0).max(0.0);
-        // Co-occurrence features: a level's neighbourhoods gathered for
-        // its PCA, four bytes per value.
-        let glcp = if params.glcp_weight > 0.0 {
-            4.0 * n * n * glcp::CHANNELS as f64
-        } else {
-            0.0
-        };
-        let per_pixel = search.max(later) + wider + kept + glcp;
+        let per_pixel = search.max(later) + wider + kept;
         // Small exemplars peak at fixed costs (samples of set sizes, trees).
         let analysis = ((pixels * per_pixel) as u64 + (4 << 20)).max(6 << 20);
         // The reference block's optimisation state (positions, colours,
@@ -301,14 +288,7 @@ impl Candidates {
                 crate::reference::seeding_params(width, height, *levels.start(), *levels.end());
             u64::from(rp.size).pow(3) * REFERENCE_BYTES_PER_VOXEL
         };
-        // The calibration's synthesis: its tile cache at most, the
-        // counted blocks and the penalties.
-        let calibration = if params.histogram_matching > 0.0 {
-            crate::synth::usage::PEAK_BYTES + (pixels as u64) * 3 * 10 * u64::from(params.levels)
-        } else {
-            0
-        };
-        analysis + reference + calibration
+        analysis + reference
     }
 
     /// Runs the whole precomputation; `progress(stage, fraction 0..1)` is
@@ -367,7 +347,7 @@ impl Candidates {
             }
         })?;
         lap(&mut report, "reference");
-        let c = Candidates {
+        Ok(Candidates {
             exemplars: given.clone(),
             analysed,
             layout,
@@ -376,46 +356,15 @@ impl Candidates {
             stacks,
             levels,
             blocks,
-            usage: Vec::new(),
             report,
             digest: std::sync::OnceLock::new(),
-        };
-        if params.histogram_matching <= 0.0 {
-            return Ok(c);
-        }
-        let mut c = crate::synth::usage::calibrate(
-            c,
-            &crate::params::SynthParams::default(),
-            params.histogram_matching,
-            &|f| {
-                progress(Stage::Calibration, f);
-                if let Some(c) = cancel.as_ref() {
-                    c.unwind_if_set();
-                }
-            },
-        )?;
-        lap(&mut c.report, "calibration");
-        Ok(c)
+        })
     }
 
     /// The reference's block of triples that level `k` starts from, if
     /// it starts from one.
     pub fn block(&self, k: usize) -> Option<&crate::reference::TripleBlock> {
         self.blocks.iter().find(|b| b.level as usize == k)
-    }
-
-    /// Level `k`'s usage penalties per plane and exemplar pixel, if the
-    /// texture was calibrated.
-    pub fn usage_penalty(&self, k: usize) -> Option<&[Vec<u16>; 3]> {
-        self.usage.get(k)
-    }
-
-    /// Replaces the usage penalties (one entry per level, finest first, or
-    /// none); the content, and so the fingerprint, changes.
-    pub(crate) fn set_usage_penalty(&mut self, usage: Vec<[Vec<u16>; 3]>) {
-        debug_assert!(usage.is_empty() || usage.len() == self.levels.len());
-        self.usage = usage;
-        self.digest = std::sync::OnceLock::new();
     }
 
     /// Every block of the reference kept, finest first.
@@ -467,7 +416,6 @@ impl Candidates {
             stacks,
             levels,
             blocks,
-            usage: Vec::new(),
             report,
             digest: std::sync::OnceLock::new(),
         })
@@ -778,32 +726,15 @@ impl PopSingle for Vec<PlaneCandidates> {
     }
 }
 
-/// Each plane's stack, with its co-occurrence features when `glcp_weight`
-/// is above 0 and its feature-distance channel when `feature_weight` is.
-/// Feature values per exemplar pixel in the appearance neighbourhoods
-/// besides its colour.
-pub(crate) fn feature_channels(params: &AnalysisParams) -> usize {
-    let glcp = if params.glcp_weight > 0.0 {
-        glcp::CHANNELS
-    } else {
-        0
-    };
-    glcp + usize::from(params.feature_weight > 0.0)
-}
-
+/// Each plane's stack, with its feature-distance channel when
+/// `feature_weight` is above 0.
 fn build_stacks(
     exemplars: &ExemplarSet,
     levels: usize,
     params: &AnalysisParams,
 ) -> [GaussianStack; 3] {
     let stack = |p: usize| {
-        let mut s = GaussianStack::new(exemplars.plane(p), levels);
-        if params.glcp_weight > 0.0 {
-            s = s.with_features(
-                glcp::glcp_features(exemplars.plane(p), params.glcp_weight),
-                glcp::CHANNELS,
-            );
-        }
+        let s = GaussianStack::new(exemplars.plane(p), levels);
         if params.feature_weight > 0.0 {
             s.with_feature(feature::feature_distance(
                 exemplars.plane(p),

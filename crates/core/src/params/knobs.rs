@@ -151,6 +151,32 @@ pub const PRESET_ABOUT: &str = "Synthesis parameters to start from: `default`; `
     The texture stores the parameters it expands to, so its id is that of the spelled-out \
     parameters.";
 
+/// Knobs that were measured, did not help and were removed
+/// (docs/quality.md). A stored texture that gives one at 0 reads as
+/// without it; one that gives it another value cannot be synthesized as
+/// it was, and is refused.
+pub const REMOVED: &[&str] = &["histogram_matching", "glcp_weight"];
+
+/// Takes the [`REMOVED`] knobs out of a stored texture's parameters:
+/// `Ok` when each was absent or 0, else an error naming the first that
+/// was not.
+pub fn strip_removed(
+    params: &mut serde_json::Map<String, serde_json::Value>,
+) -> std::result::Result<(), String> {
+    for key in REMOVED {
+        match params.remove(*key) {
+            Some(v) if v.as_f64() != Some(0.0) => {
+                return Err(format!(
+                    "made with `{key}`, which this version no longer has: \
+                     precompute the texture again"
+                ));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// Every knob, synthesis first, each part in the order of its struct.
 pub const KNOBS: &[Knob] = &[
     synth(
@@ -356,25 +382,6 @@ pub const KNOBS: &[Knob] = &[
          uploaded feature mask, or else the smaller side of its Otsu luminance threshold, found \
          automatically. 0 (default) matches colour alone. Not written into the texture's \
          parameters when 0.",
-    ),
-    analysis(
-        "glcp_weight",
-        number(0.0, 2.0),
-        "Weight of the grey-level co-occurrence features (Chang et al. 2012) in the appearance \
-         vectors: the entropy, contrast and correlation of the grey levels next to each other \
-         in a 15×15 window around each exemplar pixel, in four directions, so that matching \
-         keeps rough next to rough and smooth next to smooth. The spread of the twelve \
-         features together relative to the colours' (0.3 is a good start); 0 (default) \
-         leaves them out. Not written into the texture's parameters when 0.",
-    ),
-    analysis(
-        "histogram_matching",
-        number(0.0, 4.0),
-        "Strength of the histogram matching calibrated at precompute: the texture is \
-         synthesized a few times and each exemplar pixel whose colour the solid over-uses is \
-         given a penalty in the correction, so that rare colours (veins, cracks) come back. 0 \
-         (default) leaves the correction unweighted; above 0 the precompute takes seconds \
-         longer. Not written into the texture's parameters when 0.",
     ),
     analysis(
         "initialisation",

@@ -44,7 +44,6 @@ mod periodic_tests;
 pub mod plan;
 pub mod schedule;
 mod stats;
-pub(crate) mod usage;
 
 use crate::candidates::Candidates;
 use crate::error::Result;

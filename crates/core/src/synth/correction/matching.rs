@@ -108,10 +108,6 @@ pub struct AppearanceCorrector<'a> {
     consistency: f32,
     /// The query as one linear map (see [`QueryMap`]).
     map: QueryMap,
-    /// Each plane's usage penalty per exemplar pixel, in quantised
-    /// distance units, when the texture was calibrated (see
-    /// [`crate::synth::usage`]).
-    usage: Option<[&'a [u16]; 3]>,
     /// Whether a pixel that several neighbours propose is scored once. At
     /// the coarse levels, where neighbours that do not continue each other
     /// still lie a pixel or two apart in an exemplar blurred over many,
@@ -243,7 +239,6 @@ impl<'a> AppearanceCorrector<'a> {
             plane_colours: [0, 1, 2].map(|p| cands.stack(p).level(k)),
             consistency: params.consistency * scale * scale,
             map: QueryMap::new(level, tables, params.contrast),
-            usage: cands.usage_penalty(k).map(|u| [0, 1, 2].map(|p| &u[p][..])),
             distinct: spacing(k) >= 4,
             avx2: simd::avx2(),
         }
@@ -519,12 +514,6 @@ impl<'a> AppearanceCorrector<'a> {
                 continue;
             }
             for (&dist, &t) in dists.iter().zip(&cands.triples) {
-                // Penalties are never negative: a triple already behind
-                // the best stays behind.
-                if dist > best.0 {
-                    continue;
-                }
-                let dist = dist.saturating_add(self.usage_of(t));
                 if dist < best.0 || (dist == best.0 && t < best.1) {
                     best = (dist, t);
                 }
@@ -536,9 +525,8 @@ impl<'a> AppearanceCorrector<'a> {
             let dist = simd::distance(&self.tables.sum_shares(s), &query);
             if dist <= best.0 {
                 // Saturating: a large `consistency` can push the penalty to u32::MAX.
-                let dist = dist
-                    .saturating_add(disagreement(&self.plane_colours, self.consistency, t))
-                    .saturating_add(self.usage_of(t));
+                let dist =
+                    dist.saturating_add(disagreement(&self.plane_colours, self.consistency, t));
                 if dist < best.0 || (dist == best.0 && t < best.1) {
                     best = (dist, t);
                 }
@@ -549,19 +537,6 @@ impl<'a> AppearanceCorrector<'a> {
 }
 
 impl<'a> AppearanceCorrector<'a> {
-    /// The usage penalty of triple `t`: the sum of its three pixels'.
-    #[inline(always)]
-    fn usage_of(&self, t: [u32; 3]) -> u32 {
-        match self.usage {
-            None => 0,
-            Some([a, b, c]) => {
-                u32::from(a[t[0] as usize])
-                    + u32::from(b[t[1] as usize])
-                    + u32::from(c[t[2] as usize])
-            }
-        }
-    }
-
     /// The k-coherence proposals: each in-plane neighbour's pixel moved
     /// back by its offset (`moved`, by near slot) proposes its similarity
     /// set; their candidate lists go to `proposed`, whose length is
