@@ -16,7 +16,8 @@ use crate::spec::SpecError;
 use axum::body::Body;
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use serde_json::json;
+use schemars::JsonSchema;
+use serde::Serialize;
 
 /// An error answer.
 #[derive(Debug, Clone)]
@@ -301,8 +302,30 @@ pub fn error_body(code: &str, message: &str) -> String {
     bounded_body(code, &bounded(message))
 }
 
+// openapi.yaml's `Error` schema is generated from this type: its doc
+// comments are the document's descriptions.
+/// The body of every error answer.
+#[derive(Serialize, JsonSchema)]
+#[schemars(rename = "Error")]
+pub(crate) struct ErrorBody<'a> {
+    pub(crate) error: ErrorDetail<'a>,
+}
+
+/// What went wrong.
+#[derive(Serialize, JsonSchema)]
+#[schemars(inline)]
+pub(crate) struct ErrorDetail<'a> {
+    /// Stable identifier of the error class.
+    pub(crate) code: &'a str,
+    /// Human-readable explanation.
+    pub(crate) message: &'a str,
+}
+
 fn bounded_body(code: &str, message: &str) -> String {
-    json!({ "error": { "code": code, "message": message } }).to_string()
+    let body = ErrorBody {
+        error: ErrorDetail { code, message },
+    };
+    serde_json::to_string(&body).expect("an error body serialises")
 }
 
 impl IntoResponse for ApiError {
@@ -406,6 +429,21 @@ pub fn panic_response(err: Box<dyn std::any::Any + Send + 'static>) -> Response 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_body_is_written_as_its_json_map_was() {
+        let body = ErrorBody {
+            error: ErrorDetail {
+                code: "a",
+                message: "b",
+            },
+        };
+        assert!(crate::openapi::keys_in_map_order(&body));
+        assert_eq!(
+            error_body("a", "b"),
+            r#"{"error":{"code":"a","message":"b"}}"#
+        );
+    }
 
     #[test]
     fn engine_errors_map_to_statuses() {

@@ -3,12 +3,16 @@
 //! query parameters, each knob's parameter component, and the properties
 //! of the `Params` and `VariantParams` schemas; from the voxel routes'
 //! query structs ([`crate::routes::documented_queries`]) their operations'
-//! query parameters, the `Lod` component and the `Vector` schema. Each sits in the document between a marker
+//! query parameters, the `Lod` component and the `Vector` schema; from
+//! the types of the JSON bodies the routes answer with
+//! ([`crate::routes::documented_responses`], serde and `schemars`) their
+//! component schemas. Each sits in the document between a marker
 //! line `# generated: NAME` and `# end generated: NAME`; [`regenerate`]
 //! rewrites what is between them and leaves the rest as written.
 //! tests/server_openapi.rs checks that the file is what it gives.
 
 use crate::routes::{self, QueryParam, ValueSchema};
+use schemars::generate::{Contract, SchemaSettings};
 use serde_json::Value;
 use solidtex_core::knobs::{self, Knob, Part, Values};
 
@@ -16,6 +20,8 @@ use solidtex_core::knobs::{self, Knob, Part, Values};
 enum Node {
     /// A mapping, keys in the order given.
     Map(Vec<(&'static str, Node)>),
+    /// A mapping whose keys come from data (a schema's property names).
+    Keyed(Vec<(String, Node)>),
     /// A block sequence of mappings.
     List(Vec<Node>),
     /// A flow sequence of scalars: `[a, b]`.
@@ -60,27 +66,13 @@ fn number(x: f64) -> Node {
 }
 
 fn write(out: &mut String, node: &Node, indent: usize) {
-    let pad = " ".repeat(indent);
     match node {
-        Node::Map(entries) => {
-            for (k, v) in entries {
-                match v {
-                    Node::Scalar(s) => out.push_str(&format!("{pad}{k}: {s}\n")),
-                    Node::Flow(items) => {
-                        out.push_str(&format!("{pad}{k}: [{}]\n", items.join(", ")))
-                    }
-                    Node::Prose(t) => {
-                        out.push_str(&format!("{pad}{k}: >-\n"));
-                        wrap(out, t, indent + 2);
-                    }
-                    Node::Map(_) | Node::List(_) => {
-                        out.push_str(&format!("{pad}{k}:\n"));
-                        write(out, v, indent + 2);
-                    }
-                }
-            }
+        Node::Map(entries) => write_entries(out, entries.iter().map(|(k, v)| (*k, v)), indent),
+        Node::Keyed(entries) => {
+            write_entries(out, entries.iter().map(|(k, v)| (k.as_str(), v)), indent)
         }
         Node::List(items) => {
+            let pad = " ".repeat(indent);
             for item in items {
                 let mut inner = String::new();
                 write(&mut inner, item, indent + 2);
@@ -91,6 +83,30 @@ fn write(out: &mut String, node: &Node, indent: usize) {
         }
         Node::Flow(_) | Node::Scalar(_) | Node::Prose(_) => {
             unreachable!("a scalar is written under its key")
+        }
+    }
+}
+
+fn write_entries<'a>(
+    out: &mut String,
+    entries: impl Iterator<Item = (&'a str, &'a Node)>,
+    indent: usize,
+) {
+    let pad = " ".repeat(indent);
+    for (k, v) in entries {
+        match v {
+            Node::Scalar(s) => out.push_str(&format!("{pad}{k}: {s}\n")),
+            Node::Flow(items) => out.push_str(&format!("{pad}{k}: [{}]\n", items.join(", "))),
+            Node::Prose(t) => {
+                out.push_str(&format!("{pad}{k}: >-\n"));
+                wrap(out, t, indent + 2);
+            }
+            Node::Map(m) if m.is_empty() => out.push_str(&format!("{pad}{k}: {{}}\n")),
+            Node::Keyed(m) if m.is_empty() => out.push_str(&format!("{pad}{k}: {{}}\n")),
+            Node::Map(_) | Node::Keyed(_) | Node::List(_) => {
+                out.push_str(&format!("{pad}{k}:\n"));
+                write(out, v, indent + 2);
+            }
         }
     }
 }
@@ -326,6 +342,12 @@ fn region(name: &str, indent: usize) -> Option<String> {
             }
             return Some(out);
         }
+        "response-schemas" => Node::Keyed(
+            response_schemas()
+                .into_iter()
+                .map(|(name, schema)| (name, schema_node(&schema)))
+                .collect(),
+        ),
         "params" => properties(knobs::KNOBS.iter(), false),
         "variant-params" => properties(knobs::knobs_of(Part::Synthesis), true),
         _ => return None,
@@ -374,6 +396,102 @@ fn properties<'a>(knobs: impl Iterator<Item = &'a Knob>, variant: bool) -> Node 
     Node::Map(props)
 }
 
+/// The component schemas of the routes' JSON bodies, by name: what
+/// `schemars` reads from their types (serde's attributes, doc comments as
+/// descriptions) in OpenAPI 3.0's dialect.
+fn response_schemas() -> serde_json::Map<String, Value> {
+    let mut generator = SchemaSettings::openapi3()
+        .with(|s| {
+            // What the server writes: a field it may leave out is the one
+            // it skips, not the one it would default.
+            s.contract = Contract::Serialize;
+            s.meta_schema = None;
+        })
+        .into_generator();
+    routes::documented_responses(&mut generator);
+    generator.take_definitions(true)
+}
+
+/// The order a reader expects a schema's keywords in; others follow in
+/// alphabetical order.
+const KEYWORDS: [&str; 20] = [
+    "$ref",
+    "type",
+    "format",
+    "nullable",
+    "enum",
+    "minimum",
+    "maximum",
+    "minLength",
+    "maxLength",
+    "pattern",
+    "items",
+    "minItems",
+    "maxItems",
+    "description",
+    "required",
+    "additionalProperties",
+    "properties",
+    "oneOf",
+    "anyOf",
+    "allOf",
+];
+
+/// A JSON Schema as the document writes it: keywords in [`KEYWORDS`]'
+/// order, properties in the type's; titles left out, and formats but
+/// `int32` and `int64` (the range is in the minimum and maximum; every
+/// number is a double).
+fn schema_node(schema: &Value) -> Node {
+    let Value::Object(m) = schema else {
+        return Node::Scalar(scalar(schema));
+    };
+    let mut keys: Vec<&String> = m.keys().collect();
+    keys.sort_by_key(|k| {
+        KEYWORDS
+            .iter()
+            .position(|w| w == k)
+            .unwrap_or(KEYWORDS.len())
+    });
+    let mut entries = Vec::new();
+    for k in keys {
+        let v = &m[k];
+        let node = match (k.as_str(), v) {
+            ("title", _) => continue,
+            ("format", Value::String(f)) if !matches!(f.as_str(), "int32" | "int64") => {
+                continue;
+            }
+            ("properties", Value::Object(props)) => Node::Keyed(
+                props
+                    .iter()
+                    .map(|(name, s)| (name.clone(), schema_node(s)))
+                    .collect(),
+            ),
+            ("items" | "additionalProperties" | "not", _) => schema_node(v),
+            ("oneOf" | "anyOf" | "allOf", Value::Array(a)) => {
+                Node::List(a.iter().map(schema_node).collect())
+            }
+            ("description", Value::String(t)) => Node::Prose(t.clone()),
+            _ => value_node(v),
+        };
+        entries.push((k.clone(), node));
+    }
+    Node::Keyed(entries)
+}
+
+/// A value (a default, an example, an enum) as YAML.
+fn value_node(v: &Value) -> Node {
+    match v {
+        Value::Array(a) if a.iter().all(|x| !x.is_array() && !x.is_object()) => {
+            Node::Flow(a.iter().map(scalar).collect())
+        }
+        Value::Array(a) => Node::List(a.iter().map(value_node).collect()),
+        Value::Object(m) => {
+            Node::Keyed(m.iter().map(|(k, v)| (k.clone(), value_node(v))).collect())
+        }
+        _ => Node::Scalar(scalar(v)),
+    }
+}
+
 const BEGIN: &str = "# generated: ";
 const END: &str = "# end generated: ";
 
@@ -404,4 +522,15 @@ pub fn regenerate(document: &str) -> Result<String, String> {
         }
     }
     Ok(out)
+}
+
+/// Whether `body` is written with its keys in the order a JSON map
+/// (alphabetical) would write them: the bodies were such maps before they
+/// were types, and their bytes stay the same.
+#[cfg(test)]
+pub(crate) fn keys_in_map_order<T: serde::Serialize>(body: &T) -> bool {
+    let text = serde_json::to_string(body).expect("serialises");
+    let value = serde_json::to_value(body).expect("serialises");
+    let as_map = serde_json::to_string(&value).expect("serialises");
+    text == as_map
 }

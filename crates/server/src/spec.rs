@@ -8,6 +8,7 @@
 //! defaults are filled in, so an upload is idempotent whatever the encoding
 //! of the PNG and whichever defaults were spelled out.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 use sha2::{Digest, Sha256};
@@ -509,18 +510,23 @@ pub fn valid_id(id: &str) -> bool {
             .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
 }
 
-/// Serializable form of an exemplar's size, for metadata.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
+// Stored in a texture's metadata and shown in the API; openapi.yaml's
+// `ExemplarInfo` schema is generated from it (not written when no mask
+// came, so metadata stored before masks reads the same).
+/// The exemplar images' size.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq, JsonSchema)]
 pub struct ExemplarInfo {
     /// Width in pixels.
     pub width: u32,
     /// Height in pixels.
     pub height: u32,
     /// 1 (one image for all planes) or 3.
+    #[schemars(extend("enum" = [1, 3]))]
     pub planes: u32,
-    /// How many of the images came with a feature mask (not written when
-    /// none did, so metadata stored before masks reads the same).
+    /// How many of the images came with a feature mask; absent when none
+    /// did.
     #[serde(default, skip_serializing_if = "is_zero")]
+    #[schemars(range(min = 1, max = 3))]
     pub feature_masks: u32,
 }
 

@@ -17,8 +17,9 @@ use crate::error::ApiError;
 use axum::extract::State;
 use axum::http::HeaderMap;
 use axum::response::Response;
-use serde::Deserialize;
-use serde_json::{Value, json};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
 use solidtex_core::{Axis, MAX_SLICE_SIDE, Request, SynthParams, Texture, Window};
 
 /// Most samples one request may ask for.
@@ -53,6 +54,61 @@ document_query!(FramesQuery {
     lod: LOD,
     step: "Distance between samples along u and v, in voxels of `lod`.",
 });
+
+// openapi.yaml's `Frames`, `FrameSample` and `ProjectedAxis` schemas are
+// generated from these types. Fields are in alphabetical order, the order
+// the answer had when it was built as a JSON map, so the bytes stay the same.
+
+/// The frames of a texture's field at a grid of samples of an axis slice.
+#[derive(Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+pub(super) struct Frames {
+    at: i64,
+    #[schemars(extend("enum" = ["x", "y", "z"]))]
+    axis: &'static str,
+    /// Samples per row, ⌈w/step⌉.
+    #[schemars(range(min = 1))]
+    columns: u32,
+    /// The `kind` of the texture's field; null without one.
+    field_kind: Option<String>,
+    #[schemars(range(min = 1, max = MAX_SLICE_SIDE))]
+    h: u32,
+    lod: u32,
+    /// Rows of samples, ⌈h/step⌉.
+    #[schemars(range(min = 1))]
+    rows: u32,
+    #[schemars(length(max = MAX_FRAME_SAMPLES))]
+    samples: Vec<FrameSample>,
+    #[schemars(range(min = 1, max = MAX_SLICE_SIDE))]
+    step: u32,
+    u0: i64,
+    /// The world axis along the slice's u.
+    #[schemars(extend("enum" = ["x", "y", "z"]))]
+    u_axis: &'static str,
+    v0: i64,
+    /// The world axis along the slice's v.
+    #[schemars(extend("enum" = ["x", "y", "z"]))]
+    v_axis: &'static str,
+    #[schemars(range(min = 1, max = MAX_SLICE_SIDE))]
+    w: u32,
+}
+
+/// The local frame at one sample.
+#[derive(Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
+struct FrameSample {
+    u: i64,
+    v: i64,
+    x: ProjectedAxis,
+    y: ProjectedAxis,
+    z: ProjectedAxis,
+}
+
+/// A local axis (unit length) by its components along the slice's u and v
+/// axes and along its normal, rounded to 1e-6.
+#[derive(Serialize, JsonSchema)]
+#[serde(transparent)]
+struct ProjectedAxis([f64; 3]);
 
 fn axis_name(i: usize) -> &'static str {
     ["x", "y", "z"][i]
@@ -134,7 +190,7 @@ impl Grid {
 
     /// The frame at every sample, in the slice's (u, v, normal) axes, and
     /// the grid, as the answer's JSON text.
-    fn answer(&self, tex: &Texture, field_kind: Value) -> String {
+    fn answer(&self, tex: &Texture, field_kind: Option<String>) -> String {
         let (n, ia, ib) = self.axis.frame();
         let Window { u0, v0, .. } = self.window;
         let mut samples = Vec::with_capacity(self.columns as usize * self.rows as usize);
@@ -148,47 +204,75 @@ impl Grid {
                 p[ib] = v as f64;
                 p[n] = self.at as f64;
                 let f = tex.frame(self.lod, p);
-                let project = |a: [f64; 3]| [short(a[ia]), short(a[ib]), short(a[n])];
-                samples.push(json!({
-                    "u": u,
-                    "v": v,
-                    "x": project(f[0]),
-                    "y": project(f[1]),
-                    "z": project(f[2]),
-                }));
+                let project =
+                    |a: [f64; 3]| ProjectedAxis([short(a[ia]), short(a[ib]), short(a[n])]);
+                samples.push(FrameSample {
+                    u,
+                    v,
+                    x: project(f[0]),
+                    y: project(f[1]),
+                    z: project(f[2]),
+                });
             }
         }
-        json!({
-            "axis": self.axis.name(),
-            "at": self.at,
-            "lod": self.lod,
-            "u_axis": axis_name(ia),
-            "v_axis": axis_name(ib),
-            "u0": u0,
-            "v0": v0,
-            "w": self.window.width,
-            "h": self.window.height,
-            "step": self.step,
-            "columns": self.columns,
-            "rows": self.rows,
-            "field_kind": field_kind,
-            "samples": samples,
-        })
-        .to_string()
+        let frames = Frames {
+            at: self.at,
+            axis: self.axis.name(),
+            columns: self.columns,
+            field_kind,
+            h: self.window.height,
+            lod: self.lod,
+            rows: self.rows,
+            samples,
+            step: self.step,
+            u0,
+            u_axis: axis_name(ia),
+            v0,
+            v_axis: axis_name(ib),
+            w: self.window.width,
+        };
+        serde_json::to_string(&frames).expect("frames serialise")
     }
 }
 
-/// The `kind` of the texture's field, or null without one.
-fn field_kind(synth: &SynthParams) -> Value {
+/// The `kind` of the texture's field, if it has one.
+fn field_kind(synth: &SynthParams) -> Option<String> {
     match synth.field.as_ref().map(serde_json::to_value) {
-        Some(Ok(Value::Object(m))) => m.get("kind").cloned().unwrap_or(Value::Null),
-        _ => Value::Null,
+        Some(Ok(Value::Object(m))) => m.get("kind")?.as_str().map(str::to_string),
+        _ => None,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_answer_is_written_as_its_json_map_was() {
+        let frames = Frames {
+            at: -3,
+            axis: "z",
+            columns: 1,
+            field_kind: Some("slant".into()),
+            h: 4,
+            lod: 0,
+            rows: 1,
+            samples: vec![FrameSample {
+                u: 0,
+                v: 1,
+                x: ProjectedAxis([1.0, 0.0, 0.0]),
+                y: ProjectedAxis([0.0, 0.5, 0.866_025]),
+                z: ProjectedAxis([0.0, -0.866_025, 0.5]),
+            }],
+            step: 16,
+            u0: 0,
+            u_axis: "x",
+            v0: 1,
+            v_axis: "y",
+            w: 4,
+        };
+        assert!(crate::openapi::keys_in_map_order(&frames));
+    }
 
     #[test]
     fn components_are_short_and_never_negative_zero() {

@@ -89,6 +89,16 @@ pub fn documented_queries() -> Vec<(&'static str, Vec<QueryParam>)> {
     ]
 }
 
+/// The JSON bodies the routes answer with, registered in `generator`;
+/// openapi.yaml's section `response-schemas` is generated from their
+/// types ([`crate::openapi`]).
+pub fn documented_responses(generator: &mut schemars::SchemaGenerator) {
+    generator.subschema_for::<crate::error::ErrorBody>();
+    generator.subschema_for::<textures::TextureList>();
+    generator.subschema_for::<ops::Health>();
+    generator.subschema_for::<frames::Frames>();
+}
+
 /// The `lod` query parameter every voxel route takes.
 pub fn lod_parameter() -> QueryParam {
     params::query_param(|l: voxels::Lod| l, "lod", voxels::LOD)

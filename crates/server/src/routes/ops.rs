@@ -8,14 +8,37 @@ use axum::Json;
 use axum::extract::State;
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use serde_json::json;
+use schemars::JsonSchema;
+use serde::Serialize;
 
 /// The OpenAPI document of this service.
 pub const OPENAPI_YAML: &str = include_str!("../../../../openapi.yaml");
 
+// openapi.yaml's `Health` schema is generated from this type.
+/// Whether the server answers, and whether it is ready.
+#[derive(Serialize, JsonSchema)]
+pub(crate) struct Health {
+    pub(crate) status: HealthStatus,
+}
+
+/// `ok` from `/healthz`; `ready` or why not from `/readyz`.
+#[derive(Clone, Copy, Serialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+#[schemars(inline)]
+pub(crate) enum HealthStatus {
+    Ok,
+    Ready,
+    Loading,
+    Starting,
+    Overloaded,
+    DefaultMissing,
+}
+
 /// `GET /healthz`: the process answers.
-pub async fn healthz() -> Json<serde_json::Value> {
-    Json(json!({ "status": "ok" }))
+pub async fn healthz() -> Json<Health> {
+    Json(Health {
+        status: HealthStatus::Ok,
+    })
 }
 
 /// `GET /readyz`: 200 once the stored textures are loaded, the bundled
@@ -28,18 +51,21 @@ pub async fn readyz(State(s): State<AppState>) -> Response {
         .is_some_and(|e| matches!(e.status(), Status::Pending));
     let (code, status) = if !s.registry.recovered() {
         // The stored textures (and the bundled one) are still loading.
-        (StatusCode::SERVICE_UNAVAILABLE, "loading")
+        (StatusCode::SERVICE_UNAVAILABLE, HealthStatus::Loading)
     } else if s.default_texture && default.is_none() {
         // Deleted: this server no longer serves what it was started for.
-        (StatusCode::SERVICE_UNAVAILABLE, "default_missing")
+        (
+            StatusCode::SERVICE_UNAVAILABLE,
+            HealthStatus::DefaultMissing,
+        )
     } else if starting {
-        (StatusCode::SERVICE_UNAVAILABLE, "starting")
+        (StatusCode::SERVICE_UNAVAILABLE, HealthStatus::Starting)
     } else if s.jobs.is_full() {
-        (StatusCode::SERVICE_UNAVAILABLE, "overloaded")
+        (StatusCode::SERVICE_UNAVAILABLE, HealthStatus::Overloaded)
     } else {
-        (StatusCode::OK, "ready")
+        (StatusCode::OK, HealthStatus::Ready)
     };
-    let mut res = (code, Json(json!({ "status": status }))).into_response();
+    let mut res = (code, Json(Health { status })).into_response();
     if code != StatusCode::OK {
         res.headers_mut()
             .insert(header::RETRY_AFTER, header::HeaderValue::from_static("1"));

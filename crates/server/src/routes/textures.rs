@@ -8,68 +8,184 @@ use crate::error::ApiError;
 use crate::query::Query;
 use crate::regions::{ID_PREFIX, RegionDef, Stored};
 use crate::registry::{Entry, RegistryError, Status, Submitted};
-use crate::spec::{Planes, TextureParams, TextureSpec, params_object, valid_id};
+use crate::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec, params_object, valid_id};
 use axum::Json;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use schemars::JsonSchema;
+use serde::Serialize;
 use serde_json::{Map, Value, json};
 use solidtex_core::Exemplar;
 use solidtex_core::Layout;
 use std::sync::Arc;
 
-/// The JSON view of a texture.
-pub fn view(e: &Entry, brick_size: u32) -> Value {
-    let mut v = json!({
-        "id": e.id,
-        "name": e.name,
-        "status": "pending",
-        "progress": e.progress(),
-        "stage": e.stage(),
-        "created": e.created,
-        "exemplar": e.exemplar,
-        "params": Value::Object(e.params.to_flat()),
-        "brick_size": brick_size,
-    });
-    if let Some(l) = &e.layout {
-        v["orientation"] = layout_view(l);
+// openapi.yaml's `Texture`, `Layout` and `TextureList` schemas are
+// generated from these types: their doc comments are the document's
+// descriptions. Fields are in alphabetical order, the order the bodies had
+// when they were built as JSON maps, so the bytes stay the same.
+
+/// A texture: its exemplars, parameters and precompute.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(rename = "Texture")]
+pub(crate) struct TextureView {
+    /// Edge of the bricks served under `/bricks/`.
+    pub(crate) brick_size: u32,
+    /// Creation time, seconds since the Unix epoch.
+    pub(crate) created: u64,
+    #[serde(serialize_with = "in_map_order")]
+    #[schemars(with = "ExemplarInfo")]
+    pub(crate) exemplar: ExemplarInfo,
+    pub(crate) id: String,
+    /// Highest level of detail served (when ready).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u32")]
+    pub(crate) max_lod: Option<u32>,
+    /// The uploaded file's name (multipart file name, or the `name` query
+    /// parameter), for people; not part of the id. The first upload of a
+    /// content names it.
+    pub(crate) name: Option<String>,
+    /// Only in the answer to an upload: what was done to the images, e.g. a
+    /// photo downscaled to the exemplar size limit.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub(crate) notes: Vec<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "LayoutView")]
+    pub(crate) orientation: Option<LayoutView>,
+    #[schemars(schema_with = "params_schema")]
+    pub(crate) params: Map<String, Value>,
+    /// Heap bytes the precompute is expected to peak at (from the exemplar
+    /// size and the analysis parameters); precomputes run together only
+    /// while these add up to the server's bound.
+    pub(crate) precompute_estimated_bytes: u64,
+    /// Heap bytes the precompute peaked at, as counted by the server's
+    /// allocator (absent when not measured, e.g. for the bundled or shared
+    /// candidates).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u64")]
+    pub(crate) precompute_peak_bytes: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "f64")]
+    pub(crate) precompute_seconds: Option<f64>,
+    /// Precompute progress.
+    #[schemars(range(min = 0, max = 1))]
+    pub(crate) progress: f64,
+    /// Why the precompute failed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "String")]
+    pub(crate) reason: Option<String>,
+    /// Current precompute stage (`queued`, `analysis`, `search`,
+    /// `coherence`, `finish`, `done`, `failed`).
+    pub(crate) stage: &'static str,
+    pub(crate) status: TextureStatus,
+}
+
+/// Whether the texture's candidates are precomputed.
+#[derive(Debug, Clone, Copy, Serialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+#[schemars(inline)]
+pub(crate) enum TextureStatus {
+    Pending,
+    Ready,
+    Failed,
+}
+
+/// `value` with its keys in alphabetical order, as a JSON map writes them
+/// (the type's own order is its stored metadata's).
+fn in_map_order<T: Serialize, S: serde::Serializer>(value: &T, s: S) -> Result<S::Ok, S::Error> {
+    serde_json::to_value(value)
+        .map_err(serde::ser::Error::custom)?
+        .serialize(s)
+}
+
+/// The `Params` schema: the knobs' own section of the document.
+fn params_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    schemars::json_schema!({ "$ref": "#/components/schemas/Params" })
+}
+
+/// What the `orientation` parameter resolved to, and what was measured on
+/// the xy exemplar.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(rename = "Layout")]
+pub(crate) struct LayoutView {
+    /// Coherence of the structure tensor of the exemplar's luminance (2×2
+    /// pixel differences summed over the image): 0 when its gradients point
+    /// every way, 1 for perfect stripes.
+    #[schemars(range(min = 0, max = 1))]
+    pub(crate) coherence: f64,
+    /// The exemplar is one image for all planes, square, and strongly
+    /// oriented along one of its axes (coherence at least 0.6, grain within
+    /// 15° of an axis): `auto` arranges it.
+    pub(crate) detected: bool,
+    /// Direction of the grain, in degrees from the image's u axis towards
+    /// v, in (-90, 90]: 0 is along u, 90 along v.
+    pub(crate) grain_degrees: f64,
+    /// The rotation of each plane's exemplar in use (xy, yz, zx).
+    pub(crate) rotate: [u32; 3],
+    /// The weight of each plane in use.
+    pub(crate) weights: [f64; 3],
+}
+
+/// Every texture.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct TextureList {
+    /// The region textures (two textures sharing space), oldest first.
+    #[schemars(schema_with = "regions_schema")]
+    pub(crate) regions: Vec<Value>,
+    pub(crate) textures: Vec<TextureView>,
+}
+
+/// The region textures' schema: written by hand beside the generated ones.
+fn regions_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    schemars::json_schema!({
+        "type": "array",
+        "items": { "$ref": "#/components/schemas/RegionTexture" }
+    })
+}
+
+/// The view of a texture.
+pub(crate) fn view(e: &Entry, brick_size: u32) -> TextureView {
+    let (status, max_lod, reason) = match e.status() {
+        Status::Pending => (TextureStatus::Pending, None, None),
+        Status::Ready(_) | Status::Stored => (TextureStatus::Ready, Some(e.max_lod()), None),
+        Status::Failed(r) => (TextureStatus::Failed, None, Some(r)),
+    };
+    TextureView {
+        brick_size,
+        created: e.created,
+        exemplar: e.exemplar,
+        id: e.id.clone(),
+        max_lod,
+        name: e.name.clone(),
+        notes: Vec::new(),
+        orientation: e.layout.as_ref().map(layout_view),
+        params: e.params.to_flat(),
+        precompute_estimated_bytes: e.precompute_estimate,
+        precompute_peak_bytes: e.precompute_peak(),
+        precompute_seconds: e.precompute_seconds(),
+        // Widened as a JSON map widened it, so the digits stay the same.
+        progress: f64::from(e.progress()),
+        reason,
+        stage: e.stage(),
+        status,
     }
-    match e.status() {
-        Status::Pending => {}
-        Status::Ready(_) | Status::Stored => {
-            v["status"] = "ready".into();
-            v["max_lod"] = e.max_lod().into();
-        }
-        Status::Failed(r) => {
-            v["status"] = "failed".into();
-            v["reason"] = r.into();
-        }
-    }
-    if let Some(s) = e.precompute_seconds() {
-        v["precompute_seconds"] = s.into();
-    }
-    v["precompute_estimated_bytes"] = e.precompute_estimate.into();
-    if let Some(b) = e.precompute_peak() {
-        v["precompute_peak_bytes"] = b.into();
-    }
-    v
 }
 
 /// What the `orientation` parameter resolved to, and what was measured.
-fn layout_view(l: &Layout) -> Value {
+fn layout_view(l: &Layout) -> LayoutView {
     let round = |x: f32, places: i32| {
         let s = 10f64.powi(places);
         (x as f64 * s).round() / s
     };
     let a = &l.arrangement;
-    json!({
-        "rotate": a.rotate,
-        "weights": a.weights.map(|w| round(w, 3)),
-        "detected": l.detected,
-        "coherence": round(l.grain.coherence, 3),
-        "grain_degrees": round(l.grain.degrees, 1),
-    })
+    LayoutView {
+        coherence: round(l.grain.coherence, 3),
+        detected: l.detected,
+        grain_degrees: round(l.grain.degrees, 1),
+        rotate: a.rotate,
+        weights: a.weights.map(|w| round(w, 3)),
+    }
 }
 
 /// `GET /v1/textures`: once the stored textures are loaded (a list of
@@ -77,9 +193,9 @@ fn layout_view(l: &Layout) -> Value {
 pub(super) async fn list(
     State(s): State<AppState>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<TextureList>, ApiError> {
     s.registry.await_recovered().await?;
-    let all: Vec<Value> = s
+    let textures = s
         .registry
         .list()
         .iter()
@@ -91,7 +207,7 @@ pub(super) async fn list(
         .iter()
         .map(|r| region_view(r, s.brick_size))
         .collect();
-    Ok(Json(json!({ "textures": all, "regions": regions })))
+    Ok(Json(TextureList { regions, textures }))
 }
 
 /// Runs a blocking storage call off the async threads.
@@ -182,14 +298,14 @@ pub(super) async fn show(
     State(s): State<AppState>,
     Path(id): Path<String>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Response, ApiError> {
     checked_id(&id)?;
     if let Some(r) = region(&s, &id).await? {
         let mut v = region_view(&r, s.brick_size);
         if let Ok((_, t)) = super::answer::texture(&s, &id).await {
             v["max_lod"] = t.max_lod().into();
         }
-        return Ok(Json(v));
+        return Ok(Json(v).into_response());
     }
     let e = known(&s, &id).await?;
     Ok(Json(view(&e, s.brick_size)))
@@ -380,10 +496,10 @@ fn created_response(
     brick_size: u32,
     notes: &[String],
 ) -> Response {
-    let mut body = view(entry, brick_size);
-    if !notes.is_empty() {
-        body["notes"] = json!(notes);
-    }
+    let body = TextureView {
+        notes: notes.to_vec(),
+        ..view(entry, brick_size)
+    };
     let mut res = (status, Json(body)).into_response();
     if let Ok(loc) = HeaderValue::from_str(&format!("/v1/textures/{}", entry.id)) {
         res.headers_mut().insert(header::LOCATION, loc);
@@ -683,6 +799,46 @@ pub(super) async fn exemplar(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_texture_is_written_as_its_json_map_was() {
+        let layout = LayoutView {
+            coherence: 0.75,
+            detected: true,
+            grain_degrees: -12.5,
+            rotate: [90, 0, 0],
+            weights: [1.0, 0.25, 0.25],
+        };
+        assert!(crate::openapi::keys_in_map_order(&layout));
+        let texture = TextureView {
+            brick_size: 64,
+            created: 1_700_000_000,
+            exemplar: ExemplarInfo {
+                width: 64,
+                height: 64,
+                planes: 3,
+                feature_masks: 1,
+            },
+            id: "0123".into(),
+            max_lod: Some(3),
+            name: Some("marble.png".into()),
+            notes: vec!["downscaled".into()],
+            orientation: Some(layout),
+            params: Map::from_iter([("seed".to_string(), Value::from(7))]),
+            precompute_estimated_bytes: 1 << 20,
+            precompute_peak_bytes: Some(1 << 19),
+            precompute_seconds: Some(1.5),
+            progress: f64::from(0.3f32),
+            reason: Some("why".into()),
+            stage: "done",
+            status: TextureStatus::Failed,
+        };
+        assert!(crate::openapi::keys_in_map_order(&texture));
+        assert!(crate::openapi::keys_in_map_order(&TextureList {
+            regions: vec![json!({"id": "region-0"})],
+            textures: vec![texture]
+        }));
+    }
 
     #[test]
     fn display_names_are_a_printable_file_name_of_bounded_length() {
