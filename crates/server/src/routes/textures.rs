@@ -308,7 +308,7 @@ pub(super) async fn show(
         return Ok(Json(v).into_response());
     }
     let e = known(&s, &id).await?;
-    Ok(Json(view(&e, s.brick_size)))
+    Ok(Json(view(&e, s.brick_size)).into_response())
 }
 
 /// `DELETE /v1/textures/{id}`.
