@@ -66,7 +66,8 @@ enum UvArg {
 
 /// Renders the bake `request`, moving `bar` as it goes: by the texels
 /// answered, a step of about a million at a time, and between them by the
-/// voxels of the shell synthesized against the `predicted` bound.
+/// voxels of the shell synthesized against the `predicted` bound, whose
+/// count the message shows.
 fn render_watched(
     tex: &Texture,
     request: &Request,
@@ -83,8 +84,13 @@ fn render_watched(
     let show = |texels: u64| {
         let share = (texels as f64 / items).max(flag.share_of(predicted));
         bar.set_position((share * 1000.0) as u64);
+        // The prediction bounds a cold cache's work from above, often by
+        // far: the count itself shows the synthesis moving.
+        bar.set_message(format!(
+            "synthesis, {:.1} M voxels",
+            flag.synthesized() as f64 / 1e6
+        ));
     };
-    bar.set_message("synthesis");
     std::thread::scope(|scope| {
         let work = scope.spawn(|| {
             run_cancellable(&flag, || {
