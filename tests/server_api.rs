@@ -790,12 +790,13 @@ async fn every_error_class_is_json() {
             415,
             "unsupported_media_type",
         ),
+        // JSON defines a region texture: an image is no definition.
         (
             exemplar_png(32, 1),
             Some("application/json"),
             "",
-            415,
-            "unsupported_media_type",
+            400,
+            "invalid_region",
         ),
         (exemplar_png(32, 1), None, "", 415, "unsupported_media_type"),
         (

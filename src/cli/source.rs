@@ -6,6 +6,7 @@ use super::knob_flags::SynthArgs;
 use anyhow::Context;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use solidtex_core::region::{Shape, Split};
 use solidtex_core::{
     AnalysisParams, Candidates, Exemplar, ExemplarSet, Stage, SynthStats, Texture, TileCache,
 };
@@ -23,6 +24,21 @@ pub struct SourceArgs {
     /// Level of detail (0 = finest).
     #[arg(long, default_value_t = 0)]
     pub lod: u32,
+    /// A second texture (`.stx` or exemplar image) filling `--inner-region`:
+    /// a region texture, the first texture outside (docs/meshes.md).
+    #[arg(long, requires = "inner_region")]
+    pub inner: Option<PathBuf>,
+    /// The region `--inner` fills, in voxels of level of detail 0:
+    /// `sphere:CX,CY,CZ,R`, `box:CX,CY,CZ,HX,HY,HZ[,ROUNDING]`,
+    /// `cylinder:X0,Y0,Z0,X1,Y1,Z1,R`, `half_space:PX,PY,PZ,NX,NY,NZ`,
+    /// `shell:T` (depth below a baked mesh's surface; bakes only) or the
+    /// same as a JSON object.
+    #[arg(long, requires = "inner")]
+    pub inner_region: Option<Shape>,
+    /// Width of the band across the region's boundary where the two
+    /// textures mix (0: a hard boundary).
+    #[arg(long, default_value_t = 0.0, requires = "inner")]
+    pub band: f64,
 }
 
 /// One sentence on what a synthesis command wrote and what it cost.
@@ -76,7 +92,28 @@ pub fn precompute(
 }
 
 pub fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
-    let cands = match &src.source {
+    let cache = Arc::new(TileCache::new(1 << 30));
+    let params = src.synth.params();
+    let outer = Texture::new(
+        Arc::new(load_candidates(src.source.as_deref())?),
+        params.clone(),
+        cache.clone(),
+    )?;
+    let (Some(inner), Some(region)) = (&src.inner, &src.inner_region) else {
+        return Ok(outer);
+    };
+    let inner = Texture::new(Arc::new(load_candidates(Some(inner))?), params, cache)?;
+    let split = Split {
+        region: region.clone(),
+        band: src.band,
+    };
+    Ok(Texture::with_region(outer, inner, split)?)
+}
+
+/// The candidates of a `.stx` file, of an exemplar image (precomputed
+/// now), or of the bundled default.
+fn load_candidates(path: Option<&Path>) -> anyhow::Result<Candidates> {
+    Ok(match path {
         Some(p) if p.extension().is_some_and(|e| e == "stx") => {
             let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
             Candidates::load(&bytes)?
@@ -99,13 +136,7 @@ pub fn load_source(src: &SourceArgs) -> anyhow::Result<Texture> {
                 None => precompute(&set, &AnalysisParams::default(), false)?,
             }
         }
-    };
-    let params = src.synth.params();
-    Ok(Texture::new(
-        Arc::new(cands),
-        params,
-        Arc::new(TileCache::new(1 << 30)),
-    )?)
+    })
 }
 
 /// Opens a PNG or JPEG exemplar; a photo larger than the exemplar limit is

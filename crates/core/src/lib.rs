@@ -25,6 +25,7 @@ mod params;
 pub mod period;
 pub mod png;
 pub mod reference;
+pub mod region;
 mod request;
 mod simd;
 mod synth;

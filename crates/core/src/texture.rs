@@ -1,15 +1,18 @@
 //! The public face of synthesis: a [`Texture`] answers [`Request`]s (voxel
 //! regions, axis slices, oblique cuts, scattered voxels) by synthesizing
-//! exactly their dependency set (see [`crate::synth`]).
+//! exactly their dependency set (see [`crate::synth`]). A texture is one
+//! solid, or two sharing space across a region ([`crate::region`]).
 
 use crate::candidates::Candidates;
 use crate::error::{Error, Result};
-use crate::mesh::Bake;
+use crate::mesh::{Bake, Surface};
 use crate::params::SynthParams;
+use crate::region::{self, Side, Split};
 use crate::request::{Request, RequestKind, Slice};
 use crate::synth::cache::TileCache;
+use crate::synth::colour::rgb8;
 use crate::synth::estimate::WorkEstimate;
-use crate::synth::{Engine, SynthStats, sample_voxels};
+use crate::synth::{Engine, SynthStats, filtered_rgb, plane_points, sample_voxels, unique_voxels};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -27,7 +30,20 @@ const ESTIMATE_BLOCK: u32 = 16;
 /// rayon); call it from a blocking context.
 #[derive(Clone)]
 pub struct Texture {
+    /// The solid, or for a region texture its outermost outer solid (whose
+    /// candidates and parameters the texture reports).
     engine: Arc<Engine>,
+    /// Two textures sharing space, for a region texture.
+    split: Option<Arc<Composite>>,
+}
+
+/// A region texture: `inner` fills the region, `outer` the rest.
+struct Composite {
+    outer: Texture,
+    inner: Texture,
+    split: Split,
+    /// Region textures nested, this one included.
+    depth: usize,
 }
 
 impl Texture {
@@ -41,7 +57,56 @@ impl Texture {
         params.validate()?;
         Ok(Texture {
             engine: Arc::new(Engine::new(candidates, params, cache)?),
+            split: None,
         })
+    }
+
+    /// A region texture: `inner` in the region of `split`, `outer`
+    /// elsewhere, mixed across its band (see [`crate::region`]). Each keeps
+    /// synthesizing lazily on its own; nesting is bounded by
+    /// [`region::MAX_DEPTH`], and neither may be periodic (a region does
+    /// not repeat).
+    pub fn with_region(outer: Texture, inner: Texture, split: Split) -> Result<Texture> {
+        split.check()?;
+        let depth = 1 + outer.depth().max(inner.depth());
+        if depth > region::MAX_DEPTH {
+            return Err(Error::InvalidRequest(format!(
+                "region textures nest at most {} deep",
+                region::MAX_DEPTH
+            )));
+        }
+        if [&outer, &inner].iter().any(|t| t.is_periodic()) {
+            return Err(Error::InvalidRequest(
+                "a region texture cannot use a periodic texture: the region does not repeat".into(),
+            ));
+        }
+        Ok(Texture {
+            engine: outer.engine.clone(),
+            split: Some(Arc::new(Composite {
+                outer,
+                inner,
+                split,
+                depth,
+            })),
+        })
+    }
+
+    /// Region textures nested in this one, itself included (0 for a solid).
+    fn depth(&self) -> usize {
+        self.split.as_ref().map_or(0, |c| c.depth)
+    }
+
+    /// Whether this texture, or one it is made of, repeats with a period.
+    fn is_periodic(&self) -> bool {
+        match &self.split {
+            None => self.engine.params().period.is_some(),
+            Some(c) => c.outer.is_periodic() || c.inner.is_periodic(),
+        }
+    }
+
+    /// The region and band of a region texture.
+    pub fn region(&self) -> Option<&Split> {
+        self.split.as_ref().map(|c| &c.split)
     }
 
     /// The same candidates under other synthesis parameters, sharing what
@@ -50,12 +115,13 @@ impl Texture {
         Texture::new(self.engine.shared_candidates().clone(), params, cache)
     }
 
-    /// The precomputed candidates this texture synthesizes from.
+    /// The precomputed candidates this texture synthesizes from (a region
+    /// texture's outer solid's).
     pub fn candidates(&self) -> &Candidates {
         self.engine.candidates()
     }
 
-    /// The synthesis parameters.
+    /// The synthesis parameters (a region texture's outer solid's).
     pub fn params(&self) -> &SynthParams {
         self.engine.params()
     }
@@ -73,7 +139,10 @@ impl Texture {
     /// Highest level of detail served: lod k is pyramid level L−k, voxels
     /// 2^k finest voxels wide, addressed in its own voxel units.
     pub fn max_lod(&self) -> u32 {
-        self.engine.max_lod()
+        match &self.split {
+            None => self.engine.max_lod(),
+            Some(c) => c.outer.max_lod().min(c.inner.max_lod()),
+        }
     }
 
     /// The answer to `request` at level of detail `lod`, as RGB8 in the
@@ -91,6 +160,9 @@ impl Texture {
         progress: &(dyn Fn(u64, u64) + Sync),
     ) -> Result<(Vec<u8>, SynthStats)> {
         self.check_lod(lod)?;
+        if let Some(c) = &self.split {
+            return self.render_split(c, request, lod, progress);
+        }
         let e = &self.engine;
         match request.kind() {
             RequestKind::Region(r) => e.region_rgb(r, lod),
@@ -105,6 +177,120 @@ impl Texture {
         .inspect(|_| progress(request.voxels(), request.voxels()))
     }
 
+    /// [`Texture::render_progress`] of a region texture.
+    fn render_split(
+        &self,
+        c: &Composite,
+        request: &Request,
+        lod: u32,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> Result<(Vec<u8>, SynthStats)> {
+        match c.side(request, lod)? {
+            Side::Outer => return c.outer.render_progress(request, lod, progress),
+            Side::Inner => return c.inner.render_progress(request, lod, progress),
+            Side::Mixed => {}
+        }
+        // A step of voxels at a time, so that a large box keeps its
+        // positions and weights in memory a step at a time.
+        let voxels = |all: &mut dyn Iterator<Item = [i64; 3]>| -> Result<(Vec<u8>, SynthStats)> {
+            let mut out = Vec::with_capacity(request.voxels() as usize * 3);
+            let mut stats = SynthStats::default();
+            loop {
+                let step: Vec<[i64; 3]> = (&mut *all).take(BAKE_STEP).collect();
+                if step.is_empty() {
+                    return Ok((out, stats));
+                }
+                let (colours, s) = c.colours(&step, lod, None)?;
+                stats.merge(&s);
+                out.extend(colours.iter().flat_map(|&c| rgb8(c)));
+            }
+        };
+        match request.kind() {
+            RequestKind::Region(r) => voxels(&mut r.voxels()),
+            RequestKind::Slice(s) => {
+                let (rgb, stats) = voxels(&mut s.region().voxels())?;
+                Ok((slice_rows(s, rgb), stats))
+            }
+            RequestKind::Points(p) => voxels(&mut p.iter().copied()),
+            RequestKind::Cut(cut) => {
+                self.samples_rgb(&plane_points(&cut.plane), lod, cut.filter, None)
+            }
+            RequestKind::Bake(b) => return self.render_bake(b, lod, progress),
+        }
+        .inspect(|_| progress(request.voxels(), request.voxels()))
+    }
+
+    /// The colours at points anywhere, read through `filter`, each voxel
+    /// synthesized once however many points read it.
+    fn samples_rgb(
+        &self,
+        points: &[[f64; 3]],
+        lod: u32,
+        filter: crate::Filter,
+        surface: Option<&Surface>,
+    ) -> Result<(Vec<u8>, SynthStats)> {
+        let Some(c) = &self.split else {
+            return self.engine.samples_rgb(points, lod, filter);
+        };
+        let (pts, weights) = sample_voxels(points, filter);
+        let unique = unique_voxels(&pts);
+        let (colours, stats) = c.colours(&unique, lod, surface)?;
+        Ok((
+            filtered_rgb(&pts, &weights, filter, &unique, &colours),
+            stats,
+        ))
+    }
+
+    /// The colours of voxels anywhere at level of detail `lod`, in the
+    /// order given: a region texture reads each of its solids only where
+    /// the region's weight asks for it.
+    fn colours(
+        &self,
+        voxels: &[[i64; 3]],
+        lod: u32,
+        surface: Option<&Surface>,
+    ) -> Result<(Vec<[f32; 3]>, SynthStats)> {
+        match &self.split {
+            None => self.engine.colours_at(voxels, lod),
+            Some(c) => c.colours(voxels, lod, surface),
+        }
+    }
+
+    /// Whether a region of this texture, or of one it is made of, is a
+    /// shell below a mesh's surface.
+    fn has_shell(&self) -> bool {
+        self.split.as_ref().is_some_and(|c| {
+            c.split.region.is_shell() || c.outer.has_shell() || c.inner.has_shell()
+        })
+    }
+
+    /// The surface a bake's shell regions are measured from, when any
+    /// region needs one.
+    fn surface(&self, b: &Bake, lod: u32) -> Option<Surface> {
+        self.has_shell().then(|| Surface::of(b, lod))
+    }
+
+    /// What a cold-cache synthesis of the voxels `voxels` would compute.
+    fn plan_voxels(
+        &self,
+        voxels: &[[i64; 3]],
+        lod: u32,
+        surface: Option<&Surface>,
+    ) -> Result<SynthStats> {
+        let Some(c) = &self.split else {
+            return Ok(self.engine.plan_points(voxels, lod));
+        };
+        let (outer, inner, _) = c.partition(voxels, lod, surface)?;
+        let mut stats = SynthStats::default();
+        for (t, v) in [(&c.outer, outer), (&c.inner, inner)] {
+            if !v.is_empty() {
+                let pts: Vec<[i64; 3]> = v.iter().map(|&i| voxels[i]).collect();
+                stats.merge(&t.plan_voxels(&pts, lod, surface)?);
+            }
+        }
+        Ok(stats)
+    }
+
     /// A bake's texels (or vertices), [`BAKE_STEP`] at a time.
     fn render_bake(
         &self,
@@ -115,13 +301,14 @@ impl Texture {
         let n = b.items();
         let mut out = vec![0u8; n * 3];
         let mut stats = SynthStats::default();
+        let surface = self.surface(b, lod);
         for start in (0..n).step_by(BAKE_STEP) {
             let end = (start + BAKE_STEP).min(n);
             let (items, points): (Vec<usize>, Vec<[f64; 3]>) = (start..end)
                 .into_par_iter()
                 .filter_map(|i| b.sample(i).map(|p| (i, p)))
                 .unzip();
-            let (rgb, s) = self.engine.samples_rgb(&points, lod, b.options().filter)?;
+            let (rgb, s) = self.samples_rgb(&points, lod, b.options().filter, surface.as_ref())?;
             stats.merge(&s);
             for (&i, c) in items.iter().zip(rgb.chunks_exact(3)) {
                 out[i * 3..i * 3 + 3].copy_from_slice(c);
@@ -173,6 +360,19 @@ impl Texture {
     /// counted without computing it (the paper's Table 1/2 form).
     pub fn plan(&self, request: &Request, lod: u32) -> Result<SynthStats> {
         self.check_lod(lod)?;
+        if let Some(c) = &self.split {
+            return match c.side(request, lod)? {
+                Side::Outer => c.outer.plan(request, lod),
+                Side::Inner => c.inner.plan(request, lod),
+                Side::Mixed => {
+                    let surface = match request.kind() {
+                        RequestKind::Bake(b) => self.surface(b, lod),
+                        _ => None,
+                    };
+                    self.plan_voxels(&request_voxels(request), lod, surface.as_ref())
+                }
+            };
+        }
         let e = &self.engine;
         Ok(match request.kind() {
             RequestKind::Region(r) => e.plan_region(r, lod),
@@ -189,6 +389,19 @@ impl Texture {
     /// voxels. Counting stops once the bound passes `limit`.
     pub fn estimate(&self, request: &Request, lod: u32, limit: u64) -> Result<WorkEstimate> {
         self.check_lod(lod)?;
+        if let Some(c) = &self.split {
+            return match c.side(request, lod)? {
+                Side::Outer => c.outer.estimate(request, lod, limit),
+                Side::Inner => c.inner.estimate(request, lod, limit),
+                Side::Mixed => {
+                    let a = c.outer.estimate(request, lod, limit)?;
+                    let b = c
+                        .inner
+                        .estimate(request, lod, limit.saturating_sub(a.total))?;
+                    Ok(sum_estimates(a, b))
+                }
+            };
+        }
         let e = &self.engine;
         Ok(match request.kind() {
             RequestKind::Region(r) => e.estimate_region(r, lod, limit),
@@ -212,6 +425,16 @@ impl Texture {
         neighbourhood: Option<u32>,
     ) -> Result<Vec<(u64, u64)>> {
         self.check_lod(lod)?;
+        if let Some(c) = &self.split {
+            // Both solids' chains, as a voxel on the boundary reads both.
+            let a = c.outer.dependency_chain(voxels, lod, neighbourhood)?;
+            let b = c.inner.dependency_chain(voxels, lod, neighbourhood)?;
+            let n = a.len().max(b.len());
+            let at = |v: &[(u64, u64)], i: usize| v.get(i).copied().unwrap_or_default();
+            return Ok((0..n)
+                .map(|i| (at(&a, i).0 + at(&b, i).0, at(&a, i).1 + at(&b, i).1))
+                .collect());
+        }
         let radius = match neighbourhood {
             None => self.engine.radius(),
             Some(n) if !n.is_multiple_of(2) && (3..=9).contains(&n) => n as i64 / 2,
@@ -246,6 +469,148 @@ impl Texture {
             });
         }
         Ok(())
+    }
+}
+
+impl Composite {
+    /// Which solids `request` reads; a shell region, which needs a mesh's
+    /// surface, answers only bakes.
+    fn side(&self, request: &Request, lod: u32) -> Result<Side> {
+        if self.split.region.is_shell() {
+            return match request.kind() {
+                RequestKind::Bake(_) => Ok(Side::Mixed),
+                _ => Err(Error::InvalidRequest(
+                    "this region texture's region is a shell below a mesh's surface: \
+                     only a bake has a surface to measure it from"
+                        .into(),
+                )),
+            };
+        }
+        let corners = |lo: [f64; 3], hi: [f64; 3]| self.split.side_of_box(lod, lo, hi);
+        let boxed = |r: &crate::Region| {
+            let lo = r.origin.map(|c| c as f64);
+            corners(lo, [0, 1, 2].map(|a| lo[a] + f64::from(r.size[a]) - 1.0))
+        };
+        Ok(match request.kind() {
+            RequestKind::Region(r) => boxed(r),
+            RequestKind::Slice(s) => boxed(&s.region()),
+            RequestKind::Cut(c) => {
+                let p = &c.plane;
+                let (i, j) = (p.width - 1, p.height - 1);
+                let pts = [(0, 0), (i, 0), (0, j), (i, j)].map(|(i, j)| p.at(i, j));
+                // A trilinear sample reads the voxels around it too.
+                let (lo, hi) = bounds(pts.iter().copied());
+                corners(lo.map(|c| c.floor() - 1.0), hi.map(|c| c.ceil() + 1.0))
+            }
+            RequestKind::Points(p) => {
+                let (lo, hi) = bounds(p.iter().map(|v| v.map(|c| c as f64)));
+                corners(lo, hi)
+            }
+            RequestKind::Bake(_) => Side::Mixed,
+        })
+    }
+
+    /// The indices of `voxels` that read the outer solid, those that read
+    /// the inner one, and every voxel's inner weight. A shell region is
+    /// measured from `surface`.
+    fn partition(
+        &self,
+        voxels: &[[i64; 3]],
+        lod: u32,
+        surface: Option<&Surface>,
+    ) -> Result<(Vec<usize>, Vec<usize>, Vec<f32>)> {
+        let split = &self.split;
+        let distance = |p: [f64; 3]| match (&split.region, surface) {
+            (region::Shape::Shell { thickness }, Some(s)) => {
+                // Farther than the band's inner edge, any distance reads
+                // the inner solid alone.
+                let reach = thickness + split.band / 2.0 + 1.0;
+                Some(thickness - s.distance(p, reach))
+            }
+            (region, _) => region.distance(p),
+        };
+        let weights: Vec<f32> = voxels
+            .par_iter()
+            .map(|v| distance(region::world(lod, v.map(|c| c as f64))).map(|d| split.weight(d)))
+            .collect::<Option<_>>()
+            .ok_or_else(|| {
+                Error::InvalidRequest("a shell region needs a baked mesh's surface".into())
+            })?;
+        let outer = (0..voxels.len()).filter(|&i| weights[i] < 1.0).collect();
+        let inner = (0..voxels.len()).filter(|&i| weights[i] > 0.0).collect();
+        Ok((outer, inner, weights))
+    }
+
+    /// The mixed colours of `voxels`, each solid synthesized only at the
+    /// voxels whose weight reads it.
+    fn colours(
+        &self,
+        voxels: &[[i64; 3]],
+        lod: u32,
+        surface: Option<&Surface>,
+    ) -> Result<(Vec<[f32; 3]>, SynthStats)> {
+        let (outer, inner, weights) = self.partition(voxels, lod, surface)?;
+        let mut stats = SynthStats::default();
+        let mut read = |t: &Texture, idx: &[usize]| -> Result<Vec<[f32; 3]>> {
+            let pts: Vec<[i64; 3]> = idx.iter().map(|&i| voxels[i]).collect();
+            if pts.is_empty() {
+                return Ok(Vec::new());
+            }
+            let (c, s) = t.colours(&pts, lod, surface)?;
+            stats.merge(&s);
+            Ok(c)
+        };
+        let (co, ci) = (read(&self.outer, &outer)?, read(&self.inner, &inner)?);
+        let mut out = vec![[0f32; 3]; voxels.len()];
+        for (&i, c) in outer.iter().zip(co) {
+            out[i] = c;
+        }
+        for (&i, c) in inner.iter().zip(ci) {
+            let w = weights[i];
+            out[i] = if w == 1.0 {
+                c
+            } else {
+                [0, 1, 2].map(|ch| (1.0 - w) * out[i][ch] + w * c[ch])
+            };
+        }
+        Ok((out, stats))
+    }
+}
+
+/// The lowest and highest coordinates of `points`.
+fn bounds(points: impl Iterator<Item = [f64; 3]>) -> ([f64; 3], [f64; 3]) {
+    points.fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), p| {
+        (
+            [0, 1, 2].map(|a| lo[a].min(p[a])),
+            [0, 1, 2].map(|a| hi[a].max(p[a])),
+        )
+    })
+}
+
+/// Every voxel `request` reads (those its samples read through its filter
+/// for cuts and bakes), each once.
+fn request_voxels(request: &Request) -> Vec<[i64; 3]> {
+    match request.kind() {
+        RequestKind::Region(r) => r.voxels().collect(),
+        RequestKind::Slice(s) => s.region().voxels().collect(),
+        RequestKind::Points(p) => unique_voxels(p),
+        RequestKind::Cut(c) => unique_voxels(&sample_voxels(&plane_points(&c.plane), c.filter).0),
+        RequestKind::Bake(b) => {
+            unique_voxels(&sample_voxels(&Texture::bake_points(b), b.options().filter).0)
+        }
+    }
+}
+
+/// Two estimates added, level by level.
+fn sum_estimates(a: WorkEstimate, b: WorkEstimate) -> WorkEstimate {
+    let n = a.per_level.len().max(b.per_level.len());
+    let at = |v: &[u64], i: usize| v.get(i).copied().unwrap_or(0);
+    WorkEstimate {
+        per_level: (0..n)
+            .map(|i| at(&a.per_level, i).saturating_add(at(&b.per_level, i)))
+            .collect(),
+        total: a.total.saturating_add(b.total),
+        complete: a.complete && b.complete,
     }
 }
 

@@ -12,7 +12,8 @@
 //! - [`spec`]: what a texture is made of and its content id.
 //! - [`store`]: where textures are kept: the data directory, written
 //!   atomically and durably, or an S3-compatible object store.
-//! - [`registry`]: textures, their status and background precomputes.
+//! - [`registry`]: textures, their status and background precomputes;
+//!   [`regions`]: region textures, two of them sharing space.
 //! - [`jobs`]: the bounded synthesis queue (backpressure → 503);
 //!   [`decodes`]: the bound on decoding uploaded images.
 //! - [`listen`]: connections: header and idle timeouts, a connection cap;
@@ -45,6 +46,7 @@ pub(crate) mod panics;
 pub mod peak_alloc;
 pub(crate) mod process;
 pub mod query;
+pub(crate) mod regions;
 pub mod registry;
 pub mod routes;
 pub mod spec;
@@ -157,6 +159,7 @@ impl Server {
             Duration::from_secs_f64(args.max_queue_wait),
         );
         let state = Arc::new(Shared {
+            regions: Arc::new(regions::Regions::new(registry.store())),
             registry,
             jobs,
             decodes,

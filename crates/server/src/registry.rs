@@ -212,6 +212,38 @@ impl Entry {
         }
     }
 
+    /// An entry for a texture made of this one (a region texture, `id`
+    /// of content `content_hash`): this one's exemplars and parameters,
+    /// ready, never registered.
+    pub(crate) fn standing_for(&self, id: String, content_hash: String, t: Texture) -> Entry {
+        Entry {
+            id,
+            name: None,
+            content_hash,
+            created: self.created,
+            exemplar: self.exemplar,
+            params: self.params.clone(),
+            layout: self.layout,
+            analysis_hash: self.analysis_hash.clone(),
+            candidates: Mutex::new(None),
+            planes: self.planes.clone(),
+            progress: AtomicU32::new(1f32.to_bits()),
+            stage: Mutex::new("ready"),
+            precompute_seconds: Mutex::new(None),
+            precompute_estimate: 0,
+            precompute_peak: Mutex::new(None),
+            deleted: AtomicBool::new(false),
+            cancel: CancelFlag::new(),
+            settled: tokio::sync::Notify::new(),
+            last_used: AtomicU64::new(0),
+            on_disk: AtomicBool::new(true),
+            max_lod: AtomicU32::new(t.max_lod()),
+            loading: Mutex::new(()),
+            stored_since: Mutex::new(None),
+            status: RwLock::new(Status::Ready(t)),
+        }
+    }
+
     /// Current status.
     pub fn status(&self) -> Status {
         self.status.read().clone()
@@ -412,7 +444,8 @@ impl Drop for Reserved<'_> {
     }
 }
 
-fn now() -> u64 {
+/// Seconds since the Unix epoch.
+pub(crate) fn now() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map(|d| d.as_secs())
@@ -616,6 +649,11 @@ impl Registry {
         self.max_textures = max_textures;
         self.max_stored_bytes = max_stored_bytes;
         self
+    }
+
+    /// Where the textures are kept.
+    pub(crate) fn store(&self) -> Arc<dyn Storage> {
+        self.store.clone()
     }
 
     /// Where the textures are kept, for people.

@@ -161,6 +161,12 @@ impl Bake {
         w as usize * h as usize
     }
 
+    /// Where a point of the mesh lies in texture space (voxels of the
+    /// level baked).
+    pub(crate) fn place(&self, p: [f32; 3]) -> [f64; 3] {
+        self.0.transform.apply(p)
+    }
+
     /// Where in texture space item `i` (a texel, row by row, or a vertex)
     /// samples the solid; `None` for a texel no triangle shows.
     pub fn sample(&self, i: usize) -> Option<[f64; 3]> {

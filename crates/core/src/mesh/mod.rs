@@ -16,10 +16,12 @@ mod cut;
 mod glb;
 mod place;
 mod read;
+mod surface;
 
 pub use bake::{Bake, BakeOptions, Colours, MAX_SPREAD, Uvs};
 pub use cut::{MAX_CUTS, Plane};
 pub use place::{MAX_RESOLUTION, Placement};
+pub(crate) use surface::Surface;
 
 use crate::error::{Error, Result};
 

@@ -30,7 +30,7 @@
 
 pub mod cache;
 pub mod cancel;
-mod colour;
+pub(crate) mod colour;
 pub mod correction;
 pub mod dual_grid;
 pub mod estimate;
@@ -596,43 +596,35 @@ impl Engine {
         lod: u32,
         filter: Filter,
     ) -> Result<(Vec<u8>, SynthStats)> {
-        let acc = self.new_acc();
-        let k = lod as usize;
         let (pts, weights) = sample_voxels(points, filter);
-        let mut unique = pts.clone();
-        unique.par_sort_unstable();
-        unique.dedup();
-        let t = self.triples_at(k, &unique, &acc);
-        let at = |p: &[i64; 3]| t[unique.binary_search(p).unwrap_or_default()];
-        let rgb = match filter {
-            Filter::Nearest => pts
-                .par_iter()
-                .flat_map_iter(|p| triple_rgb8(&self.cands, k, at(p)))
-                .collect(),
-            Filter::Trilinear => {
-                let mut out = vec![0u8; points.len() * 3];
-                out.par_chunks_mut(3).enumerate().for_each(|(i, dst)| {
-                    let mut c = [0f32; 3];
-                    for j in i * 8..i * 8 + 8 {
-                        let col = colour(&self.cands, k, at(&pts[j]));
-                        for ch in 0..3 {
-                            c[ch] += weights[j] * col[ch];
-                        }
-                    }
-                    dst.copy_from_slice(&rgb8(c));
-                });
-                out
-            }
-        };
-        Ok((rgb, acc.stats()))
+        let unique = unique_voxels(&pts);
+        let (colours, stats) = self.colours_at(&unique, lod)?;
+        Ok((
+            filtered_rgb(&pts, &weights, filter, &unique, &colours),
+            stats,
+        ))
+    }
+
+    /// The colours of voxels anywhere at level of detail `lod`, in the
+    /// order given.
+    pub(crate) fn colours_at(
+        &self,
+        points: &[[i64; 3]],
+        lod: u32,
+    ) -> Result<(Vec<[f32; 3]>, SynthStats)> {
+        let acc = self.new_acc();
+        if points.is_empty() {
+            return Ok((Vec::new(), acc.stats()));
+        }
+        let k = lod as usize;
+        let t = self.triples_at(k, points, &acc);
+        let colours = t.par_iter().map(|t| colour(&self.cands, k, *t)).collect();
+        Ok((colours, acc.stats()))
     }
 
     /// Counts what the colours at `points` would compute from a cold cache.
     pub(crate) fn plan_samples(&self, points: &[[f64; 3]], lod: u32, filter: Filter) -> SynthStats {
-        let mut voxels = sample_voxels(points, filter).0;
-        voxels.par_sort_unstable();
-        voxels.dedup();
-        self.plan_points(&voxels, lod)
+        self.plan_points(&unique_voxels(&sample_voxels(points, filter).0), lod)
     }
 
     /// An upper bound of what synthesizing every voxel of the aligned
@@ -712,11 +704,49 @@ fn position(b: &Box3, i: usize) -> [i64; 3] {
 }
 
 /// Where the pixels of a cut sample, row by row.
-fn plane_points(plane: &CutPlane) -> Vec<[f64; 3]> {
+pub(crate) fn plane_points(plane: &CutPlane) -> Vec<[f64; 3]> {
     let w = plane.width;
     (0..w * plane.height)
         .map(|i| plane.at(i % w, i / w))
         .collect()
+}
+
+/// `voxels` sorted, each once.
+pub(crate) fn unique_voxels(voxels: &[[i64; 3]]) -> Vec<[i64; 3]> {
+    let mut unique = voxels.to_vec();
+    unique.par_sort_unstable();
+    unique.dedup();
+    unique
+}
+
+/// RGB8 of the samples that read the voxels `pts` with `weights` (as
+/// [`sample_voxels`] gives them), from the colours of the sorted voxels
+/// `unique` that include them.
+pub(crate) fn filtered_rgb(
+    pts: &[[i64; 3]],
+    weights: &[f32],
+    filter: Filter,
+    unique: &[[i64; 3]],
+    colours: &[[f32; 3]],
+) -> Vec<u8> {
+    let at = |p: &[i64; 3]| colours[unique.binary_search(p).unwrap_or_default()];
+    match filter {
+        Filter::Nearest => pts.par_iter().flat_map_iter(|p| rgb8(at(p))).collect(),
+        Filter::Trilinear => {
+            let mut out = vec![0u8; pts.len() / 8 * 3];
+            out.par_chunks_mut(3).enumerate().for_each(|(i, dst)| {
+                let mut c = [0f32; 3];
+                for j in i * 8..i * 8 + 8 {
+                    let col = at(&pts[j]);
+                    for ch in 0..3 {
+                        c[ch] += weights[j] * col[ch];
+                    }
+                }
+                dst.copy_from_slice(&rgb8(c));
+            });
+            out
+        }
+    }
 }
 
 /// The voxels points read: each rounded to the nearest voxel, or for the

@@ -17,25 +17,56 @@ use axum::http::{HeaderMap, HeaderName, HeaderValue, StatusCode, header};
 use axum::response::Response;
 use sha2::{Digest, Sha256};
 use solidtex_core::{Request, RequestKind, SynthStats, Texture, WorkEstimate, png};
+use std::future::Future;
+use std::pin::Pin;
 use std::sync::Arc;
 
 /// The texture `id` ready to synthesize. One still being precomputed is
 /// waited for up to the server's `--pending-wait` before the request is
 /// answered 409, so that a first request right after an upload (or after
-/// start, for the bundled texture) gets its voxels. The span records its id.
+/// start, for the bundled texture) gets its voxels. A region texture is
+/// its two textures, each ready. The span records its id.
 pub(super) async fn texture(s: &AppState, id: &str) -> Result<(Arc<Entry>, Texture), ApiError> {
     if !valid_id(id) {
         return Err(ApiError::unknown_texture(id));
     }
     tracing::Span::current().record("texture", id);
-    // With a shared store, a texture another replica stored is taken up.
-    let found = s.registry.find(id).await?;
-    if !s.pending_wait.is_zero()
-        && let Some(e) = found
-    {
-        e.settle(tokio::time::Instant::now() + s.pending_wait).await;
-    }
-    Ok(s.registry.loaded(id).await?)
+    resolve(s, id.to_string(), 0).await
+}
+
+/// A texture ready to synthesize, with its entry.
+type Ready = Result<(Arc<Entry>, Texture), ApiError>;
+
+/// [`texture`], a region texture's own textures in turn (`depth` region
+/// textures above).
+fn resolve(
+    s: &AppState,
+    id: String,
+    depth: usize,
+) -> Pin<Box<dyn Future<Output = Ready> + Send + '_>> {
+    Box::pin(async move {
+        if let Some(r) = super::textures::region(s, &id).await? {
+            if depth >= solidtex_core::region::MAX_DEPTH {
+                return Err(ApiError::internal(format!(
+                    "region texture `{id}` nests deeper than {}",
+                    solidtex_core::region::MAX_DEPTH
+                )));
+            }
+            let (oe, outer) = resolve(s, r.def.outer.clone(), depth + 1).await?;
+            let (ie, inner) = resolve(s, r.def.inner.clone(), depth + 1).await?;
+            let tex = Texture::with_region(outer, inner, r.def.split())?;
+            let hash = r.def.content_hash(&oe.content_hash, &ie.content_hash);
+            return Ok((Arc::new(oe.standing_for(id, hash, tex.clone())), tex));
+        }
+        // With a shared store, a texture another replica stored is taken up.
+        let found = s.registry.find(&id).await?;
+        if !s.pending_wait.is_zero()
+            && let Some(e) = found
+        {
+            e.settle(tokio::time::Instant::now() + s.pending_wait).await;
+        }
+        Ok(s.registry.loaded(&id).await?)
+    })
 }
 
 /// How a rendered request is sent.

@@ -108,6 +108,8 @@ pub fn lod_parameter() -> QueryParam {
 pub struct Shared {
     /// The textures.
     pub registry: Arc<Registry>,
+    /// The region textures, made of those.
+    pub(crate) regions: Arc<crate::regions::Regions>,
     /// The synthesis job queue.
     pub(crate) jobs: Jobs,
     /// The bound on decoding uploaded images.

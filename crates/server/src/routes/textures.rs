@@ -6,6 +6,7 @@ use super::answer::{ETag, body};
 use super::params::{NoQuery, TypedQuery};
 use crate::error::ApiError;
 use crate::query::Query;
+use crate::regions::{ID_PREFIX, RegionDef, Stored};
 use crate::registry::{Entry, RegistryError, Status, Submitted};
 use crate::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec, params_object, valid_id};
 use axum::Json;
@@ -15,7 +16,7 @@ use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use schemars::JsonSchema;
 use serde::Serialize;
-use serde_json::{Map, Value};
+use serde_json::{Map, Value, json};
 use solidtex_core::Exemplar;
 use solidtex_core::Layout;
 use std::sync::Arc;
@@ -129,7 +130,18 @@ pub(crate) struct LayoutView {
 /// Every texture.
 #[derive(Debug, Serialize, JsonSchema)]
 pub(crate) struct TextureList {
+    /// The region textures (two textures sharing space), oldest first.
+    #[schemars(schema_with = "regions_schema")]
+    pub(crate) regions: Vec<Value>,
     pub(crate) textures: Vec<TextureView>,
+}
+
+/// The region textures' schema: written by hand beside the generated ones.
+fn regions_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    schemars::json_schema!({
+        "type": "array",
+        "items": { "$ref": "#/components/schemas/RegionTexture" }
+    })
 }
 
 /// The view of a texture.
@@ -189,7 +201,78 @@ pub(super) async fn list(
         .iter()
         .map(|e| view(e, s.brick_size))
         .collect();
-    Ok(Json(TextureList { textures }))
+    let regions = s.regions.clone();
+    let regions: Vec<Value> = blocking(move || regions.list())
+        .await?
+        .iter()
+        .map(|r| region_view(r, s.brick_size))
+        .collect();
+    Ok(Json(TextureList { regions, textures }))
+}
+
+/// Runs a blocking storage call off the async threads.
+async fn blocking<T: Send + 'static>(
+    f: impl FnOnce() -> std::io::Result<T> + Send + 'static,
+) -> Result<T, ApiError> {
+    tokio::task::spawn_blocking(f)
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))?
+        .map_err(|e| ApiError::internal(format!("reading the region textures: {e}")))
+}
+
+/// Region texture `id`, when it is one.
+pub(super) async fn region(s: &AppState, id: &str) -> Result<Option<Stored>, ApiError> {
+    if !id.starts_with(ID_PREFIX) {
+        return Ok(None);
+    }
+    let (regions, id) = (s.regions.clone(), id.to_string());
+    blocking(move || regions.get(&id)).await
+}
+
+/// The JSON view of a region texture.
+fn region_view(r: &Stored, brick_size: u32) -> Value {
+    json!({
+        "id": r.id,
+        "kind": "region",
+        "status": "ready",
+        "created": r.created,
+        "outer": r.def.outer,
+        "inner": r.def.inner,
+        "region": r.def.region,
+        "band": r.def.band,
+        "brick_size": brick_size,
+    })
+}
+
+/// Largest region texture definition accepted, bytes.
+const MAX_REGION_BODY: usize = 16 << 10;
+
+/// `POST /v1/textures` with a JSON body: a region texture made of two
+/// textures the server has. Both must be ready (so that nesting, periods
+/// and levels are checked now, not at the first request).
+async fn create_region(s: &AppState, req: Request) -> Result<Response, ApiError> {
+    let bytes = read_body(req, MAX_REGION_BODY).await?;
+    let def: RegionDef = serde_json::from_slice(&bytes).map_err(|e| {
+        ApiError::new(
+            StatusCode::BAD_REQUEST,
+            "invalid_region",
+            format!("a region texture is {{\"outer\", \"inner\", \"region\", \"band\"}}: {e}"),
+        )
+    })?;
+    def.split().check()?;
+    let (_, outer) = super::answer::texture(s, &def.outer).await?;
+    let (_, inner) = super::answer::texture(s, &def.inner).await?;
+    let max_lod = solidtex_core::Texture::with_region(outer, inner, def.split())?.max_lod();
+    let regions = s.regions.clone();
+    let (stored, _) = blocking(move || regions.create(def, crate::registry::now())).await?;
+    tracing::Span::current().record("texture", stored.id.as_str());
+    let mut body = region_view(&stored, s.brick_size);
+    body["max_lod"] = max_lod.into();
+    let mut res = (StatusCode::CREATED, Json(body)).into_response();
+    if let Ok(loc) = HeaderValue::from_str(&format!("/v1/textures/{}", stored.id)) {
+        res.headers_mut().insert(header::LOCATION, loc);
+    }
+    Ok(res)
 }
 
 fn checked_id(id: &str) -> Result<(), ApiError> {
@@ -215,9 +298,17 @@ pub(super) async fn show(
     State(s): State<AppState>,
     Path(id): Path<String>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Result<Json<TextureView>, ApiError> {
+) -> Result<Response, ApiError> {
+    checked_id(&id)?;
+    if let Some(r) = region(&s, &id).await? {
+        let mut v = region_view(&r, s.brick_size);
+        if let Ok((_, t)) = super::answer::texture(&s, &id).await {
+            v["max_lod"] = t.max_lod().into();
+        }
+        return Ok(Json(v).into_response());
+    }
     let e = known(&s, &id).await?;
-    Ok(Json(view(&e, s.brick_size)))
+    Ok(Json(view(&e, s.brick_size)).into_response())
 }
 
 /// `DELETE /v1/textures/{id}`.
@@ -228,6 +319,29 @@ pub(super) async fn remove(
 ) -> Result<StatusCode, ApiError> {
     checked_id(&id)?;
     tracing::Span::current().record("texture", id.as_str());
+    let regions = s.regions.clone();
+    let of = id.clone();
+    let users = blocking(move || regions.users_of(&of)).await?;
+    if !users.is_empty() {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            "texture_in_use",
+            format!(
+                "texture `{id}` is part of region texture{} {}: delete {} first",
+                if users.len() > 1 { "s" } else { "" },
+                users.join(", "),
+                if users.len() > 1 { "them" } else { "it" },
+            ),
+        ));
+    }
+    if id.starts_with(ID_PREFIX) {
+        let regions = s.regions.clone();
+        let of = id.clone();
+        if blocking(move || regions.remove(&of)).await? {
+            return Ok(StatusCode::NO_CONTENT);
+        }
+        return Err(ApiError::unknown_texture(&id));
+    }
     s.registry.delete(&id).await?;
     Ok(StatusCode::NO_CONTENT)
 }
@@ -322,7 +436,8 @@ fn display_name(raw: &str) -> Option<String> {
 /// `POST /v1/textures`: a PNG body, or multipart `xy`/`yz`/`zx` (or one
 /// `image`) with optional JSON `params` and optional feature masks
 /// (`feature_mask` with `image`, `feature_mask_xy` … with the planes);
-/// parameters may also be given in the query string.
+/// parameters may also be given in the query string. A JSON body defines
+/// a region texture instead (see [`crate::regions`]).
 pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response, ApiError> {
     let query = Query::parse(req.uri().query())?;
     // `name` labels the texture; it is not a parameter and not in the id.
@@ -342,16 +457,17 @@ pub async fn create(State(s): State<AppState>, req: Request) -> Result<Response,
         .to_ascii_lowercase();
     let limit = s.max_upload_bytes;
     let raw = match essence.as_str() {
+        "application/json" => return create_region(&s, req).await,
         "image/png" | "image/jpeg" => RawPlanes::Single(read_body(req, limit).await?, None),
         "multipart/form-data" => read_multipart(req, &mut flat, &mut name).await?,
         "" => {
             return Err(unsupported(
-                "missing Content-Type (send image/png, image/jpeg or multipart/form-data)",
+                "missing Content-Type (send image/png, image/jpeg, multipart/form-data or application/json)",
             ));
         }
         other => {
             return Err(unsupported(&format!(
-                "unsupported Content-Type `{other}` (send image/png, image/jpeg or multipart/form-data)"
+                "unsupported Content-Type `{other}` (send image/png, image/jpeg, multipart/form-data or application/json)"
             )));
         }
     };
@@ -719,6 +835,7 @@ mod tests {
         };
         assert!(crate::openapi::keys_in_map_order(&texture));
         assert!(crate::openapi::keys_in_map_order(&TextureList {
+            regions: vec![json!({"id": "region-0"})],
             textures: vec![texture]
         }));
     }

@@ -226,6 +226,50 @@ impl Storage for DataDir {
     fn ids(&self) -> io::Result<Vec<String>> {
         Ok(self.scan()?.into_iter().map(|f| f.meta.id).collect())
     }
+
+    fn write_region(&self, id: &str, json: &[u8]) -> io::Result<()> {
+        let dir = self.root.join("regions");
+        fs::create_dir_all(&dir)?;
+        write_atomic(&dir.join(format!("{id}.json")), json)
+    }
+
+    fn read_region(&self, id: &str) -> io::Result<Option<Vec<u8>>> {
+        if !valid_id(id) {
+            return Ok(None);
+        }
+        match fs::read(self.root.join("regions").join(format!("{id}.json"))) {
+            Ok(b) => Ok(Some(b)),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+
+    fn remove_region(&self, id: &str) -> io::Result<()> {
+        let dir = self.root.join("regions");
+        match fs::remove_file(dir.join(format!("{id}.json"))) {
+            Ok(()) => sync_dir(&dir),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(()),
+            Err(e) => Err(e),
+        }
+    }
+
+    fn region_ids(&self) -> io::Result<Vec<String>> {
+        let dir = self.root.join("regions");
+        let entries = match fs::read_dir(&dir) {
+            Ok(e) => e,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
+            Err(e) => return Err(e),
+        };
+        let mut ids = Vec::new();
+        for entry in entries {
+            let name = entry?.file_name().to_string_lossy().to_string();
+            if let Some(id) = name.strip_suffix(".json").filter(|id| valid_id(id)) {
+                ids.push(id.to_string());
+            }
+        }
+        ids.sort();
+        Ok(ids)
+    }
 }
 
 /// Takes the exclusive lock of the data directory `root`. A server still

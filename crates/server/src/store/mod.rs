@@ -151,6 +151,19 @@ pub(crate) trait Storage: Send + Sync {
 
     /// Ids of the textures stored now (those with metadata).
     fn ids(&self) -> io::Result<Vec<String>>;
+
+    /// Writes region texture `id`'s definition (`regions/ID.json`): a few
+    /// hundred bytes naming the textures it is made of.
+    fn write_region(&self, id: &str, json: &[u8]) -> io::Result<()>;
+
+    /// Region texture `id`'s definition, `None` when there is none.
+    fn read_region(&self, id: &str) -> io::Result<Option<Vec<u8>>>;
+
+    /// Removes region texture `id`'s definition (none there is no error).
+    fn remove_region(&self, id: &str) -> io::Result<()>;
+
+    /// Ids of the region textures stored now.
+    fn region_ids(&self) -> io::Result<Vec<String>>;
 }
 
 /// The files of a texture's exemplars: `(name, PNG bytes)`, masks

@@ -198,9 +198,26 @@ impl ObjectStorage {
 
     /// Every object key and size under `textures/`.
     fn list(&self) -> io::Result<Vec<(String, u64)>> {
+        self.list_under(self.textures_prefix())
+    }
+
+    /// The key of region texture `id`'s definition.
+    fn region_key(&self, id: &str) -> Key {
+        Key::from(format!("{}{id}.json", self.regions_prefix()))
+    }
+
+    fn regions_prefix(&self) -> String {
+        if self.prefix.is_empty() {
+            "regions/".to_string()
+        } else {
+            format!("{}/regions/", self.prefix)
+        }
+    }
+
+    /// Every object key (less `root`) and size under `root`.
+    fn list_under(&self, root: String) -> io::Result<Vec<(String, u64)>> {
         let store = self.store.clone();
-        let prefix = Key::from(self.textures_prefix());
-        let root = self.textures_prefix();
+        let prefix = Key::from(root.clone());
         self.block(async move {
             let objects: Vec<_> = store
                 .list(Some(&prefix))
@@ -401,6 +418,34 @@ impl Storage for ObjectStorage {
             .into_iter()
             .filter_map(|(rest, _)| {
                 let id = rest.strip_suffix("/meta.json")?;
+                valid_id(id).then(|| id.to_string())
+            })
+            .collect();
+        ids.sort();
+        Ok(ids)
+    }
+
+    fn write_region(&self, id: &str, json: &[u8]) -> io::Result<()> {
+        self.put_same(&self.region_key(id), json.to_vec())
+    }
+
+    fn read_region(&self, id: &str) -> io::Result<Option<Vec<u8>>> {
+        if !valid_id(id) {
+            return Ok(None);
+        }
+        self.get(self.region_key(id))
+    }
+
+    fn remove_region(&self, id: &str) -> io::Result<()> {
+        self.delete(self.region_key(id))
+    }
+
+    fn region_ids(&self) -> io::Result<Vec<String>> {
+        let mut ids: Vec<String> = self
+            .list_under(self.regions_prefix())?
+            .into_iter()
+            .filter_map(|(rest, _)| {
+                let id = rest.strip_suffix(".json")?;
                 valid_id(id).then(|| id.to_string())
             })
             .collect();
