@@ -33,18 +33,15 @@ pub(super) fn rows(
     let load = load_average();
     let m = measure(1, || Candidates::compute(set, &params, &|_, _| {}));
     let quality = Arc::new(m.value?);
-    rows.push(Row {
-        name: format!("{ROW_PREFIX}: quality preset, precompute {size}"),
-        seconds: Some(m.seconds),
-        runs: 1,
-        peak_bytes: Some(m.peak_bytes),
-        target: None,
-        paper: None,
-        detail: format!(
+    rows.push(one_run(
+        format!("{ROW_PREFIX}: quality preset, precompute {size}"),
+        m.seconds,
+        m.peak_bytes,
+        format!(
             ".stx {} KiB; the reference's blocks at every level; load average {load} at the start",
             quality.to_bytes().len() >> 10
         ),
-    });
+    ));
     for (label, c) in [("default", default), ("quality preset", &quality)] {
         let requests = [
             (
@@ -88,18 +85,28 @@ pub(super) fn rows(
             synthesize(&laid, layout.arrangement.weights, &params, |_| {})
         });
         m.value?;
-        rows.push(Row {
-            name: format!("{ROW_PREFIX}: reference {side}³ (`solidtex reference --size {side}`)"),
-            seconds: Some(m.seconds),
-            runs: 1,
-            peak_bytes: Some(m.peak_bytes),
-            target: None,
-            paper: None,
-            detail: format!(
+        rows.push(one_run(
+            format!("{ROW_PREFIX}: reference {side}³ (`solidtex reference --size {side}`)"),
+            m.seconds,
+            m.peak_bytes,
+            format!(
                 "a periodic block, {} levels; load average {load} at the start",
                 params.levels
             ),
-        });
+        ));
     }
     Ok(())
+}
+
+/// A row of one timed run, with no target or papers' figure.
+fn one_run(name: String, seconds: f64, peak_bytes: u64, detail: String) -> Row {
+    Row {
+        name,
+        seconds: Some(seconds),
+        runs: 1,
+        peak_bytes: Some(peak_bytes),
+        target: None,
+        paper: None,
+        detail,
+    }
 }

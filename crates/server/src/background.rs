@@ -454,7 +454,7 @@ impl Background {
                 bytes,
                 used: Instant::now(),
             });
-            inner.bytes += bytes;
+            inner.bytes = inner.bytes.saturating_add(bytes);
         }
         job.phase.send_replace(phase);
         self.evict(&mut inner);
