@@ -523,6 +523,26 @@ mod tests {
     }
 
     #[tokio::test]
+    async fn finished_jobs_are_held_up_to_the_count_and_no_more() {
+        let b = Arc::new(Background::new(4, 1000, 1 << 20, Duration::from_secs(60)));
+        for i in 0..MAX_FINISHED {
+            b.start(spec(&format!("j{i}")), bytes(1))
+                .unwrap()
+                .finished()
+                .await;
+        }
+        // At the count every one is held; reading j0 makes j1 the least
+        // recently used.
+        assert!(b.get(Kind::Bake, "j0").is_some());
+        // One past it: the least recently used goes, the rest stay.
+        b.start(spec("past"), bytes(1)).unwrap().finished().await;
+        assert!(b.get(Kind::Bake, "j1").is_none());
+        assert!(b.get(Kind::Bake, "j0").is_some());
+        assert!(b.get(Kind::Bake, "j2").is_some());
+        assert!(b.get(Kind::Bake, "past").is_some());
+    }
+
+    #[tokio::test]
     async fn finished_jobs_expire() {
         let b = Arc::new(Background::new(4, 1000, 1000, Duration::from_millis(50)));
         b.start(spec("a"), bytes(1)).unwrap().finished().await;
