@@ -64,6 +64,29 @@ fn a_baked_texel_is_the_voxel_at_its_surface_point() {
     }
 }
 
+/// The guess a bake's progress is measured against stays near the exact
+/// count of a cold synthesis, where the admission bound is many times it.
+#[test]
+fn a_bake_is_predicted_close_to_what_a_cold_cache_synthesizes() {
+    let tex = texture();
+    for resolution in [64, 128] {
+        let bake = Bake::new(torus(), BakeOptions::new(resolution)).unwrap();
+        let request = Request::bake(bake).unwrap();
+        let exact: u64 = tex.plan(&request, 0).unwrap().voxels_per_level.iter().sum();
+        let guess = tex.predict(&request, 0).unwrap();
+        let bound = tex.estimate(&request, 0, u64::MAX).unwrap().total;
+        let ratio = guess as f64 / exact as f64;
+        assert!(
+            (0.8..=2.0).contains(&ratio),
+            "{resolution}: {guess} against {exact}"
+        );
+        assert!(
+            bound >= exact,
+            "{resolution}: the bound {bound} under {exact}"
+        );
+    }
+}
+
 #[test]
 fn vertex_colours_are_the_voxels_at_the_vertices_and_trilinear_stays_between() {
     let tex = texture();

@@ -66,7 +66,7 @@ enum UvArg {
 
 /// Renders the bake `request`, moving `bar` as it goes: by the texels
 /// answered, a step of about a million at a time, and between them by the
-/// voxels of the shell synthesized against the `predicted` bound, whose
+/// voxels of the shell synthesized against the `predicted` guess, whose
 /// count the message shows.
 fn render_watched(
     tex: &Texture,
@@ -84,8 +84,8 @@ fn render_watched(
     let show = |texels: u64| {
         let share = (texels as f64 / items).max(flag.share_of(predicted));
         bar.set_position((share * 1000.0) as u64);
-        // The prediction bounds a cold cache's work from above, often by
-        // far: the count itself shows the synthesis moving.
+        // A warm cache synthesizes less than predicted: the count itself
+        // shows the synthesis moving.
         bar.set_message(format!(
             "synthesis, {:.1} M voxels",
             flag.synthesized() as f64 / 1e6
@@ -147,7 +147,7 @@ pub fn run(a: BakeArgs) -> anyhow::Result<()> {
     let bar = progress_bar();
     bar.set_message("planning");
     let request = Request::bake(bake.clone())?;
-    let predicted = tex.estimate(&request, a.src.lod, u64::MAX)?.total;
+    let predicted = tex.predict(&request, a.src.lod)?;
     let (rgb, stats) = render_watched(&tex, &request, a.src.lod, predicted, &bar)?;
     bar.set_position(1000);
     bar.set_message("writing");

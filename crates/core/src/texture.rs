@@ -412,6 +412,43 @@ impl Texture {
         })
     }
 
+    /// A guess of the voxels a cold-cache synthesis of `request` computes,
+    /// closer than [`Texture::estimate`]'s bound where the request is
+    /// scattered (a bake, a set of voxels), for progress reports: what a
+    /// share of finished work is measured against. It is no bound; a
+    /// synthesis may pass it.
+    pub fn predict(&self, request: &Request, lod: u32) -> Result<u64> {
+        self.check_lod(lod)?;
+        if let Some(c) = &self.split {
+            return match c.side(request, lod)? {
+                Side::Outer => c.outer.predict(request, lod),
+                Side::Inner => c.inner.predict(request, lod),
+                Side::Mixed => Ok(c
+                    .outer
+                    .predict(request, lod)?
+                    .saturating_add(c.inner.predict(request, lod)?)),
+            };
+        }
+        Ok(match request.kind() {
+            RequestKind::Points(p) => self.engine.predict_voxels(p.iter().copied(), lod),
+            RequestKind::Bake(b) => {
+                // Steps keep the sample points few at a time; the voxels,
+                // shared by neighbouring texels, are far fewer.
+                let mut all = rustc_hash::FxHashSet::default();
+                for start in (0..b.items()).step_by(BAKE_STEP) {
+                    let end = (start + BAKE_STEP).min(b.items());
+                    let points: Vec<[f64; 3]> = (start..end)
+                        .into_par_iter()
+                        .filter_map(|i| b.sample(i))
+                        .collect();
+                    all.extend(sample_voxels(&points, b.options().filter).0);
+                }
+                self.engine.predict_voxels(all, lod)
+            }
+            _ => self.estimate(request, lod, u64::MAX)?.total,
+        })
+    }
+
     /// Exact voxel-level dependency chain of a few voxels at `lod`:
     /// version-0 voxels and corrections per level, finest first. It
     /// follows what a correction reads, its direct neighbours, unless

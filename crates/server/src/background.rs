@@ -122,7 +122,8 @@ pub(crate) struct Spec {
     pub unit: &'static str,
     /// How many of them there are.
     pub total: u64,
-    /// Voxels predicted to be synthesized from a cold cache (an upper bound).
+    /// Voxels predicted to be synthesized from a cold cache, until the
+    /// work sets a closer guess (see [`Progress::set_predicted`]).
     pub predicted: u64,
     /// Fields of its own kind added to its status.
     pub extra: Map<String, Value>,
@@ -132,12 +133,21 @@ pub(crate) struct Spec {
 pub(crate) struct Progress {
     done: AtomicU64,
     stage: Mutex<&'static str>,
+    /// Voxels the synthesis is measured against.
+    predicted: AtomicU64,
 }
 
 impl Progress {
     /// `done` of the job's units are finished.
     pub(crate) fn set_done(&self, done: u64) {
         self.done.fetch_max(done, Ordering::Relaxed);
+    }
+
+    /// The synthesis is guessed to compute `voxels` from a cold cache:
+    /// what its progress is measured against from now on, if lower (a
+    /// prediction is never raised, so the share done never falls).
+    pub(crate) fn set_predicted(&self, voxels: u64) {
+        self.predicted.fetch_min(voxels, Ordering::Relaxed);
     }
 
     /// The job entered `stage`.
@@ -185,14 +195,19 @@ impl Job {
 
     /// Share done, 0 to 1, never decreasing, 1 once done: the larger of
     /// the units done and of the voxels synthesized against the
-    /// prediction (an upper bound, so that share stops short of 1; it
-    /// moves while a step of units is being synthesized).
+    /// prediction (a share that stops short of 1, and moves while a step
+    /// of units is being synthesized).
     fn fraction(&self, phase: &Phase) -> f64 {
         if matches!(phase, Phase::Done(_)) {
             return 1.0;
         }
         let units = self.done() as f64 / self.spec.total.max(1) as f64;
-        units.max(self.flag.share_of(self.spec.predicted)).min(1.0)
+        units.max(self.flag.share_of(self.predicted())).min(1.0)
+    }
+
+    /// Voxels the synthesis is measured against.
+    fn predicted(&self) -> u64 {
+        self.progress.predicted.load(Ordering::Relaxed)
     }
 
     /// Its status as JSON (what `GET /v1/{exports,bakes}/{id}` answers).
@@ -214,7 +229,7 @@ impl Job {
             "done": self.done(),
             "total": spec.total,
             "unit": spec.unit,
-            "predicted_voxels": spec.predicted,
+            "predicted_voxels": self.predicted(),
             "synthesized_voxels": self.flag.synthesized(),
             "created": self.created,
             "file": spec.file_name,
@@ -347,6 +362,7 @@ impl Background {
             progress: Progress {
                 done: AtomicU64::new(0),
                 stage: Mutex::new("queued"),
+                predicted: AtomicU64::new(spec.predicted),
             },
             flag: CancelFlag::with_budget(self.max_work),
             cancelled: Notify::new(),

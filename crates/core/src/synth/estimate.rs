@@ -265,6 +265,96 @@ impl Walk<'_> {
     }
 }
 
+/// A close guess, for progress, of the voxels a cold cache synthesizes for
+/// the scattered voxels `voxels` at the level whose reach is `reach[0]`:
+/// per level, the union of the boxes their chains may reach. Unlike
+/// [`estimate`] it is no bound: the pieces of a surface share most of
+/// their chains, which the union counts once (the bound counts them once
+/// per piece, many times too high), while the engine's groups may compute
+/// a shared border twice and a voxel's chain is often shorter than the
+/// level's reach.
+pub fn voxel_union(voxels: impl IntoIterator<Item = [i64; 3]>, reach: &[Reach]) -> u64 {
+    let mut level = Masks::default();
+    for v in voxels {
+        let (t, bit) = tile_bit(v);
+        *level.entry(t).or_default() |= bit;
+    }
+    let mut total = 0u64;
+    for r in reach {
+        if level.is_empty() {
+            break;
+        }
+        let need = grown(level, r);
+        let count: u64 = need.values().map(|m| u64::from(m.count_ones())).sum();
+        total = total.saturating_add(count);
+        level = parents(&need);
+    }
+    total
+}
+
+/// Voxels by tile: bit `x + 4y + 16z` of a tile's mask is its voxel at
+/// (x, y, z) from the tile's corner.
+type Masks = rustc_hash::FxHashMap<[i64; 3], u64>;
+
+fn tile_bit(v: [i64; 3]) -> ([i64; 3], u64) {
+    let [x, y, z] = v.map(|c| c.rem_euclid(TILE));
+    (
+        v.map(|c| c.div_euclid(TILE)),
+        1 << (x + TILE * y + TILE * TILE * z),
+    )
+}
+
+/// The bits of a tile's mask whose coordinate along axis `a` is below `n`.
+fn below(a: usize, n: i64) -> u64 {
+    (0..64)
+        .filter(|i| (i / TILE.pow(a as u32)) % TILE < n)
+        .fold(0, |m, i| m | 1 << i)
+}
+
+/// The voxels within `r` of a voxel of `masks`, grown one axis at a time
+/// (a box's dilation is the product of three runs).
+fn grown(mut masks: Masks, r: &Reach) -> Masks {
+    for a in 0..3 {
+        let stride = TILE.pow(a as u32);
+        // For a shift by `inner` within a tile: the bits that stay in it.
+        let stay: [u64; 4] = [0, 1, 2, 3].map(|inner| below(a, TILE - inner));
+        let mut out = Masks::default();
+        out.reserve(masks.len() * 2);
+        for (t, &m) in &masks {
+            for s in -r.lo[a]..=r.hi[a] {
+                let (q, inner) = (s.div_euclid(TILE), s.rem_euclid(TILE));
+                let kept = (m & stay[inner as usize]) << (inner * stride);
+                let over = (m & !stay[inner as usize]) >> ((TILE - inner) * stride);
+                for (d, bits) in [(q, kept), (q + 1, over)] {
+                    if bits != 0 {
+                        let mut n = *t;
+                        n[a] += d;
+                        *out.entry(n).or_default() |= bits;
+                    }
+                }
+            }
+        }
+        masks = out;
+    }
+    masks
+}
+
+/// The parents (one level coarser) of the voxels of `masks`.
+fn parents(masks: &Masks) -> Masks {
+    let mut out = Masks::default();
+    for (t, &m) in masks {
+        let mut bits = m;
+        while bits != 0 {
+            let i = i64::from(bits.trailing_zeros());
+            bits &= bits - 1;
+            let v = [i % TILE, (i / TILE) % TILE, i / (TILE * TILE)];
+            let (p, bit) = tile_bit([0, 1, 2].map(|a| (t[a] * TILE + v[a]).div_euclid(2)));
+            *out.entry(p).or_default() |= bit;
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -274,6 +364,35 @@ mod tests {
             lo: [r; 3],
             hi: [r; 3],
         }
+    }
+
+    #[test]
+    fn the_union_counts_shared_boxes_once() {
+        // One voxel grown by 2 at its own level, then its parents' box (the
+        // grown 5³ from −2 has parents −1..=1) grown by 1.
+        assert_eq!(voxel_union([[0; 3]], &[reach(2)]), 125);
+        assert_eq!(voxel_union([[0; 3]], &[reach(2), reach(1)]), 125 + 125);
+        // Two neighbours share all but a layer of their boxes, across a
+        // tile's side and below zero as well as inside one tile.
+        for (a, b) in [
+            ([1, 1, 1], [2, 1, 1]),
+            ([3, 0, 0], [4, 0, 0]),
+            ([-1, 5, 9], [0, 5, 9]),
+        ] {
+            assert_eq!(voxel_union([a, b], &[reach(1)]), 4 * 3 * 3, "{a:?} {b:?}");
+        }
+        // Far apart, they add up; a repeated voxel counts once.
+        assert_eq!(voxel_union([[0; 3], [100, 0, 0]], &[reach(1)]), 2 * 27);
+        assert_eq!(voxel_union([[7, 7, 7]; 3], &[reach(0), reach(0)]), 2);
+        // Uneven reach: 2 below and 5 above along x only.
+        let r = Reach {
+            lo: [2, 0, 0],
+            hi: [5, 0, 0],
+        };
+        assert_eq!(voxel_union([[-9, 3, 3]], &[r]), 8);
+        // A run of 10 voxels from 1 has parents 0..=5.
+        let run = (1..11).map(|x| [x, 0, 0]);
+        assert_eq!(voxel_union(run, &[reach(0), reach(0)]), 10 + 6);
     }
 
     #[test]

@@ -627,6 +627,16 @@ impl Engine {
         self.plan_points(&unique_voxels(&sample_voxels(points, filter).0), lod)
     }
 
+    /// A guess of what a cold cache computes for `voxels` at level of
+    /// detail `lod` (see [`estimate::voxel_union`]).
+    pub(crate) fn predict_voxels(
+        &self,
+        voxels: impl IntoIterator<Item = [i64; 3]>,
+        lod: u32,
+    ) -> u64 {
+        estimate::voxel_union(voxels, &self.reach_from(lod))
+    }
+
     /// An upper bound of what synthesizing every voxel of the aligned
     /// cubes of `side` voxels from `corners` would count: a bound for any
     /// voxels inside them.

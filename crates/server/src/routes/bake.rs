@@ -187,6 +187,8 @@ async fn bake_async(
         extra,
     };
     let work = move |p: &Progress| -> Result<Bytes, ApiError> {
+        p.set_stage("planning");
+        p.set_predicted(tex.predict(&request, lod)?);
         p.set_stage("synthesis");
         let (rgb, _) = tex.render_progress(&request, lod, &|done, _| p.set_done(done))?;
         p.set_stage("writing");
