@@ -11,7 +11,7 @@ use crate::region::{self, Side, Split};
 use crate::request::{Request, RequestKind, Slice};
 use crate::synth::cache::TileCache;
 use crate::synth::colour::rgb8;
-use crate::synth::estimate::WorkEstimate;
+use crate::synth::estimate::{Masks, WorkEstimate, add_voxel};
 use crate::synth::{Engine, SynthStats, filtered_rgb, plane_points, sample_voxels, unique_voxels};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -413,10 +413,9 @@ impl Texture {
     }
 
     /// A guess of the voxels a cold-cache synthesis of `request` computes,
-    /// closer than [`Texture::estimate`]'s bound where the request is
-    /// scattered (a bake, a set of voxels), for progress reports: what a
-    /// share of finished work is measured against. It is no bound; a
-    /// synthesis may pass it.
+    /// for progress reports: what a share of finished work is measured
+    /// against. For a bake it is much closer than [`Texture::estimate`]'s
+    /// bound, and no bound itself; for the rest it is that bound.
     pub fn predict(&self, request: &Request, lod: u32) -> Result<u64> {
         self.check_lod(lod)?;
         if let Some(c) = &self.split {
@@ -429,24 +428,23 @@ impl Texture {
                     .saturating_add(c.inner.predict(request, lod)?)),
             };
         }
-        Ok(match request.kind() {
-            RequestKind::Points(p) => self.engine.predict_voxels(p.iter().copied(), lod),
-            RequestKind::Bake(b) => {
-                // Steps keep the sample points few at a time; the voxels,
-                // shared by neighbouring texels, are far fewer.
-                let mut all = rustc_hash::FxHashSet::default();
-                for start in (0..b.items()).step_by(BAKE_STEP) {
-                    let end = (start + BAKE_STEP).min(b.items());
-                    let points: Vec<[f64; 3]> = (start..end)
-                        .into_par_iter()
-                        .filter_map(|i| b.sample(i))
-                        .collect();
-                    all.extend(sample_voxels(&points, b.options().filter).0);
-                }
-                self.engine.predict_voxels(all, lod)
+        let RequestKind::Bake(b) = request.kind() else {
+            return Ok(self.estimate(request, lod, u64::MAX)?.total);
+        };
+        // Steps keep few sample points in memory at once; the voxels,
+        // shared by neighbouring texels, are fewer.
+        let mut masks = Masks::default();
+        for start in (0..b.items()).step_by(BAKE_STEP) {
+            let end = (start + BAKE_STEP).min(b.items());
+            let points: Vec<[f64; 3]> = (start..end)
+                .into_par_iter()
+                .filter_map(|i| b.sample(i))
+                .collect();
+            for v in sample_voxels(&points, b.options().filter).0 {
+                add_voxel(&mut masks, v);
             }
-            _ => self.estimate(request, lod, u64::MAX)?.total,
-        })
+        }
+        Ok(self.engine.predict_union(masks, lod))
     }
 
     /// Exact voxel-level dependency chain of a few voxels at `lod`:

@@ -266,24 +266,17 @@ impl Walk<'_> {
 }
 
 /// A close guess, for progress, of the voxels a cold cache synthesizes for
-/// the scattered voxels `voxels` at the level whose reach is `reach[0]`:
-/// per level, the union of the boxes their chains may reach. Unlike
-/// [`estimate`] it is no bound: the pieces of a surface share most of
-/// their chains, which the union counts once (the bound counts them once
-/// per piece, many times too high), while the engine's groups may compute
-/// a shared border twice and a voxel's chain is often shorter than the
-/// level's reach.
-pub fn voxel_union(voxels: impl IntoIterator<Item = [i64; 3]>, reach: &[Reach]) -> u64 {
-    let mut level = Masks::default();
-    for v in voxels {
-        let (t, bit) = tile_bit(v);
-        *level.entry(t).or_default() |= bit;
-    }
+/// the voxels in `masks` (at the level whose reach is `reach[0]`): per
+/// level, the union of the voxels within its reach of a voxel needed, then
+/// their parents one level up. The pieces of a surface share most of their
+/// chains, which the union counts once where [`estimate`]'s bound counts
+/// them once per piece, many times over. It is no bound either way: the
+/// engine's groups may compute a shared border twice, and the union
+/// undercounts the coarsest levels' chains for large requests.
+pub fn union(masks: Masks, reach: &[Reach]) -> u64 {
+    let mut level = masks;
     let mut total = 0u64;
     for r in reach {
-        if level.is_empty() {
-            break;
-        }
         let need = grown(level, r);
         let count: u64 = need.values().map(|m| u64::from(m.count_ones())).sum();
         total = total.saturating_add(count);
@@ -294,7 +287,13 @@ pub fn voxel_union(voxels: impl IntoIterator<Item = [i64; 3]>, reach: &[Reach]) 
 
 /// Voxels by tile: bit `x + 4y + 16z` of a tile's mask is its voxel at
 /// (x, y, z) from the tile's corner.
-type Masks = rustc_hash::FxHashMap<[i64; 3], u64>;
+pub type Masks = rustc_hash::FxHashMap<[i64; 3], u64>;
+
+/// Adds voxel `v` to `masks`.
+pub fn add_voxel(masks: &mut Masks, v: [i64; 3]) {
+    let (t, bit) = tile_bit(v);
+    *masks.entry(t).or_default() |= bit;
+}
 
 fn tile_bit(v: [i64; 3]) -> ([i64; 3], u64) {
     let [x, y, z] = v.map(|c| c.rem_euclid(TILE));
@@ -364,6 +363,12 @@ mod tests {
             lo: [r; 3],
             hi: [r; 3],
         }
+    }
+
+    fn voxel_union(voxels: impl IntoIterator<Item = [i64; 3]>, reach: &[Reach]) -> u64 {
+        let mut masks = Masks::default();
+        voxels.into_iter().for_each(|v| add_voxel(&mut masks, v));
+        union(masks, reach)
     }
 
     #[test]

@@ -627,14 +627,10 @@ impl Engine {
         self.plan_points(&unique_voxels(&sample_voxels(points, filter).0), lod)
     }
 
-    /// A guess of what a cold cache computes for `voxels` at level of
-    /// detail `lod` (see [`estimate::voxel_union`]).
-    pub(crate) fn predict_voxels(
-        &self,
-        voxels: impl IntoIterator<Item = [i64; 3]>,
-        lod: u32,
-    ) -> u64 {
-        estimate::voxel_union(voxels, &self.reach_from(lod))
+    /// A guess of what a cold cache computes for the voxels of `masks` at
+    /// level of detail `lod` (see [`estimate::union`]).
+    pub(crate) fn predict_union(&self, masks: estimate::Masks, lod: u32) -> u64 {
+        estimate::union(masks, &self.reach_from(lod))
     }
 
     /// An upper bound of what synthesizing every voxel of the aligned
