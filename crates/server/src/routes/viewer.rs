@@ -29,3 +29,20 @@ pub async fn page() -> Response {
 pub async fn script() -> Response {
     asset(SCRIPT, "text/javascript; charset=utf-8")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::PAGE;
+    use solidtex_core::knobs::PRESETS;
+
+    #[test]
+    fn the_upload_form_offers_every_preset() {
+        // The default is the empty choice (the server's own defaults).
+        for (name, _) in &PRESETS[1..] {
+            assert!(
+                PAGE.contains(&format!("<option value=\"{name}\">")),
+                "the viewer's preset menu lacks `{name}`"
+            );
+        }
+    }
+}
