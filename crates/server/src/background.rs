@@ -86,6 +86,9 @@ pub(crate) enum Phase {
     Cancelled,
 }
 
+/// The names of the phases, as [`Phase::name`] gives them.
+const STATES: [&str; 5] = ["queued", "running", "done", "failed", "cancelled"];
+
 impl Phase {
     /// Its name in a status.
     pub(crate) fn name(&self) -> &'static str {
@@ -314,6 +317,24 @@ impl Background {
         }
     }
 
+    /// The jobs held, as (kind, state name, count) for every kind and
+    /// state (zero counts included), and the bytes of the files held.
+    pub(crate) fn census(&self) -> (Vec<(Kind, &'static str, u64)>, u64) {
+        let mut inner = self.inner.lock();
+        self.evict(&mut inner);
+        let mut out: Vec<(Kind, &'static str, u64)> = [Kind::Export, Kind::Bake]
+            .into_iter()
+            .flat_map(|k| STATES.map(|s| (k, s, 0)))
+            .collect();
+        for job in inner.by_id.values() {
+            let (kind, state) = (job.spec.kind, job.phase().name());
+            if let Some(n) = out.iter_mut().find(|(k, s, _)| *k == kind && *s == state) {
+                n.2 += 1;
+            }
+        }
+        (out, inner.bytes)
+    }
+
     /// The job `id` of `kind`, if it is held; reading it counts as a use.
     pub(crate) fn get(&self, kind: Kind, id: &str) -> Option<Arc<Job>> {
         let mut inner = self.inner.lock();
@@ -518,6 +539,18 @@ mod tests {
             p.set_done(10);
             Ok(Bytes::from(vec![7u8; n]))
         })
+    }
+
+    #[test]
+    fn the_census_names_every_phase() {
+        let phases = [
+            Phase::Queued,
+            Phase::Running,
+            Phase::Done(Bytes::new()),
+            Phase::Failed(ApiError::internal("x")),
+            Phase::Cancelled,
+        ];
+        assert_eq!(phases.map(|p| p.name()), STATES);
     }
 
     #[tokio::test]
