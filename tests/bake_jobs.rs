@@ -129,6 +129,20 @@ async fn an_async_bake_reports_progress_and_serves_the_synchronous_bytes() {
     let (st, _, again) = post_bake(&c, &url, true).await;
     assert_eq!(st, 200);
     assert!(again == file);
+    // The metrics count it, and its file's bytes.
+    let (st, _, metrics) = get(&c, &s.url("/metrics")).await;
+    assert_eq!(st, 200);
+    let metrics = String::from_utf8_lossy(&metrics);
+    for line in [
+        "solidtex_background_jobs{kind=\"bake\",state=\"done\"} 1".to_string(),
+        "solidtex_background_jobs{kind=\"bake\",state=\"running\"} 0".to_string(),
+        format!("solidtex_background_held_bytes {}", file.len()),
+    ] {
+        assert!(
+            metrics.lines().any(|l| l == line),
+            "no `{line}` in\n{metrics}"
+        );
+    }
     s.stop().await;
 }
 

@@ -25,6 +25,10 @@ const BAKE_STEP: usize = 1 << 20;
 /// the more often it counts the coarse levels they share.
 const ESTIMATE_BLOCK: u32 = 16;
 
+/// Most tiles a bake's estimate holds the voxels of (a tile's mask is 8
+/// bytes beside its 24-byte key).
+const MAX_ESTIMATE_TILES: usize = 1 << 22;
+
 /// A solid texture ready to be sampled anywhere. Cheap to clone; safe to
 /// share between threads. Every method blocks while it synthesizes (using
 /// rayon); call it from a blocking context.
@@ -318,13 +322,25 @@ impl Texture {
         Ok((out, stats))
     }
 
-    /// The bounds of the aligned blocks of [`ESTIMATE_BLOCK`] voxels a
-    /// bake reads, summed. Each block counts at least its own voxels, so
-    /// counting stops once there are more blocks than the limit pays for.
+    /// An upper bound of a bake's synthesis. The voxels it reads are
+    /// grouped as the engine groups them and each group's chain counted as
+    /// one union (`estimate::grouped_union`); every tile read holds a
+    /// voxel of it, so counting stops once there are more tiles than the
+    /// limit. Past [`MAX_ESTIMATE_TILES`] tiles (a bake of millions of
+    /// scattered texels) the looser bound of the aligned blocks of
+    /// [`ESTIMATE_BLOCK`] voxels it reads, each counted on its own, keeps
+    /// the memory small; each block counts at least its own voxels, so
+    /// that count stops once there are more blocks than the limit pays for.
     fn estimate_bake(&self, b: &Bake, lod: u32, limit: u64) -> WorkEstimate {
         let side = i64::from(ESTIMATE_BLOCK);
-        let most = limit / u64::from(ESTIMATE_BLOCK).pow(3) + 1;
+        let most_blocks = limit / u64::from(ESTIMATE_BLOCK).pow(3) + 1;
+        let over = || WorkEstimate {
+            per_level: Vec::new(),
+            total: limit.saturating_add(1),
+            complete: false,
+        };
         let mut blocks = rustc_hash::FxHashSet::default();
+        let mut masks = Some(Masks::default());
         for start in (0..b.items()).step_by(BAKE_STEP) {
             let end = (start + BAKE_STEP).min(b.items());
             let points: Vec<[f64; 3]> = (start..end)
@@ -333,14 +349,19 @@ impl Texture {
                 .collect();
             for v in sample_voxels(&points, b.options().filter).0 {
                 blocks.insert(v.map(|c| c.div_euclid(side) * side));
+                if let Some(m) = &mut masks {
+                    add_voxel(m, v);
+                }
             }
-            if blocks.len() as u64 > most {
-                return WorkEstimate {
-                    per_level: Vec::new(),
-                    total: limit.saturating_add(1),
-                    complete: false,
-                };
+            match &masks {
+                Some(m) if m.len() as u64 > limit => return over(),
+                Some(m) if m.len() > MAX_ESTIMATE_TILES => masks = None,
+                None if blocks.len() as u64 > most_blocks => return over(),
+                _ => {}
             }
+        }
+        if let Some(m) = masks {
+            return self.engine.estimate_grouped(&m, lod, limit);
         }
         let mut corners: Vec<[i64; 3]> = blocks.into_iter().collect();
         corners.sort_unstable();

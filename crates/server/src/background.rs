@@ -87,6 +87,9 @@ pub(crate) enum Phase {
     Cancelled,
 }
 
+/// The names of the phases, as [`Phase::name`] gives them.
+const STATES: [&str; 5] = ["queued", "running", "done", "failed", "cancelled"];
+
 impl Phase {
     /// Its name in a status.
     pub(crate) fn name(&self) -> &'static str {
@@ -192,8 +195,8 @@ pub(crate) struct JobStatus {
     pub media_type: &'static str,
     /// Voxels a cold cache would synthesize: the upper bound checked
     /// against `--max-export-work` before it started; for a bake, once
-    /// `planning` is over, a closer guess (the union of the shell's
-    /// dependency boxes, level by level), which the synthesis may pass.
+    /// `planning` is over, a closer guess (one union of the shell's chains
+    /// per level), which the synthesis may pass.
     pub predicted_voxels: u64,
     /// Share done, never decreasing, 1 once done: the larger of `done`
     /// over `total` and of `synthesized_voxels` over `predicted_voxels`
@@ -210,7 +213,7 @@ pub(crate) struct JobStatus {
     /// finished.
     pub stage: &'static str,
     /// Where it stands.
-    #[schemars(extend("enum" = ["queued", "running", "done", "failed", "cancelled"]))]
+    #[schemars(extend("enum" = STATES))]
     pub state: &'static str,
     /// Voxels synthesized so far, all levels (cached ones are free).
     pub synthesized_voxels: u64,
@@ -467,6 +470,24 @@ impl Background {
         }
     }
 
+    /// The jobs held, as (kind, state name, count) for every kind and
+    /// state (zero counts included), and the bytes of the files held.
+    pub(crate) fn census(&self) -> (Vec<(Kind, &'static str, u64)>, u64) {
+        let mut inner = self.inner.lock();
+        self.evict(&mut inner);
+        let mut out: Vec<(Kind, &'static str, u64)> = [Kind::Export, Kind::Bake]
+            .into_iter()
+            .flat_map(|k| STATES.map(|s| (k, s, 0)))
+            .collect();
+        for job in inner.by_id.values() {
+            let (kind, state) = (job.spec.kind, job.phase().name());
+            if let Some(n) = out.iter_mut().find(|(k, s, _)| *k == kind && *s == state) {
+                n.2 += 1;
+            }
+        }
+        (out, inner.bytes)
+    }
+
     /// The job `id` of `kind`, if it is held; reading it counts as a use.
     pub(crate) fn get(&self, kind: Kind, id: &str) -> Option<Arc<Job>> {
         let mut inner = self.inner.lock();
@@ -676,6 +697,18 @@ mod tests {
             p.set_done(10);
             Ok(Bytes::from(vec![7u8; n]))
         })
+    }
+
+    #[test]
+    fn the_census_names_every_phase() {
+        let phases = [
+            Phase::Queued,
+            Phase::Running,
+            Phase::Done(Bytes::new()),
+            Phase::Failed(ApiError::internal("x")),
+            Phase::Cancelled,
+        ];
+        assert_eq!(phases.map(|p| p.name()), STATES);
     }
 
     #[tokio::test]

@@ -92,8 +92,16 @@ impl ApiError {
 
     /// 400: the request is predicted, before any work, to need more
     /// synthesis than one request may do (`predicted` is an upper bound;
-    /// `complete` false when counting stopped once past the budget).
-    pub fn predicted_over_budget(predicted: u64, complete: bool, budget: u64) -> Self {
+    /// `complete` false when counting stopped once past the budget), the
+    /// `budget` set by the server's option `flag`; `advice` says what to
+    /// ask for instead.
+    pub fn predicted_over_budget(
+        predicted: u64,
+        complete: bool,
+        budget: u64,
+        flag: &str,
+        advice: &str,
+    ) -> Self {
         let more = if complete { "" } else { "more than " };
         Self::new(
             StatusCode::BAD_REQUEST,
@@ -101,8 +109,7 @@ impl ApiError {
             format!(
                 "this request is predicted to synthesize up to {more}{predicted} voxels from a \
                  cold cache, over the server's budget of {budget} voxels per request \
-                 (--max-request-work); ask for fewer pixels, pixels closer together or a \
-                 smaller box"
+                 ({flag}); {advice}"
             ),
         )
     }

@@ -64,6 +64,15 @@ pub struct PartLabels {
     pub part: String,
 }
 
+/// Labels of the background job gauge.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct BackgroundLabels {
+    /// `export` or `bake`.
+    pub kind: String,
+    /// `queued`, `running`, `done`, `failed` or `cancelled`.
+    pub state: String,
+}
+
 /// Labels of the texture gauge.
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 pub struct StatusLabels {
@@ -134,6 +143,12 @@ pub struct Metrics {
     /// The server's bound on its resident memory, by part (see
     /// [`super::memory`]); set at each scrape.
     pub memory_bound: Family<PartLabels, Gauge>,
+    /// Background jobs (exports, bakes) held, by kind and state; set at
+    /// each scrape.
+    pub background_jobs: Family<BackgroundLabels, Gauge>,
+    /// Bytes of the finished background jobs' files held; set at each
+    /// scrape.
+    pub background_bytes: Gauge,
 }
 
 impl Metrics {
@@ -169,6 +184,8 @@ impl Metrics {
             textures_refused: Default::default(),
             textures: Default::default(),
             memory_bound: Default::default(),
+            background_jobs: Default::default(),
+            background_bytes: Default::default(),
         };
         m.register_requests();
         m.register_synthesis();
@@ -331,6 +348,18 @@ impl Metrics {
         );
         self.registry
             .register("textures", "Textures by status", self.textures.clone());
+        self.registry.register(
+            "background_jobs",
+            "Background jobs (exports, and bakes asked for with Prefer: respond-async) held, \
+             by kind and state; they run outside the interactive job queue",
+            self.background_jobs.clone(),
+        );
+        self.registry.register_with_unit(
+            "background_held",
+            "Bytes of the finished background jobs' files held (--max-export-bytes bounds them)",
+            prometheus_client::registry::Unit::Bytes,
+            self.background_bytes.clone(),
+        );
         self.registry.register_with_unit(
             "memory_bound",
             "The server's bound on its resident memory, by part (the bound is their sum): \

@@ -24,6 +24,11 @@
 //! Where the engine finds a coarser tile already computed for an earlier
 //! group it does not compute it again; the estimate counts it again, which
 //! keeps it above the engine's count.
+//!
+//! A surface's voxels (a bake) are no zonotope: bounded piece by piece,
+//! the pieces' shared chains would be counted many times over. They are
+//! grouped as the engine groups them instead, and each group's chain is
+//! counted voxel by voxel as one union per level ([`grouped_union`]).
 
 use super::TILE;
 use super::plan::Reach;
@@ -283,6 +288,54 @@ pub fn union(masks: Masks, reach: &[Reach]) -> u64 {
         level = parents(&need);
     }
     total
+}
+
+/// An upper bound of the voxels the engine synthesizes for the voxels in
+/// `masks` from a cold cache: it splits them into groups of at most
+/// `max_group_tiles` tiles as the engine does ([`super::plan::group_cells`])
+/// and counts each group's chain through every level as one union, as if
+/// no group found anything another computed. Counting stops once the total
+/// passes `limit`.
+pub fn grouped_union(
+    masks: &Masks,
+    reach: &[Reach],
+    max_group_tiles: usize,
+    limit: u64,
+) -> WorkEstimate {
+    use rayon::prelude::*;
+    let cells: Vec<[i64; 3]> = masks.keys().copied().collect();
+    let groups = super::plan::group_cells(&cells, max_group_tiles);
+    let per_group: Vec<Vec<u64>> = groups
+        .par_iter()
+        .map(|g| per_level_union(g.iter().map(|c| (*c, masks[c])).collect(), reach))
+        .collect();
+    let mut out = WorkEstimate {
+        per_level: vec![0; reach.len()],
+        total: 0,
+        complete: true,
+    };
+    for counts in per_group {
+        for (sum, n) in out.per_level.iter_mut().zip(&counts) {
+            *sum = sum.saturating_add(*n);
+        }
+        out.total = out.total.saturating_add(counts.iter().sum());
+    }
+    if out.total > limit {
+        out.complete = false;
+    }
+    out
+}
+
+/// [`union`]'s count, per level.
+fn per_level_union(masks: Masks, reach: &[Reach]) -> Vec<u64> {
+    let mut level = masks;
+    let mut out = Vec::with_capacity(reach.len());
+    for r in reach {
+        let need = grown(level, r);
+        out.push(need.values().map(|m| u64::from(m.count_ones())).sum());
+        level = parents(&need);
+    }
+    out
 }
 
 /// Voxels by tile: bit `x + 4y + 16z` of a tile's mask is its voxel at

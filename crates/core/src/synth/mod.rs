@@ -627,6 +627,17 @@ impl Engine {
         self.plan_points(&unique_voxels(&sample_voxels(points, filter).0), lod)
     }
 
+    /// An upper bound of what a cold cache computes for the voxels of
+    /// `masks` at level of detail `lod` (see [`estimate::grouped_union`]).
+    pub(crate) fn estimate_grouped(
+        &self,
+        masks: &estimate::Masks,
+        lod: u32,
+        limit: u64,
+    ) -> estimate::WorkEstimate {
+        estimate::grouped_union(masks, &self.reach_from(lod), MAX_GROUP_TILES, limit)
+    }
+
     /// A guess of what a cold cache computes for the voxels of `masks` at
     /// level of detail `lod` (see [`estimate::union`]).
     pub(crate) fn predict_union(&self, masks: estimate::Masks, lod: u32) -> u64 {

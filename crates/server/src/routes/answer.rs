@@ -300,14 +300,27 @@ fn check_budget(s: &AppState, request: &Request) -> Result<(), ApiError> {
 fn check_work(
     s: &AppState,
     predicted: solidtex_core::Result<WorkEstimate>,
-    budget: u64,
+    request: &Request,
 ) -> Result<u64, ApiError> {
     let e = predicted?;
+    let budget = work_budget(s, request);
     if e.complete && e.total <= budget {
         return Ok(e.total);
     }
     s.metrics.over_budget("predicted");
-    Err(ApiError::predicted_over_budget(e.total, e.complete, budget))
+    let (flag, advice) = match request.kind() {
+        RequestKind::Bake(_) => (
+            "--max-export-work",
+            "ask for a lower resolution, a smaller texture or vertex colours",
+        ),
+        _ => (
+            "--max-request-work",
+            "ask for fewer pixels, pixels closer together or a smaller box",
+        ),
+    };
+    Err(ApiError::predicted_over_budget(
+        e.total, e.complete, budget, flag, advice,
+    ))
 }
 
 /// Most voxels `request` may synthesize: a bake, the size of an export
@@ -338,7 +351,7 @@ pub(super) fn admit(
 ) -> Result<u64, ApiError> {
     check_budget(s, request)?;
     let budget = work_budget(s, request);
-    check_work(s, tex.estimate(request, lod, budget), budget)
+    check_work(s, tex.estimate(request, lod, budget), request)
 }
 
 /// Answers `request` at level of detail `lod` of the texture `(entry,

@@ -2,7 +2,7 @@
 
 use super::AppState;
 use crate::memory;
-use crate::metrics::PartLabels;
+use crate::metrics::{BackgroundLabels, PartLabels};
 use crate::registry::Status;
 use axum::Json;
 use axum::extract::State;
@@ -84,6 +84,19 @@ pub async fn metrics(State(s): State<AppState>) -> Response {
         decode_bytes: s.decodes.max_bytes(),
         answer_voxels: s.max_request_voxels.min(s.max_request_work),
     };
+    let (jobs, held) = s.background.census();
+    for (kind, state, n) in jobs {
+        s.metrics
+            .background_jobs
+            .get_or_create(&BackgroundLabels {
+                kind: kind.name().to_string(),
+                state: state.to_string(),
+            })
+            .set(i64::try_from(n).unwrap_or(i64::MAX));
+    }
+    s.metrics
+        .background_bytes
+        .set(i64::try_from(held).unwrap_or(i64::MAX));
     for part in memory::bound(&inputs) {
         s.metrics
             .memory_bound
