@@ -8,9 +8,12 @@
 //    grey) and its detail (the step between neighbouring pixels is well
 //    above the untextured mesh's, which has shading alone);
 //  - the torus cut through its ring into two pieces, pulled apart: two
-//    meshes, capped, both textured.
-// The screenshots (three-bake.png, three-cut.png) go to ARTEFACTS; README's
-// and docs/meshes.md's pictures are them.
+//    meshes, capped, both textured;
+//  - the same cut of a region texture with a shell (Zhang et al.'s bark:
+//    marble for 10 voxels below the surface, wood deeper, the fixture's
+//    wood5): the caps show wood ringed with marble.
+// The screenshots (three-bake.png, three-cut.png, three-shell.png) go to
+// ARTEFACTS; README's and docs/meshes.md's pictures are them.
 //
 //   node three_bake.test.mjs
 
@@ -18,7 +21,7 @@ import assert from "node:assert/strict";
 import { copyFileSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
-import { ARTEFACTS, HERE, ROOT, defaultReady, launch, routeThree, serveStatic, startServer } from "./browser.mjs";
+import { ARTEFACTS, HERE, ROOT, defaultReady, launch, readyTexture, routeThree, serveStatic, startServer } from "./browser.mjs";
 
 const TORUS = readFileSync(join(ROOT, "tests", "fixtures", "meshes", "torus.obj"));
 const TORUS_TRIANGLES = 2304;
@@ -49,14 +52,23 @@ const server = await startServer([], { defaultTexture: true });
 let statics, browser;
 try {
   await defaultReady(server.base);
-  const bake = async (query) => {
-    const res = await fetch(`${server.base}/v1/textures/default/bake?${query}`, { method: "POST", body: TORUS });
+  const wood = await readyTexture(server.base, join(ROOT, "tests", "fixtures", "exemplars", "wood_wood5.png"), "");
+  const made = await fetch(`${server.base}/v1/textures`, {
+    method: "POST",
+    headers: { "Content-Type": "application/json" },
+    body: JSON.stringify({ outer: "default", inner: wood.id, band: 4, region: { shape: "shell", thickness: 10 } }),
+  });
+  assert.equal(made.status, 201, await made.clone().text());
+  const shell = (await made.json()).id;
+  const bake = async (query, id = "default") => {
+    const res = await fetch(`${server.base}/v1/textures/${id}/bake?${query}`, { method: "POST", body: TORUS });
     assert.equal(res.status, 200, `${query}: ${await res.clone().text()}`);
     return new Uint8Array(await res.arrayBuffer());
   };
   const files = {
     torus: await bake("resolution=256"),
     cut: await bake("resolution=256&cut=1,0,0,0&spread=0.12"),
+    shell: await bake("resolution=256&cut=1,0,0,0&spread=0.12", shell),
   };
   for (const [name, b] of Object.entries(files)) writeFileSync(join(site, `${name}.glb`), b);
   copyFileSync(join(HERE, "three_bake.html"), join(site, "index.html"));
@@ -100,6 +112,12 @@ try {
   assert.ok(cut.triangles > TORUS_TRIANGLES, `capped: ${cut.triangles} triangles`);
   assert.equal(cut.textures.length, 2, "both pieces textured");
   assert.ok(apart(chroma(cut.objectMean), chroma(cut.textureMean)) < 0.02, "the pieces drawn in the texture's colour");
+  const bark = await draw("glb=shell.glb&dir=0.8,0.9,1.0", "three-shell.png");
+  console.log("shell:", JSON.stringify(bark));
+  assert.equal(bark.meshes, 2, "two pieces");
+  assert.equal(bark.triangles, cut.triangles, "the same pieces");
+  assert.equal(bark.textures.length, 2, "both pieces textured");
+  assert.notDeepEqual(bark.textureMean, cut.textureMean, "the caps show the inner texture");
   assert.deepEqual(errors, [], "console errors");
   console.log("three.js: GLTFLoader draws the baked torus and its cut pieces textured");
 } finally {
