@@ -170,6 +170,19 @@ export async function launch(viewport = { width: 1000, height: 640 }) {
   };
 }
 
+/// The three.js release the pages import from the CDN (their import maps
+/// name it), served instead from node_modules: the pages run offline.
+export const THREE_VERSION = "0.187.0";
+
+/// Answers `context`'s requests for three.js on the CDN from node_modules.
+export async function routeThree(context) {
+  const dir = join(process.env.CLIENTS_NODE_DIR || join(ROOT, "target", "clients", "node"), "node_modules", "three");
+  await context.route(`https://unpkg.com/three@${THREE_VERSION}/**`, (route) => {
+    const path = new URL(route.request().url()).pathname.replace(`/three@${THREE_VERSION}/`, "");
+    route.fulfill({ body: readFileSync(join(dir, path)), contentType: "text/javascript" });
+  });
+}
+
 /// Mean and standard deviation of the pixels of a PNG (all channels), and
 /// the fraction of grey pixels (r = g = b within 2), over the part inside
 /// `box` {x, y, w, h} when given.

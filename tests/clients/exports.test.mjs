@@ -13,15 +13,14 @@
 //   node exports.test.mjs
 
 import assert from "node:assert/strict";
-import { copyFileSync, mkdirSync, mkdtempSync, readFileSync, rmSync, writeFileSync } from "node:fs";
+import { copyFileSync, mkdirSync, mkdtempSync, rmSync, writeFileSync } from "node:fs";
 import { createRequire } from "node:module";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
-import { ARTEFACTS, HERE, ROOT, launch, pngStats, readyTexture, serveStatic, startServer } from "./browser.mjs";
+import { ARTEFACTS, HERE, ROOT, launch, pngStats, readyTexture, routeThree, serveStatic, startServer } from "./browser.mjs";
 
 const NODE = process.env.CLIENTS_NODE_DIR || join(ROOT, "target", "clients", "node");
 const require = createRequire(join(NODE, "package.json"));
-const THREE_DIR = join(NODE, "node_modules", "three");
 const { read } = await import(require.resolve("ktx-parse"));
 
 const PERIOD = 32;
@@ -109,10 +108,7 @@ try {
   for (const [name, b] of Object.entries(files)) writeFileSync(join(site, `${name}.ktx2`), b);
   statics = await serveStatic(site);
   browser = await launch({ width: 900, height: 540 });
-  await browser.context.route("https://unpkg.com/three@0.187.0/**", (route) => {
-    const path = new URL(route.request().url()).pathname.replace("/three@0.187.0/", "");
-    route.fulfill({ body: readFileSync(join(THREE_DIR, path)), contentType: "text/javascript" });
-  });
+  await routeThree(browser.context);
   const open = async (query) => {
     const page = await browser.context.newPage();
     page.on("console", (m) => { if (m.type() === "error") errors.push(m.text()); });

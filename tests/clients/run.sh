@@ -11,7 +11,8 @@
 #    ome-zarr-models validating the OME-Zarr view;
 #  - exports.test.mjs: ktx-parse and three.js (KTX2Loader in Chromium)
 #    reading the KTX2 exports, and the shader example's seams;
-#  - meshes.test.mjs: Khronos' glTF validator on baked meshes.
+#  - meshes.test.mjs: Khronos' glTF validator on baked meshes;
+#  - three_bake.test.mjs: three.js's GLTFLoader drawing baked meshes.
 #
 #   tests/clients/run.sh [path/to/solidtex]
 #   tests/clients/run.sh --install     # only install the clients
@@ -66,3 +67,4 @@ node tests/clients/viewer_mesh.test.mjs
 PYTHON=$C/venv/bin/python node tests/clients/neuroglancer.test.mjs
 node tests/clients/exports.test.mjs
 node tests/clients/meshes.test.mjs
+node tests/clients/three_bake.test.mjs
