@@ -287,12 +287,13 @@ fn query_parameter(p: &QueryParam) -> Node {
         };
         schema.push(("default", Node::Scalar(written)));
     }
-    Node::Map(vec![
-        ("name", text(p.name)),
-        ("in", text("query")),
-        ("description", Node::Prose(p.about.to_string())),
-        ("schema", Node::Map(schema)),
-    ])
+    let mut entries = vec![("name", text(p.name)), ("in", text("query"))];
+    if p.required {
+        entries.push(("required", Node::Scalar("true".into())));
+    }
+    entries.push(("description", Node::Prose(p.about.to_string())));
+    entries.push(("schema", Node::Map(schema)));
+    Node::Map(entries)
 }
 
 /// The region called `name`, at `indent`.

@@ -43,8 +43,9 @@ pub const MAX_KTX2_SIDE: u32 = 2048;
 /// Voxels synthesized per step of an export, between reports of progress.
 const STEP_VOXELS: u64 = 1 << 20;
 
-/// A file format of an export.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// A file format of an export (serde reads it by [`Format::name`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Format {
     /// KTX 2.0 3D texture.
     Ktx2,
@@ -111,8 +112,11 @@ impl std::fmt::Display for Format {
     }
 }
 
-/// How a KTX2 export's mip chain is made.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+/// How a KTX2 export's mip chain is made (serde reads it by name).
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Mips {
     /// A box filter of the level below.
     #[default]

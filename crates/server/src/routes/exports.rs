@@ -17,7 +17,7 @@
 
 use super::answer::{ETag, texture};
 use super::background::answer_job;
-use super::params::{Int, TypedQuery};
+use super::params::{Int, TypedQuery, document_query, named_value};
 use super::voxels::{Coord, Lod};
 use super::{AppState, IMMUTABLE};
 use crate::background::{Detail, Kind, Progress, Spec};
@@ -26,7 +26,7 @@ use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::Response;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use solidtex_core::export::{Export, Format, MAX_EXPORT_VOXELS, Mips};
 use solidtex_core::{Region, Texture};
 
@@ -59,9 +59,9 @@ type ExportSide = Int<1, { MAX_EXPORT_VOXELS as i64 }, 64>;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct ExportQuery {
-    format: Option<String>,
+    format: Format,
     #[serde(rename = "box")]
-    whole: Option<String>,
+    whole: Option<Whole>,
     x: Option<Coord>,
     y: Option<Coord>,
     z: Option<Coord>,
@@ -70,20 +70,71 @@ pub(super) struct ExportQuery {
     d: Option<ExportSide>,
     #[serde(default)]
     lod: Lod,
-    mips: Option<String>,
-    colour: Option<String>,
+    mips: Option<Mips>,
+    colour: Option<Colour>,
 }
+
+/// What a parameter left out stands for, as the document states it: the
+/// box's corner and sides, KTX2's mips and colour. (A box left out of a
+/// periodic texture's export is its period; `format` has no default.)
+impl Default for ExportQuery {
+    fn default() -> ExportQuery {
+        ExportQuery {
+            format: Format::Ktx2,
+            whole: None,
+            x: Some(Coord::default()),
+            y: Some(Coord::default()),
+            z: Some(Coord::default()),
+            w: Some(ExportSide::default()),
+            h: Some(ExportSide::default()),
+            d: Some(ExportSide::default()),
+            lod: Lod::default(),
+            mips: Some(Mips::default()),
+            colour: Some(Colour::Srgb),
+        }
+    }
+}
+
+document_query!(ExportQuery {
+    format: "The file's format.",
+    whole as "box": "`period`: one period of a periodic texture, from the origin.",
+    x: "Lowest corner along x.",
+    y: "Lowest corner along y.",
+    z: "Lowest corner along z.",
+    w: "Extent along x.",
+    h: "Extent along y.",
+    d: "Extent along z.",
+    lod: super::voxels::LOD,
+    mips: "KTX2 only. How the mip chain is made.",
+    colour: "KTX2 only. `srgb` (VK_FORMAT_R8G8B8A8_SRGB) or `linear` (R8G8B8A8_UNORM, the \
+             same bytes).",
+});
+
+/// The box an export takes whole, instead of its corner and sides.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub(super) enum Whole {
+    /// One period of a periodic texture, from the origin.
+    Period,
+}
+
+/// How a KTX2 export's colours are marked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub(super) enum Colour {
+    /// `VK_FORMAT_R8G8B8A8_SRGB`.
+    Srgb,
+    /// `VK_FORMAT_R8G8B8A8_UNORM`: the same bytes, read as linear.
+    Linear,
+}
+
+named_value!(Whole, Colour);
 
 /// The export `q` names, checked against the texture, the limits and the
 /// budgets. Returns it with the predicted synthesis (an upper bound,
 /// voxels).
 fn parse_export(s: &AppState, q: &ExportQuery, tex: &Texture) -> Result<(Export, u64), ApiError> {
-    let format: Format = q
-        .format
-        .as_deref()
-        .ok_or_else(|| ApiError::invalid_parameter("format", "required: ktx2, atlas, nrrd or raw"))?
-        .parse()
-        .map_err(|e: solidtex_core::Error| ApiError::invalid_parameter("format", e))?;
+    let format = q.format;
     let lod = q.lod.get_u32();
     let corner = [
         ("x", q.x.is_some()),
@@ -95,8 +146,8 @@ fn parse_export(s: &AppState, q: &ExportQuery, tex: &Texture) -> Result<(Export,
     ]
     .into_iter()
     .find_map(|(k, given)| given.then_some(k));
-    let region = match q.whole.as_deref() {
-        Some("period") => {
+    let region = match q.whole {
+        Some(Whole::Period) => {
             if let Some(k) = corner {
                 return Err(ApiError::invalid_parameter(
                     k,
@@ -105,34 +156,14 @@ fn parse_export(s: &AppState, q: &ExportQuery, tex: &Texture) -> Result<(Export,
             }
             Export::one_period(tex, lod)?
         }
-        Some(other) => {
-            return Err(ApiError::invalid_parameter(
-                "box",
-                format_args!("`{other}` is not `period` (give x, y, z, w, h, d for a box)"),
-            ));
-        }
         None if corner.is_none() && tex.params().period.is_some() => Export::one_period(tex, lod)?,
         None => Region {
             origin: [q.x, q.y, q.z].map(|c| c.unwrap_or_default().get()),
             size: [q.w, q.h, q.d].map(|c| c.unwrap_or_default().get_u32()),
         },
     };
-    let mips = match q.mips.as_deref() {
-        None => Mips::default(),
-        Some(m) => m
-            .parse()
-            .map_err(|e: solidtex_core::Error| ApiError::invalid_parameter("mips", e))?,
-    };
-    let srgb = match q.colour.as_deref() {
-        None | Some("srgb") => true,
-        Some("linear") => false,
-        Some(other) => {
-            return Err(ApiError::invalid_parameter(
-                "colour",
-                format_args!("`{other}` is not srgb or linear"),
-            ));
-        }
-    };
+    let mips = q.mips.unwrap_or_default();
+    let srgb = q.colour != Some(Colour::Linear);
     if format != Format::Ktx2 && (q.mips.is_some() || q.colour.is_some()) {
         return Err(ApiError::invalid_parameter(
             if q.mips.is_some() { "mips" } else { "colour" },

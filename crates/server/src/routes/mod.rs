@@ -86,6 +86,8 @@ pub fn documented_queries() -> Vec<(&'static str, Vec<QueryParam>)> {
         ("getSlice", voxels::SliceQuery::params()),
         ("getCut", voxels::CutQuery::params()),
         ("getRegion", voxels::RegionQuery::params()),
+        ("getExport", exports::ExportQuery::params()),
+        ("describeExport", exports::ExportQuery::params()),
     ]
 }
 
@@ -492,12 +494,14 @@ mod tests {
 
     #[test]
     fn documented_queries_name_every_field_in_order() {
-        use params::fields_of;
+        use params::{DocumentedQuery, fields_of};
         let fields = [
             fields_of::<frames::FramesQuery>(),
             fields_of::<voxels::SliceQuery>(),
             fields_of::<voxels::CutQuery>(),
             fields_of::<voxels::RegionQuery>(),
+            fields_of::<exports::ExportQuery>(),
+            fields_of::<exports::ExportQuery>(),
         ];
         let documented = documented_queries();
         assert_eq!(documented.len(), fields.len());
@@ -506,6 +510,16 @@ mod tests {
             assert_eq!(names, fields, "{operation}");
             assert!(params.iter().all(|p| !p.about.is_empty()), "{operation}");
         }
+        // What serde requires is what the document marks required.
+        let export = exports::ExportQuery::params();
+        let required: Vec<&str> = export
+            .iter()
+            .filter(|p| p.required)
+            .map(|p| p.name)
+            .collect();
+        assert_eq!(required, ["format"]);
+        let slice = voxels::SliceQuery::params();
+        assert!(slice.iter().all(|p| !p.required));
     }
 
     async fn boom() -> StatusCode {

@@ -110,7 +110,7 @@ impl de::Error for ParamError {
     }
 
     fn missing_field(field: &'static str) -> Self {
-        ParamError::new(Problem::Invalid("missing".into())).named(field)
+        ParamError::new(Problem::Invalid(MISSING.into())).named(field)
     }
 }
 
@@ -508,7 +508,23 @@ pub struct QueryParam {
     pub schema: ValueSchema,
     /// The value taken when it is not given, as the query writes it.
     pub default: Option<String>,
+    /// Whether the query must give it.
+    pub required: bool,
 }
+
+/// The field of `T` that an empty query lacks, if one is required.
+pub(super) fn required_of<T: DeserializeOwned>() -> Option<String> {
+    match T::deserialize(Pairs(std::iter::empty::<(&str, &str)>())) {
+        Err(ParamError {
+            name,
+            problem: Problem::Invalid(why),
+        }) if why == MISSING => name,
+        _ => None,
+    }
+}
+
+/// What a required field that was not given is told.
+const MISSING: &str = "missing";
 
 /// A query struct whose parameters the document describes.
 pub(super) trait DocumentedQuery: DeserializeOwned {
@@ -557,9 +573,11 @@ impl<T: QueryValue> QueryValue for Option<T> {
 /// A unit enum deserialized from its serde name.
 macro_rules! named_value {
     ($($t:ty),*) => {$(
-        impl QueryValue for $t {
-            fn schema() -> ValueSchema {
-                ValueSchema::Choice(variants_of::<$t>())
+        impl $crate::routes::params::QueryValue for $t {
+            fn schema() -> $crate::routes::params::ValueSchema {
+                $crate::routes::params::ValueSchema::Choice(
+                    $crate::routes::params::variants_of::<$t>(),
+                )
             }
 
             fn written(&self) -> Option<String> {
@@ -569,10 +587,16 @@ macro_rules! named_value {
     )*};
 }
 
-named_value!(solidtex_core::Filter);
+pub(super) use named_value;
+
+named_value!(
+    solidtex_core::Filter,
+    solidtex_core::export::Format,
+    solidtex_core::export::Mips
+);
 
 /// The names serde reads a unit enum from, in declaration order.
-fn variants_of<T: DeserializeOwned>() -> &'static [&'static str] {
+pub(super) fn variants_of<T: DeserializeOwned>() -> &'static [&'static str] {
     /// Stops the enum's deserialization at the names it hands over.
     struct Names;
     #[derive(Debug)]
@@ -624,6 +648,7 @@ pub(super) fn query_param<S: Default, T: QueryValue>(
         about,
         schema: T::schema(),
         default: field(S::default()).written(),
+        required: false,
     }
 }
 
@@ -641,18 +666,35 @@ pub(super) fn fields_of<T: DeserializeOwned>() -> &'static [&'static str] {
 }
 
 /// Declares what each field of a query struct means, in the struct's
-/// order: `document_query!(SliceQuery { u0: "First u.", … })`. The field's
+/// order: `document_query!(SliceQuery { u0: "First u.", … })`, a field
+/// that serde renames with its query name (`whole as "box": …`). The field's
 /// type gives its values, the struct's `Default` its default; a test checks
 /// that the list is every field serde reads.
 macro_rules! document_query {
-    ($query:ident { $($field:ident: $about:expr),* $(,)? }) => {
+    (@name $field:ident) => {
+        stringify!($field)
+    };
+    (@name $field:ident $name:literal) => {
+        $name
+    };
+    ($query:ident { $($field:ident $(as $name:literal)?: $about:expr),* $(,)? }) => {
         impl $crate::routes::params::DocumentedQuery for $query {
             fn params() -> Vec<$crate::routes::params::QueryParam> {
-                vec![$($crate::routes::params::query_param(
+                let required = $crate::routes::params::required_of::<$query>();
+                let mut params = vec![$($crate::routes::params::query_param(
                     |q: $query| q.$field,
-                    stringify!($field),
+                    document_query!(@name $field $($name)?),
                     $about,
-                )),*]
+                )),*];
+                for p in &mut params {
+                    // A required field's value in the struct's `Default`
+                    // is no default of the query's.
+                    p.required = required.as_deref() == Some(p.name);
+                    if p.required {
+                        p.default = None;
+                    }
+                }
+                params
             }
         }
     };
