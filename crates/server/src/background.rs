@@ -18,7 +18,8 @@ use crate::error::ApiError;
 use crate::spec::hex;
 use axum::body::Bytes;
 use parking_lot::Mutex;
-use serde_json::{Map, Value, json};
+use schemars::JsonSchema;
+use serde::Serialize;
 use sha2::{Digest, Sha256};
 use solidtex_core::{CancelFlag, Cancelled, run_cancellable};
 use std::collections::{HashMap, VecDeque};
@@ -128,8 +129,156 @@ pub(crate) struct Spec {
     /// Voxels predicted to be synthesized from a cold cache, until the
     /// work sets a closer guess (see [`Progress::set_predicted`]).
     pub predicted: u64,
-    /// Fields of its own kind added to its status.
-    pub extra: Map<String, Value>,
+    /// What its status tells of its kind's own.
+    pub detail: Detail,
+}
+
+/// What a job's status tells of what only its kind has.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Detail {
+    /// An export's format (`ktx2`, `atlas`, `nrrd`, `raw`).
+    Export { format: &'static str },
+    /// A bake's mesh and texture.
+    Bake(BakeDetail),
+}
+
+/// What a bake's status tells of its mesh and texture.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BakeDetail {
+    pub triangles: u64,
+    pub resolution: u32,
+    /// `None` for vertex colours.
+    pub texture_size: Option<u32>,
+    pub lod: u32,
+}
+
+// openapi.yaml's `JobStatus` schema is generated from this type. Its
+// fields stand in alphabetical order: the status was a JSON map before it
+// was a type, and its bytes stay the same.
+/// A background job: an export, or a bake asked for with `Prefer:
+/// respond-async` (what `GET /v1/{exports,bakes}/{id}` answers).
+#[derive(Serialize, JsonSchema)]
+#[schemars(example = JobStatus::example())]
+pub(crate) struct JobStatus {
+    /// The file's size (when done).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u64")]
+    pub bytes: Option<u64>,
+    /// When it started, seconds since the Unix epoch.
+    pub created: u64,
+    /// Units finished (all once done).
+    pub done: u64,
+    /// Why it failed (when failed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "JobError")]
+    pub error: Option<JobError>,
+    /// The file's name.
+    pub file: String,
+    /// Where the file is served once done.
+    pub file_url: String,
+    /// An export's format.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "String")]
+    #[schemars(extend("enum" = ["ktx2", "atlas", "nrrd", "raw"]))]
+    pub format: Option<&'static str>,
+    /// Derived from the texture and what the job makes: the same request
+    /// gets the same id.
+    pub id: String,
+    /// Export or bake.
+    #[schemars(extend("enum" = ["export", "bake"]))]
+    pub kind: &'static str,
+    /// A bake's level of detail.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u32")]
+    pub lod: Option<u32>,
+    /// The file's media type.
+    pub media_type: &'static str,
+    /// Voxels a cold cache would synthesize: the upper bound checked
+    /// against `--max-export-work` before it started; for a bake, once
+    /// `planning` is over, a closer guess (one union of the shell's chains
+    /// per level), which the synthesis may pass.
+    pub predicted_voxels: u64,
+    /// Share done, never decreasing, 1 once done: the larger of `done`
+    /// over `total` and of `synthesized_voxels` over `predicted_voxels`
+    /// (at most 0.99: the prediction is a guess that the synthesis may
+    /// pass).
+    #[schemars(range(min = 0, max = 1))]
+    pub progress: f64,
+    /// A bake's resolution.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u32")]
+    pub resolution: Option<u32>,
+    /// What it is doing: `queued`, `planning` (a bake's prediction),
+    /// `synthesis`, `writing` (a bake's glTF), then the state once
+    /// finished.
+    pub stage: &'static str,
+    /// Where it stands.
+    #[schemars(extend("enum" = STATES))]
+    pub state: &'static str,
+    /// Voxels synthesized so far, all levels (cached ones are free).
+    pub synthesized_voxels: u64,
+    /// The texture's id.
+    pub texture: String,
+    /// A bake's texture side (null for vertex colours).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<u32>")]
+    pub texture_size: Option<Option<u32>>,
+    /// How many units there are.
+    pub total: u64,
+    /// A bake's triangles.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "u64")]
+    pub triangles: Option<u64>,
+    /// What `done` and `total` count: an export's voxels, a bake's texels
+    /// or vertices.
+    #[schemars(extend("enum" = ["voxels", "texels", "vertices"]))]
+    pub unit: &'static str,
+    /// Where this status is.
+    pub url: String,
+}
+
+impl JobStatus {
+    /// A bake under way, as the document shows it.
+    fn example() -> JobStatus {
+        let id = "5f0c2a9e41d7b3c8a6e2f19d0b4c7a83";
+        JobStatus {
+            bytes: None,
+            created: 1_796_425_200,
+            done: 1_048_576,
+            error: None,
+            file: "default-5f0c2a9e.glb".into(),
+            file_url: format!("/v1/bakes/{id}/file"),
+            format: None,
+            id: id.into(),
+            kind: "bake",
+            lod: Some(0),
+            media_type: "model/gltf-binary",
+            predicted_voxels: 41_203_712,
+            progress: 0.42,
+            resolution: Some(1024),
+            stage: "synthesis",
+            state: "running",
+            synthesized_voxels: 17_305_600,
+            texture: "default".into(),
+            texture_size: Some(Some(2048)),
+            total: 4_194_304,
+            triangles: Some(4608),
+            unit: "texels",
+            url: format!("/v1/bakes/{id}"),
+        }
+    }
+}
+
+/// Why a job failed: the error a client asking for its file gets.
+#[derive(Serialize, JsonSchema)]
+#[schemars(inline)]
+pub(crate) struct JobError {
+    /// Stable identifier of the error class.
+    pub code: &'static str,
+    /// Human-readable explanation.
+    pub message: String,
+    /// The HTTP status of that answer.
+    pub status: u16,
 }
 
 /// What a running job tells its status as it goes.
@@ -213,50 +362,54 @@ impl Job {
         self.progress.predicted.load(Ordering::Relaxed)
     }
 
-    /// Its status as JSON (what `GET /v1/{exports,bakes}/{id}` answers).
-    pub(crate) fn status(&self) -> Value {
+    /// Its status (what `GET /v1/{exports,bakes}/{id}` answers).
+    pub(crate) fn status(&self) -> JobStatus {
         let phase = self.phase();
         let spec = &self.spec;
         let stage = match &phase {
             Phase::Queued | Phase::Running => *self.progress.stage.lock(),
             finished => finished.name(),
         };
-        let base = format!("/v1/{}/{}", spec.kind.collection(), spec.id);
-        let mut v = json!({
-            "id": spec.id,
-            "kind": spec.kind.name(),
-            "texture": spec.texture,
-            "state": phase.name(),
-            "stage": stage,
-            "progress": self.fraction(&phase),
-            "done": self.done(),
-            "total": spec.total,
-            "unit": spec.unit,
-            "predicted_voxels": self.predicted(),
-            "synthesized_voxels": self.flag.synthesized(),
-            "created": self.created,
-            "file": spec.file_name,
-            "media_type": spec.media_type,
-            "file_url": format!("{base}/file"),
-            "url": base,
-        });
-        let o = v.as_object_mut().expect("an object");
-        match &phase {
-            Phase::Done(b) => {
-                o.insert("bytes".into(), json!(b.len()));
-            }
-            Phase::Failed(e) => {
-                o.insert(
-                    "error".into(),
-                    json!({"code": e.code, "message": e.message, "status": e.status.as_u16()}),
-                );
-            }
-            _ => {}
+        let url = format!("/v1/{}/{}", spec.kind.collection(), spec.id);
+        let (format, bake) = match spec.detail {
+            Detail::Export { format } => (Some(format), None),
+            Detail::Bake(bake) => (None, Some(bake)),
+        };
+        JobStatus {
+            bytes: match &phase {
+                Phase::Done(b) => Some(b.len() as u64),
+                _ => None,
+            },
+            created: self.created,
+            done: self.done(),
+            error: match &phase {
+                Phase::Failed(e) => Some(JobError {
+                    code: e.code,
+                    message: e.message.clone(),
+                    status: e.status.as_u16(),
+                }),
+                _ => None,
+            },
+            file: spec.file_name.clone(),
+            file_url: format!("{url}/file"),
+            format,
+            id: spec.id.clone(),
+            kind: spec.kind.name(),
+            lod: bake.map(|b| b.lod),
+            media_type: spec.media_type,
+            predicted_voxels: self.predicted(),
+            progress: self.fraction(&phase),
+            resolution: bake.map(|b| b.resolution),
+            stage,
+            state: phase.name(),
+            synthesized_voxels: self.flag.synthesized(),
+            texture: spec.texture.clone(),
+            texture_size: bake.map(|b| b.texture_size),
+            total: spec.total,
+            triangles: bake.map(|b| b.triangles),
+            unit: spec.unit,
+            url,
         }
-        for (k, x) in &spec.extra {
-            o.insert(k.clone(), x.clone());
-        }
-        v
     }
 }
 
@@ -530,7 +683,12 @@ mod tests {
             unit: "texels",
             total: 10,
             predicted: 100,
-            extra: Map::new(),
+            detail: Detail::Bake(BakeDetail {
+                triangles: 12,
+                resolution: 64,
+                texture_size: None,
+                lod: 0,
+            }),
         }
     }
 
@@ -560,8 +718,8 @@ mod tests {
         let again = b.start(spec("a"), bytes(60)).unwrap();
         assert!(Arc::ptr_eq(&first, &again));
         assert!(matches!(first.finished().await, Phase::Done(f) if f.len() == 60));
-        assert_eq!(first.status()["progress"], 1.0);
-        assert_eq!(first.status()["done"], 10);
+        assert_eq!(first.status().progress, 1.0);
+        assert_eq!(first.status().done, 10);
         // Another kind does not see it.
         assert!(b.get(Kind::Export, "a").is_none());
         let second = b.start(spec("b"), bytes(60)).unwrap();
@@ -592,6 +750,46 @@ mod tests {
     }
 
     #[tokio::test]
+    async fn a_status_is_written_as_the_map_it_was() {
+        let b = Arc::new(Background::new(4, 1000, 1000, Duration::from_secs(60)));
+        let done = b.start(spec("a"), bytes(3)).unwrap();
+        done.finished().await;
+        let status = done.status();
+        assert!(crate::openapi::keys_in_map_order(&status));
+        let v = serde_json::to_value(&status).unwrap();
+        // A vertex-coloured bake has a texture side of null; a bake has
+        // no format, and only a failed job an error.
+        assert_eq!(v["texture_size"], serde_json::Value::Null);
+        assert!(v.as_object().unwrap().contains_key("texture_size"));
+        assert_eq!(v["bytes"], 3);
+        assert!(v.get("format").is_none() && v.get("error").is_none());
+        assert_eq!(v["url"], "/v1/bakes/a");
+        assert_eq!(v["file_url"], "/v1/bakes/a/file");
+        let failing = Spec {
+            kind: Kind::Export,
+            detail: Detail::Export { format: "nrrd" },
+            ..spec("f")
+        };
+        let failed = b
+            .start(
+                failing,
+                Box::new(|_: &Progress| Err(ApiError::internal("no room"))),
+            )
+            .unwrap();
+        failed.finished().await;
+        let status = failed.status();
+        assert!(crate::openapi::keys_in_map_order(&status));
+        let v = serde_json::to_value(&status).unwrap();
+        assert_eq!(v["error"]["status"], 500);
+        assert_eq!(v["error"]["message"], "no room");
+        assert_eq!(v["format"], "nrrd");
+        assert_eq!(v["state"], "failed");
+        for bake_only in ["lod", "resolution", "texture_size", "triangles", "bytes"] {
+            assert!(v.get(bake_only).is_none(), "{bake_only}");
+        }
+    }
+
+    #[tokio::test]
     async fn finished_jobs_expire() {
         let b = Arc::new(Background::new(4, 1000, 1000, Duration::from_millis(50)));
         b.start(spec("a"), bytes(1)).unwrap().finished().await;
@@ -614,7 +812,7 @@ mod tests {
         assert_eq!(refused.status, axum::http::StatusCode::SERVICE_UNAVAILABLE);
         b.cancel(Kind::Bake, "wait").unwrap();
         assert!(matches!(waiting.finished().await, Phase::Cancelled));
-        assert_eq!(waiting.status()["state"], "cancelled");
+        assert_eq!(waiting.status().state, "cancelled");
         // Its place in the queue is free again (once its task has ended).
         tokio::time::sleep(Duration::from_millis(50)).await;
         let next = b.start(spec("next"), bytes(1)).unwrap();

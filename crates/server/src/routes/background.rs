@@ -9,7 +9,7 @@
 use super::answer::{ETag, texture};
 use super::params::{NoQuery, TypedPath, TypedQuery};
 use super::{AppState, IMMUTABLE};
-use crate::background::{Job, Kind, Phase};
+use crate::background::{Job, JobStatus, Kind, Phase};
 use crate::error::ApiError;
 use axum::Json;
 use axum::body::{Body, Bytes};
@@ -17,7 +17,6 @@ use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Deserialize;
-use serde_json::Value;
 
 /// Whether the client asked for an asynchronous answer.
 pub(super) fn respond_async(headers: &HeaderMap) -> bool {
@@ -49,9 +48,7 @@ pub(super) fn file_response(job: &Job, bytes: Bytes, tag: &ETag) -> Response {
 pub(super) fn accepted(job: &Job) -> Response {
     let status = job.status();
     let mut res = (StatusCode::ACCEPTED, Json(&status)).into_response();
-    if let Some(url) = status["url"].as_str()
-        && let Ok(v) = HeaderValue::from_str(url)
-    {
+    if let Ok(v) = HeaderValue::from_str(&status.url) {
         res.headers_mut().insert(header::LOCATION, v);
     }
     res
@@ -97,7 +94,7 @@ fn finished_file(job: &Job, phase: Phase, tag: &ETag) -> Result<Response, ApiErr
             format!(
                 "{} `{id}` is {:.0} % done; its status is at /v1/{}/{id}",
                 kind.name(),
-                100.0 * job.status()["progress"].as_f64().unwrap_or(0.0),
+                100.0 * job.status().progress,
                 kind.collection()
             ),
         )
@@ -119,7 +116,7 @@ fn unknown(kind: Kind, id: &str) -> ApiError {
     )
 }
 
-fn status(s: &AppState, kind: Kind, id: &str) -> Result<Json<Value>, ApiError> {
+fn status(s: &AppState, kind: Kind, id: &str) -> Result<Json<JobStatus>, ApiError> {
     let job = s
         .background
         .get(kind, id)
@@ -145,7 +142,7 @@ async fn file(
     finished_file(&job, job.phase(), &tag)
 }
 
-fn cancel(s: &AppState, kind: Kind, id: &str) -> Result<Json<Value>, ApiError> {
+fn cancel(s: &AppState, kind: Kind, id: &str) -> Result<Json<JobStatus>, ApiError> {
     let job = s
         .background
         .cancel(kind, id)
@@ -170,7 +167,7 @@ pub(super) async fn export_status(
     State(s): State<AppState>,
     TypedPath(ExportPath { eid }): TypedPath<ExportPath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<JobStatus>, ApiError> {
     status(&s, Kind::Export, &eid)
 }
 
@@ -189,7 +186,7 @@ pub(super) async fn export_cancel(
     State(s): State<AppState>,
     TypedPath(ExportPath { eid }): TypedPath<ExportPath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<JobStatus>, ApiError> {
     cancel(&s, Kind::Export, &eid)
 }
 
@@ -198,7 +195,7 @@ pub(super) async fn bake_status(
     State(s): State<AppState>,
     TypedPath(BakePath { bid }): TypedPath<BakePath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<JobStatus>, ApiError> {
     status(&s, Kind::Bake, &bid)
 }
 
@@ -217,6 +214,6 @@ pub(super) async fn bake_cancel(
     State(s): State<AppState>,
     TypedPath(BakePath { bid }): TypedPath<BakePath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<JobStatus>, ApiError> {
     cancel(&s, Kind::Bake, &bid)
 }

@@ -19,7 +19,7 @@ use super::answer::{Encoding, admit, answer, texture};
 use super::background::{answer_job, respond_async};
 use super::params::{Int, TypedQuery, Vec3};
 use super::voxels::Lod;
-use crate::background::{Kind, Progress, Spec};
+use crate::background::{BakeDetail, Detail, Kind, Progress, Spec};
 use crate::error::ApiError;
 use crate::registry::Entry;
 use axum::body::Bytes;
@@ -27,7 +27,6 @@ use axum::extract::{Path, State};
 use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
-use serde_json::json;
 use sha2::{Digest, Sha256};
 use solidtex_core::mesh::{
     Bake, BakeOptions, Colours, MAX_RESOLUTION, Mesh, MeshFormat, Plane, Uvs,
@@ -163,14 +162,12 @@ async fn bake_async(
         return Err(ApiError::internal("a bake request is not a bake"));
     };
     let bake = bake.clone();
-    let mut extra = serde_json::Map::new();
-    extra.insert("triangles".into(), json!(bake.mesh().triangles().len()));
-    extra.insert(
-        "resolution".into(),
-        json!(bake.options().placement.resolution),
-    );
-    extra.insert("texture_size".into(), json!(bake.texture_side()));
-    extra.insert("lod".into(), json!(lod));
+    let detail = Detail::Bake(BakeDetail {
+        triangles: bake.mesh().triangles().len() as u64,
+        resolution: bake.options().placement.resolution,
+        texture_size: bake.texture_side(),
+        lod,
+    });
     let spec = Spec {
         file_name: format!("{}-{}.glb", entry.id, &id[..8]),
         id,
@@ -184,7 +181,7 @@ async fn bake_async(
         },
         total: bake.items() as u64,
         predicted,
-        extra,
+        detail,
     };
     let work = move |p: &Progress| -> Result<Bytes, ApiError> {
         p.set_stage("planning");

@@ -20,14 +20,13 @@ use super::background::answer_job;
 use super::params::{Int, TypedQuery};
 use super::voxels::{Coord, Lod};
 use super::{AppState, IMMUTABLE};
-use crate::background::{Kind, Progress, Spec};
+use crate::background::{Detail, Kind, Progress, Spec};
 use crate::error::ApiError;
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::Response;
 use serde::Deserialize;
-use serde_json::json;
 use solidtex_core::export::{Export, Format, MAX_EXPORT_VOXELS, Mips};
 use solidtex_core::{Region, Texture};
 
@@ -198,9 +197,9 @@ pub(super) async fn export(
         unit: "voxels",
         total,
         predicted,
-        extra: [("format".to_string(), json!(export.format.name()))]
-            .into_iter()
-            .collect(),
+        detail: Detail::Export {
+            format: export.format.name(),
+        },
     };
     let work = move |p: &Progress| -> Result<Bytes, ApiError> {
         p.set_stage("synthesis");

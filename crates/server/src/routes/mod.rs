@@ -97,6 +97,7 @@ pub fn documented_responses(generator: &mut schemars::SchemaGenerator) {
     generator.subschema_for::<textures::TextureList>();
     generator.subschema_for::<ops::Health>();
     generator.subschema_for::<frames::Frames>();
+    generator.subschema_for::<crate::background::JobStatus>();
 }
 
 /// The `lod` query parameter every voxel route takes.
