@@ -14,6 +14,7 @@ use crate::synth::colour::rgb8;
 use crate::synth::estimate::{Masks, WorkEstimate, add_voxel};
 use crate::synth::{Engine, SynthStats, filtered_rgb, plane_points, sample_voxels, unique_voxels};
 use rayon::prelude::*;
+use std::ops::ControlFlow;
 use std::sync::Arc;
 
 /// Texels (or vertices) of a bake synthesized per step: a step's sample
@@ -28,6 +29,21 @@ const ESTIMATE_BLOCK: u32 = 16;
 /// Most tiles a bake's estimate holds the voxels of (a tile's mask is 8
 /// bytes beside its 24-byte key).
 const MAX_ESTIMATE_TILES: usize = 1 << 22;
+
+/// Hands `each` the voxels a bake reads, a step of texels at a time (so
+/// few sample points are in memory at once), until it breaks.
+fn bake_voxels(b: &Bake, mut each: impl FnMut(Vec<[i64; 3]>) -> ControlFlow<()>) {
+    for start in (0..b.items()).step_by(BAKE_STEP) {
+        let end = (start + BAKE_STEP).min(b.items());
+        let points: Vec<[f64; 3]> = (start..end)
+            .into_par_iter()
+            .filter_map(|i| b.sample(i))
+            .collect();
+        if each(sample_voxels(&points, b.options().filter).0).is_break() {
+            return;
+        }
+    }
+}
 
 /// A solid texture ready to be sampled anywhere. Cheap to clone; safe to
 /// share between threads. Every method blocks while it synthesizes (using
@@ -341,24 +357,28 @@ impl Texture {
         };
         let mut blocks = rustc_hash::FxHashSet::default();
         let mut masks = Some(Masks::default());
-        for start in (0..b.items()).step_by(BAKE_STEP) {
-            let end = (start + BAKE_STEP).min(b.items());
-            let points: Vec<[f64; 3]> = (start..end)
-                .into_par_iter()
-                .filter_map(|i| b.sample(i))
-                .collect();
-            for v in sample_voxels(&points, b.options().filter).0 {
+        let mut too_many = false;
+        bake_voxels(b, |voxels| {
+            for v in voxels {
                 blocks.insert(v.map(|c| c.div_euclid(side) * side));
                 if let Some(m) = &mut masks {
                     add_voxel(m, v);
                 }
             }
             match &masks {
-                Some(m) if m.len() as u64 > limit => return over(),
+                Some(m) if m.len() as u64 > limit => too_many = true,
                 Some(m) if m.len() > MAX_ESTIMATE_TILES => masks = None,
-                None if blocks.len() as u64 > most_blocks => return over(),
+                None if blocks.len() as u64 > most_blocks => too_many = true,
                 _ => {}
             }
+            if too_many {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        });
+        if too_many {
+            return over();
         }
         if let Some(m) = masks {
             return self.engine.estimate_grouped(&m, lod, limit);
@@ -452,19 +472,11 @@ impl Texture {
         let RequestKind::Bake(b) = request.kind() else {
             return Ok(self.estimate(request, lod, u64::MAX)?.total);
         };
-        // Steps keep few sample points in memory at once; the voxels,
-        // shared by neighbouring texels, are fewer.
         let mut masks = Masks::default();
-        for start in (0..b.items()).step_by(BAKE_STEP) {
-            let end = (start + BAKE_STEP).min(b.items());
-            let points: Vec<[f64; 3]> = (start..end)
-                .into_par_iter()
-                .filter_map(|i| b.sample(i))
-                .collect();
-            for v in sample_voxels(&points, b.options().filter).0 {
-                add_voxel(&mut masks, v);
-            }
-        }
+        bake_voxels(b, |voxels| {
+            voxels.into_iter().for_each(|v| add_voxel(&mut masks, v));
+            ControlFlow::Continue(())
+        });
         Ok(self.engine.predict_union(masks, lod))
     }
 
