@@ -4,6 +4,8 @@
 //! of the `Params` and `VariantParams` schemas; from the voxel routes'
 //! query structs ([`crate::routes::documented_queries`]) their operations'
 //! query parameters, the `Lod` component and the `Vector` schema; from
+//! the background jobs' path structs their path parameters' components
+//! ([`crate::routes::documented_paths`]); from
 //! the types of the JSON bodies the routes answer with
 //! ([`crate::routes::documented_responses`], serde and `schemars`) their
 //! component schemas. Each sits in the document between a marker
@@ -261,6 +263,12 @@ const VECTOR: &str = r"^-?[0-9]+(\.[0-9]+)?,-?[0-9]+(\.[0-9]+)?,-?[0-9]+(\.[0-9]
 
 /// A route's query parameter as a parameter object.
 fn query_parameter(p: &QueryParam) -> Node {
+    parameter_object(p, "query")
+}
+
+/// A route's parameter `p`, found `location` (`query` or `path`), as a
+/// parameter object.
+fn parameter_object(p: &QueryParam, location: &'static str) -> Node {
     let mut schema = match p.schema {
         ValueSchema::Integer { min, max } => {
             let mut s = vec![("type", text("integer"))];
@@ -279,6 +287,7 @@ fn query_parameter(p: &QueryParam) -> Node {
                 Node::Flow(names.iter().map(|n| quoted(n)).collect()),
             ),
         ],
+        ValueSchema::Text => vec![("type", text("string"))],
     };
     if let Some(d) = &p.default {
         let written = match p.schema {
@@ -287,7 +296,7 @@ fn query_parameter(p: &QueryParam) -> Node {
         };
         schema.push(("default", Node::Scalar(written)));
     }
-    let mut entries = vec![("name", text(p.name)), ("in", text("query"))];
+    let mut entries = vec![("name", text(p.name)), ("in", text(location))];
     if p.required {
         entries.push(("required", Node::Scalar("true".into())));
     }
@@ -309,6 +318,16 @@ fn region(name: &str, indent: usize) -> Option<String> {
             ]),
         )]),
         "lod-parameter" => Node::Map(vec![("Lod", query_parameter(&routes::lod_parameter()))]),
+        "path-parameters" => Node::Map(
+            routes::documented_paths()
+                .iter()
+                .flat_map(|(component, params)| {
+                    params
+                        .iter()
+                        .map(|p| (*component, parameter_object(p, "path")))
+                })
+                .collect(),
+        ),
         _ if name.starts_with("query ") => {
             let operation = &name["query ".len()..];
             let (_, params) = routes::documented_queries()

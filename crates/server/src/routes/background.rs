@@ -7,7 +7,7 @@
 //! URL in `Location`.
 
 use super::answer::{ETag, texture};
-use super::params::{NoQuery, TypedPath, TypedQuery};
+use super::params::{NoQuery, TypedPath, TypedQuery, document_query};
 use super::{AppState, IMMUTABLE};
 use crate::background::{Job, JobStatus, Kind, Phase};
 use crate::error::ApiError;
@@ -151,16 +151,24 @@ fn cancel(s: &AppState, kind: Kind, id: &str) -> Result<Json<JobStatus>, ApiErro
 }
 
 /// The path of an export: `/v1/exports/{eid}`.
-#[derive(Deserialize)]
+#[derive(Deserialize, Default)]
 pub(super) struct ExportPath {
     eid: String,
 }
 
+document_query!(ExportPath {
+    eid: "The export's id (from `Location`).",
+});
+
 /// The path of a bake: `/v1/bakes/{bid}`.
-#[derive(Deserialize)]
+#[derive(Deserialize, Default)]
 pub(super) struct BakePath {
     bid: String,
 }
+
+document_query!(BakePath {
+    bid: "The bake's id (from `Location`).",
+});
 
 /// `GET /v1/exports/{eid}`
 pub(super) async fn export_status(

@@ -91,6 +91,17 @@ pub fn documented_queries() -> Vec<(&'static str, Vec<QueryParam>)> {
     ]
 }
 
+/// The path parameters declared once as components, by component name;
+/// openapi.yaml's section `path-parameters` is generated from the routes'
+/// path structs ([`crate::openapi`]).
+pub fn documented_paths() -> Vec<(&'static str, Vec<QueryParam>)> {
+    use params::DocumentedQuery;
+    vec![
+        ("ExportId", background::ExportPath::params()),
+        ("BakeId", background::BakePath::params()),
+    ]
+}
+
 /// The JSON bodies the routes answer with, registered in `generator`;
 /// openapi.yaml's section `response-schemas` is generated from their
 /// types ([`crate::openapi`]).
@@ -520,6 +531,20 @@ mod tests {
         assert_eq!(required, ["format"]);
         let slice = voxels::SliceQuery::params();
         assert!(slice.iter().all(|p| !p.required));
+    }
+
+    #[test]
+    fn documented_path_parameters_are_required_and_in_routes() {
+        for (component, params) in documented_paths() {
+            for p in params {
+                assert!(p.required, "{component}");
+                let captured = format!("{{{}}}", p.name);
+                assert!(
+                    ROUTES.iter().any(|(_, path)| path.contains(&captured)),
+                    "{component}"
+                );
+            }
+        }
     }
 
     async fn boom() -> StatusCode {

@@ -493,6 +493,8 @@ pub enum ValueSchema {
     Vector,
     /// One of these names.
     Choice(&'static [&'static str]),
+    /// Any string.
+    Text,
 }
 
 /// One query parameter as the API document describes it: declared beside
@@ -526,7 +528,7 @@ pub(super) fn required_of<T: DeserializeOwned>() -> Option<String> {
 /// What a required field that was not given is told.
 const MISSING: &str = "missing";
 
-/// A query struct whose parameters the document describes.
+/// A query (or path) struct whose parameters the document describes.
 pub(super) trait DocumentedQuery: DeserializeOwned {
     /// Its parameters, in the struct's order.
     fn params() -> Vec<QueryParam>;
@@ -557,6 +559,16 @@ impl QueryValue for Vec3 {
 
     fn written(&self) -> Option<String> {
         Some(self.0.map(|c| c.to_string()).join(","))
+    }
+}
+
+impl QueryValue for String {
+    fn schema() -> ValueSchema {
+        ValueSchema::Text
+    }
+
+    fn written(&self) -> Option<String> {
+        Some(self.clone()).filter(|s| !s.is_empty())
     }
 }
 
