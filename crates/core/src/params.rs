@@ -9,54 +9,86 @@ use serde::{Deserialize, Serialize};
 
 pub mod knobs;
 
-/// Parameters of the exemplar analysis and 3D candidate precomputation.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct AnalysisParams {
-    /// Neighbourhood side N (odd). The papers use 5.
-    pub neighbourhood: u32,
-    /// Appearance-space dimensions per exemplar pixel (PCA of the N×N RGB
-    /// neighbourhood). The papers use 8.
-    pub pca_dims: u32,
-    /// Most similar strips S searched in each other exemplar (Dong: 65).
-    pub strips: u32,
-    /// Triples kept per pixel by crossbar error before coherence filtering.
-    pub triples: u32,
-    /// Candidates kept per pixel after coherence filtering (Dong: 12).
-    pub max_candidates: u32,
-    /// Number of pyramid levels analysed, finest first. Synthesis starts at
-    /// the coarsest of them (L−3 with the default 4).
-    pub levels: u32,
-    /// 2D candidates (most similar pixels) stored per exemplar pixel for the
-    /// correction's first stage, at coarse levels.
-    pub similar_coarse: u32,
-    /// 2D candidates per exemplar pixel at the finest level.
-    pub similar_fine: u32,
-    /// How the exemplar is laid on the three planes, and how much each
-    /// plane counts in the matching (see [`Orientation`]).
-    pub orientation: Orientation,
-    /// Weight of the feature-distance channel in the appearance vectors,
-    /// relative to the luminance (see [`crate::analysis::feature`]); 0 leaves the
-    /// vectors to colour alone. Not written when 0, so textures without
-    /// the channel keep their ids.
-    #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
-    pub feature_weight: f32,
-    /// What the lazy synthesis starts from (see [`Initialisation`]). Not
-    /// written when the slab, so textures that start from it keep their
-    /// ids.
-    #[serde(skip_serializing_if = "Initialisation::is_slab")]
-    pub initialisation: Initialisation,
-    /// The finest level at which the reference is kept as a block of
-    /// triples, when the synthesis starts from it: every level from this
-    /// one to the coarsest starts from its own block, so a request at a
-    /// level of detail at or above it corrects only that level. `None`
-    /// keeps the coarsest level's block alone (cheap to precompute; the
-    /// finer levels are upsampled and corrected as before); 0 keeps every
-    /// level's (the quality preset: the finest level is the reference's
-    /// own, at the cost of minutes of precompute and its blocks in the
-    /// `.stx`).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub reference_level: Option<u32>,
+use knobs::{Before, Values, int, knobs, number};
+
+knobs! {
+    /// Parameters of the exemplar analysis and 3D candidate precomputation.
+    #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    pub struct AnalysisParams(Analysis, ANALYSIS_KNOBS) {
+        neighbourhood: u32 = 5,
+            Values::Integer { min: 3, max: 9, odd: true },
+            "Neighbourhood side N (odd) of the exemplar analysis (the papers use 5).";
+        pca_dims: u32 = 8,
+            int(2, 16),
+            "Appearance-space dimensions per exemplar pixel: the PCA of its N×N colour \
+             neighbourhood (the papers use 8).";
+        strips: u32 = 65,
+            int(4, 256),
+            "Most similar strips searched in each other exemplar for every pixel's 3D candidates \
+             (Dong et al.: 65).";
+        triples: u32 = 100,
+            int(4, 1000),
+            "Triples kept per pixel by crossbar error before the coherence filtering.";
+        max_candidates: u32 = 12,
+            int(1, 32),
+            "3D candidates kept per pixel after the coherence filtering (Dong et al.: 12).";
+        /// The synthesis starts at the coarsest level (L−3 with the
+        /// default 4).
+        levels: u32 = 4,
+            int(1, 6),
+            "Pyramid levels analysed; the synthesis starts at the coarsest.";
+        similar_coarse: u32 = 4,
+            int(1, 8),
+            "2D candidates (most similar pixels) kept per exemplar pixel for the correction at the \
+             coarse levels.";
+        similar_fine: u32 = 2,
+            int(1, 8),
+            "2D candidates kept per exemplar pixel at the finest level.";
+        /// See [`Orientation`].
+        orientation: Orientation = Orientation::Auto,
+            Values::Text { max_len: None, pattern: None, strict: false },
+            "How the exemplar is laid on the three planes: `auto` (default) turns one plane a \
+             quarter and weights the plane that cuts along the grain down when one exemplar for \
+             all planes is square and strongly oriented along one of its axes, and leaves it as it \
+             is otherwise; `none` shows it as it is on every plane; an arrangement is given as the \
+             JSON text of an object (see `Arrangement`). The texture's `orientation` says what was \
+             chosen.",
+            before = Before::Value(r#""none""#);
+        /// See [`crate::analysis::feature`]. Off by default, since the
+        /// channel found automatically made the shared exemplars'
+        /// statistics worse (docs/quality.md); not written when 0, so
+        /// textures without the channel keep their ids.
+        #[serde(serialize_with = "shortest_f32", skip_serializing_if = "is_zero")]
+        feature_weight: f32 = 0.0,
+            number(0.0, 4.0),
+            "Weight of the feature-distance channel in the appearance vectors, relative to the \
+             exemplar's luminance: a signed distance to the edges of the exemplar's features: the \
+             uploaded feature mask, or else the smaller side of its Otsu luminance threshold, found \
+             automatically. 0 (default) matches colour alone. Not written into the texture's \
+             parameters when 0.",
+            before = Before::Value("0");
+        /// See [`Initialisation`]. Not written when the slab, so textures
+        /// that start from it keep their ids.
+        #[serde(skip_serializing_if = "Initialisation::is_slab")]
+        initialisation: Initialisation = Initialisation::Slab,
+            Values::Choice(&["reference", "slab"]),
+            "What the synthesis starts from: `slab` (default), the candidate slab of Dong et al.; \
+             `reference`, a periodic block of the global reference (texture optimisation over a \
+             whole block) optimised at precompute and tiled in cells at hashed offsets. Written \
+             into the texture's parameters only when `reference`.",
+            before = Before::Value(r#""slab""#);
+        /// With a level, a request at or above it corrects only that
+        /// level; `None` is cheap to precompute (the finer levels are
+        /// upsampled and corrected as before).
+        #[serde(skip_serializing_if = "Option::is_none")]
+        reference_level: Option<u32> = None,
+            int(0, 5),
+            "With `initialisation=reference`, the finest level that starts from its own block of \
+             the reference (at most `levels` − 1); every coarser level does too. Omitted: the \
+             coarsest level only. 0 is the quality preset (every level; minutes of precompute and \
+             larger stored candidates).";
+    }
 }
 
 /// What the lazy synthesis's first version of a level is made from.
@@ -105,30 +137,6 @@ impl std::str::FromStr for Initialisation {
         }
     }
 }
-
-impl Default for AnalysisParams {
-    fn default() -> Self {
-        AnalysisParams {
-            neighbourhood: 5,
-            pca_dims: 8,
-            strips: 65,
-            triples: 100,
-            max_candidates: 12,
-            levels: 4,
-            similar_coarse: 4,
-            similar_fine: 2,
-            orientation: Orientation::Auto,
-            feature_weight: DEFAULT_FEATURE_WEIGHT,
-            initialisation: Initialisation::default(),
-            reference_level: None,
-        }
-    }
-}
-
-/// Default [`AnalysisParams::feature_weight`]: off, since the channel found
-/// automatically made the shared exemplars' statistics worse
-/// (docs/quality.md).
-pub const DEFAULT_FEATURE_WEIGHT: f32 = 0.0;
 
 fn is_zero(v: &f32) -> bool {
     *v == 0.0
@@ -456,151 +464,153 @@ impl std::str::FromStr for SlabTiling {
     }
 }
 
-/// Default [`SynthParams::contrast`], measured on the shared exemplars
-/// (docs/quality.md).
-pub const DEFAULT_CONTRAST: f32 = 1.6;
-
-/// Parameters of the synthesis itself; changing them changes the voxels but
-/// not the precomputed candidates.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct SynthParams {
-    /// Seed hashed with level and position for every random choice.
-    pub seed: u64,
-    /// Correction passes P per level, the fine levels excepted (see
-    /// [`SynthParams::fine_levels`]).
-    pub passes: u32,
-    /// Correction passes at the fine levels (the finest
-    /// [`SynthParams::fine_levels`] levels). Each pass there
-    /// widens a request's dependency set by the subpass chains of a whole
-    /// level at full resolution, so it costs far more than a coarse pass,
-    /// while the coarse passes have already settled which exemplar patches
-    /// the voxels continue; one pass keeps most of the quality of two
-    /// (docs/quality.md) for about half of a cold slice's corrections.
-    pub finest_passes: u32,
-    /// How many levels, counted from the finest, are corrected with
-    /// `finest_passes` passes instead of `passes`. A slice needs only a few
-    /// planes of each level, but every pass there chains through the
-    /// subpasses into more planes of that level and of all coarser ones:
-    /// level 1's two passes cost a cold 256² slice more corrections than
-    /// level 0. One pass at level 1 too makes cold slices much faster for
-    /// a little patch coherence (docs/quality.md).
-    pub fine_levels: u32,
-    /// How many levels, counted from the finest, correct a pass in two
-    /// parity subpasses: the voxels whose coordinates sum to an even
-    /// number, then the odd ones, which read their six face neighbours
-    /// new. The other levels use s³ block subpasses (voxels congruent
-    /// modulo [`SynthParams::subpass_side`]), where a voxel reads half of
-    /// its neighbours new. Within a pass a voxel's chain steps back
-    /// through the earlier subpasses: once with parity, so a cold slice
-    /// needs its own plane and half of each plane beside it; up to five
-    /// planes of the level with blocks. The finest level's chains are the
-    /// largest part of a cold slice, and it changes the least; the coarser
-    /// levels, which lay out the structure, converge better with blocks
-    /// (docs/quality.md).
-    pub parity_levels: u32,
-    /// Subpass block side s of the block subpasses: s³ subpasses per pass
-    /// (2 gives 8).
-    pub subpass_side: u32,
-    /// Correction scheme.
-    pub scheme: Scheme,
-    /// Cell side M of the dual-grid scheme, in voxels of the level.
-    pub grid: u32,
-    /// Jitter strength multiplier; 0 disables the deformation.
-    #[serde(serialize_with = "shortest_f32")]
-    pub jitter: f32,
-    /// Also correct the initialisation level after jitter.
-    pub correct_init_level: bool,
-    /// Gain on a correction's query around its mean colour before matching
-    /// (1 leaves it as it is): on each appearance-space location around the
-    /// flat neighbourhood of its mean colour. A voxel's colour is the mean of three exemplar colours, so
-    /// synthesized neighbourhoods are flatter than the exemplar's and,
-    /// matched as they are, pick its calm regions: rare dark or bright
-    /// features fade (docs/quality.md).
-    #[serde(serialize_with = "shortest_f32")]
-    pub contrast: f32,
-    /// Which voxels a correction reads: its direct neighbours (the only
-    /// value left).
-    pub slices: Slices,
-    /// Penalty on coherent triples whose three exemplar colours disagree,
-    /// per squared colour difference (in units of a quantised
-    /// neighbourhood distance of one colour level); 0 disables it. Without
-    /// it, exemplar features that only one plane's exemplar has are
-    /// extruded along that plane's normal into straight streaks
-    /// (docs/quality.md).
-    #[serde(serialize_with = "shortest_f32")]
-    pub consistency: f32,
-    /// Thickness of the candidate slab's layers, in voxels of the
-    /// initialisation level. Dong et al.'s slab is N thick; within a layer a
-    /// voxel's xy coordinate does not change along z, so an N-thick layer
-    /// starts every x and y slice with features extruded N coarse voxels
-    /// (8N finest voxels) along z, which the correction only partly
-    /// removes. One-voxel layers start those slices isotropic
-    /// (docs/quality.md).
-    pub slab_thickness: u32,
-    /// How the slab is cut into pieces that are tiled with hashed offsets.
-    pub slab_tiling: SlabTiling,
-    /// What a correction matches (appearance space, the only value left).
-    pub correction: Correction,
-    /// The field of local frames the texture follows (see [`Field`]);
-    /// none keeps every voxel's frame on the world axes.
-    #[serde(
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "field_or_text"
-    )]
-    pub field: Option<Field>,
-    /// The solid's period along x, y and z, in voxels of the finest level
-    /// (see [`crate::period`]): with one, voxel(p) = voxel(p + period·eᵢ)
-    /// everywhere and at every level of detail, so a block of one period
-    /// tiles space without a seam. Each side must be a multiple of
-    /// [`crate::period::multiple`] (the coarsest level's spacing times
-    /// the tile side); none leaves the solid aperiodic. Not written when
-    /// none, so aperiodic textures keep their ids.
-    #[serde(
-        skip_serializing_if = "Option::is_none",
-        deserialize_with = "crate::period::deserialize"
-    )]
-    pub period: Option<[u32; 3]>,
-}
-
-/// Default [`SynthParams::fine_levels`], measured on the shared exemplars
-/// (docs/quality.md).
-pub const DEFAULT_FINE_LEVELS: u32 = 2;
-
-/// Default [`SynthParams::parity_levels`], measured on the shared
-/// exemplars (docs/quality.md).
-pub const DEFAULT_PARITY_LEVELS: u32 = 1;
-
-/// Default [`SynthParams::slab_thickness`], measured on the shared
-/// exemplars (docs/quality.md).
-pub const DEFAULT_SLAB_THICKNESS: u32 = 1;
-
-/// Default [`SynthParams::consistency`], measured on the shared exemplars
-/// (docs/quality.md).
-pub const DEFAULT_CONSISTENCY: f32 = 32.0;
-
-impl Default for SynthParams {
-    fn default() -> Self {
-        SynthParams {
-            seed: 1,
-            passes: 2,
-            finest_passes: 1,
-            fine_levels: DEFAULT_FINE_LEVELS,
-            parity_levels: DEFAULT_PARITY_LEVELS,
-            subpass_side: 2,
-            scheme: Scheme::DualGrid,
-            grid: 12,
-            jitter: 1.0,
-            correct_init_level: true,
-            contrast: DEFAULT_CONTRAST,
-            slices: Slices::Sparse,
-            consistency: DEFAULT_CONSISTENCY,
-            slab_thickness: DEFAULT_SLAB_THICKNESS,
-            slab_tiling: SlabTiling::default(),
-            correction: Correction::default(),
-            field: None,
-            period: None,
-        }
+knobs! {
+    /// Parameters of the synthesis itself; changing them changes the voxels
+    /// but not the precomputed candidates. Defaults marked measured were
+    /// chosen on the shared exemplars (docs/quality.md).
+    #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    pub struct SynthParams(Synthesis, SYNTH_KNOBS) {
+        seed: u64 = 1,
+            int(0, u64::MAX),
+            "Random seed of the synthesis, hashed with level and position for every random choice.";
+        passes: u32 = 2,
+            int(0, 6),
+            "Correction passes per level, the fine levels excepted (see `fine_levels`).";
+        /// Each pass there widens a request's dependency set by the
+        /// subpass chains of a whole level at full resolution, while the
+        /// coarse passes have already settled which exemplar patches the
+        /// voxels continue.
+        finest_passes: u32 = 1,
+            int(0, 6),
+            "Correction passes at the fine levels (see `fine_levels`). A pass there costs far more \
+             than a coarse one (every pass widens a request's dependency set at full resolution); \
+             one pass keeps most of the quality of two for about half the work of a cold slice.",
+            before = Before::SameAs("passes");
+        /// Measured: level 1's two passes cost a cold 256² slice more
+        /// corrections than level 0, so one pass there too makes cold
+        /// slices much faster for a little patch coherence.
+        fine_levels: u32 = 2,
+            int(1, 16),
+            "How many levels, counted from the finest, are corrected with `finest_passes` passes \
+             instead of `passes`. Each pass at a level widens a request's dependency set there and \
+             at every coarser level.",
+            before = Before::Value("1");
+        /// Measured: the finest level's chains are the largest part of a
+        /// cold slice, and it changes the least; the coarser levels, which
+        /// lay out the structure, converge better with blocks.
+        parity_levels: u32 = 1,
+            int(0, 16),
+            "How many levels, counted from the finest, correct each pass in two parity subpasses \
+             (coordinate sums even, then odd) instead of s³ block subpasses (see `subpass_side`). \
+             A voxel's chain steps back once through parity subpasses, so a cold slice needs its \
+             own plane and half of each plane beside it at those levels, whatever its axis; block \
+             subpasses reach up to five planes but converge better at the coarser levels. Textures \
+             stored before it keep 0.",
+            before = Before::Value("0");
+        subpass_side: u32 = 2,
+            int(1, 3),
+            "Block side s of the block subpasses: s³ subpasses per pass (2 gives 8; 1 corrects \
+             every voxel of a pass at once).";
+        scheme: Scheme = Scheme::DualGrid,
+            Values::Choice(&["standard", "dual-grid"]),
+            "Correction scheme: `dual-grid` (Zhang et al.: passes alternate between a primary grid \
+             of cells and its dual, and a correction reads across a cell wall the version its step \
+             started from, which bounds a request's dependency set) or `standard` (Dong et al.: \
+             every correction reads the latest version of its neighbours).";
+        grid: u32 = 12,
+            int(4, 64),
+            "Cell side M of the dual-grid scheme, in voxels of the level.";
+        #[serde(serialize_with = "shortest_f32")]
+        jitter: f32 = 1.0,
+            number(0.0, 4.0),
+            "Jitter strength (0 disables it).";
+        correct_init_level: bool = true,
+            Values::Flag,
+            "Also correct the coarsest synthesized level after the jitter.";
+        /// Measured. A voxel's colour is the mean of three exemplar
+        /// colours, so synthesized neighbourhoods are flatter than the
+        /// exemplar's and, matched as they are, pick its calm regions:
+        /// rare dark or bright features fade.
+        #[serde(serialize_with = "shortest_f32")]
+        contrast: f32 = 1.6,
+            number(1.0, 4.0),
+            "Gain on each correction's query around its mean colour (1 disables it): on each \
+             appearance-space location around the flat neighbourhood of its mean colour.";
+        slices: Slices = Slices::Sparse,
+            Values::Choice(&["sparse"]),
+            "Voxels a correction reads: `sparse`, its direct neighbours (dependency radius 1), is \
+             the only value left; `full` went with the colour correction. Kept so that texture ids \
+             do not change.",
+            flag = false,
+            before = Before::Value(r#""full""#);
+        /// Measured; in units of a quantised neighbourhood distance of one
+        /// colour level per squared colour difference.
+        #[serde(serialize_with = "shortest_f32")]
+        consistency: f32 = 32.0,
+            number(0.0, 1024.0),
+            "Penalty on coherent triples whose three exemplar colours disagree (0 disables it). \
+             Without it, a feature that only one plane's exemplar has is extruded along that \
+             plane's normal into straight streaks on the other planes.",
+            before = Before::Value("0");
+        /// Measured. Within a layer a voxel's xy coordinate does not
+        /// change along z, so an N-thick layer starts every x and y slice
+        /// with features extruded N coarse voxels (8N finest voxels) along
+        /// z, which the correction only partly removes; one-voxel layers
+        /// start those slices isotropic.
+        slab_thickness: u32 = 1,
+            int(1, 9),
+            "Thickness of the candidate slab's layers that initialise the coarsest synthesized \
+             level, in voxels of that level (Dong et al. use N). Thick layers extrude features \
+             along z into x and y slices.",
+            before = Before::SameAs("neighbourhood");
+        slab_tiling: SlabTiling = SlabTiling::default(),
+            Values::Choice(&["cells", "blocks"]),
+            "How the candidate slab is cut into pieces, each tiled with its own hashed offset: \
+             `cells` (a jittered grid, borders at every angle) or `blocks` (axis-aligned squares, \
+             whose outlines stay visible as square blocks). Textures stored before `cells` keep \
+             `blocks`.",
+            before = Before::Value(r#""blocks""#);
+        correction: Correction = Correction::default(),
+            Values::Choice(&["appearance"]),
+            "What a correction matches: `appearance`, sparse appearance-space neighbourhoods (in \
+             each plane the appearance vectors at the 4 diagonal locations, each averaged over the \
+             3 direct neighbours that predict it; candidates by k-coherence), is the only value \
+             left: the colour correction was removed. Kept so that texture ids do not change.",
+            flag = false,
+            before = Before::Value(r#""colour""#);
+        /// See [`Field`]; none keeps every voxel's frame on the world axes.
+        #[serde(
+            skip_serializing_if = "Option::is_none",
+            deserialize_with = "field_or_text"
+        )]
+        field: Option<Field> = None,
+            Values::Text { max_len: Some(4096), pattern: None, strict: false },
+            "A field of local frames that the texture follows (docs/fields.md): a preset in short, \
+             `slant:ANGLE`, `circular[:CX,CY]`, `emissive[:CX,CY]`, `zigzag:ANGLE,PERIOD` or \
+             `slant3d:DX,DY,DZ` (angles in degrees, positions and lengths in voxels of the finest \
+             level), or the JSON text of a `Field` object. Part of the texture's id. Omitted: no \
+             field. A request target is at most 8 KiB: a long sketch goes in the `params` form \
+             field instead.";
+        /// See [`crate::period`]: each side a multiple of
+        /// [`crate::period::multiple`]. Not written when none, so
+        /// aperiodic textures keep their ids.
+        #[serde(
+            skip_serializing_if = "Option::is_none",
+            deserialize_with = "crate::period::deserialize"
+        )]
+        period: Option<[u32; 3]> = None,
+            Values::Text {
+                max_len: Some(40),
+                pattern: Some("^[0-9]+(,[0-9]+,[0-9]+)?$"),
+                strict: true,
+            },
+            "Makes the solid periodic: voxel(p) = voxel(p + period·eᵢ) exactly, at every level of \
+             detail, so a block of one period tiles space without a seam. One side for all three \
+             axes (`128`) or three (`128,128,64`: decimal digits and commas only, no brackets or \
+             spaces), in voxels of the finest level, each 1 to 4096 and a multiple of the coarsest \
+             level's spacing times the tile side 4 (32 with the default 4 levels; 96 with \
+             `subpass_side` 3). Part of the texture's id. Omitted: the solid has no period.";
     }
 }
 

@@ -153,21 +153,24 @@ impl TextureParams {
     pub fn from_stored(obj: &Map<String, Value>) -> Result<TextureParams, SpecError> {
         let mut obj = obj.clone();
         knobs::strip_removed(&mut obj).map_err(SpecError::InvalidParams)?;
-        for (key, then) in KEYS_ADDED_SINCE_VERSION_1 {
-            obj.entry(*key)
-                .or_insert_with(|| serde_json::from_str(then).expect("valid JSON"));
+        // A knob added since stores what textures written before it
+        // behaved as: a value, or the value of an older knob.
+        for k in knobs::KNOBS {
+            let then = match k.before {
+                None => continue,
+                Some(knobs::Before::Value(json)) => {
+                    serde_json::from_str(json).expect("declared as JSON text")
+                }
+                Some(knobs::Before::SameAs(other)) => {
+                    obj.get(other).cloned().unwrap_or_else(|| {
+                        knobs::knob(other)
+                            .and_then(knobs::default_of)
+                            .expect("a knob with a default")
+                    })
+                }
+            };
+            obj.entry(k.name).or_insert(then);
         }
-        // Before `finest_passes`, the finest level had `passes` like the rest.
-        let passes = obj
-            .get("passes")
-            .cloned()
-            .unwrap_or(Value::from(SynthParams::default().passes));
-        obj.entry("finest_passes").or_insert(passes);
-        // Before `slab_thickness`, the slab was N (`neighbourhood`) thick.
-        let n = obj.get("neighbourhood").cloned().unwrap_or(Value::from(
-            solidtex_core::AnalysisParams::default().neighbourhood,
-        ));
-        obj.entry("slab_thickness").or_insert(n);
         Self::from_flat(&obj)
     }
 
@@ -218,24 +221,6 @@ impl TextureParams {
 fn strict_text(key: &str) -> bool {
     knobs::knob(key).is_some_and(|k| matches!(k.values, knobs::Values::Text { strict: true, .. }))
 }
-
-/// Synthesis keys added after the first stored layout, with the value that
-/// behaves as textures stored without them did (`finest_passes` and
-/// `slab_thickness`, whose old values are the texture's own `passes` and
-/// `neighbourhood`, are filled in by [`TextureParams::from_stored`]).
-/// Values are JSON texts. (`fine_levels` 1: `finest_passes` applied to
-/// level 0 alone.)
-const KEYS_ADDED_SINCE_VERSION_1: &[(&str, &str)] = &[
-    ("slices", r#""full""#),
-    ("consistency", "0"),
-    ("fine_levels", "1"),
-    ("correction", r#""colour""#),
-    ("orientation", r#""none""#),
-    ("slab_tiling", r#""blocks""#),
-    ("feature_weight", "0"),
-    ("parity_levels", "0"),
-    ("initialisation", r#""slab""#),
-];
 
 /// The members of a JSON object in the order written, repeated keys kept.
 struct Members(Vec<(String, Value)>);

@@ -1,10 +1,12 @@
-//! The one declaration of every texture-definition knob as users see it:
-//! its name, the values it takes and what it does. The structs in
-//! [`crate::params`] hold the values; their defaults live in their
-//! `Default` impls. Validation reads the ranges here, the server reads the
-//! names here to sort a flat object of parameters, the command line builds
-//! its flags from here, and openapi.yaml's parameter sections are
-//! generated from here (tests/server_openapi.rs checks them).
+//! Every texture-definition knob as users see it: its name, the values it
+//! takes, what it does and what textures stored before it behaved as. Each
+//! is declared once, beside its field, by the [`knobs!`] blocks in
+//! [`crate::params`], which expand to the structs, their defaults and the
+//! table here. Validation reads the ranges here, the server reads the
+//! names here to sort a flat object of parameters and to upgrade stored
+//! ones, the command line builds its flags from here, and openapi.yaml's
+//! parameter sections are generated from here (tests/server_openapi.rs
+//! checks them).
 
 use crate::error::{Error, Result};
 
@@ -70,6 +72,19 @@ pub struct Knob {
     /// Whether the command line offers it (a knob with one value left
     /// does not).
     pub flag: bool,
+    /// For a knob added after the first stored layout: what textures
+    /// stored without it behaved as.
+    pub before: Option<Before>,
+}
+
+/// What a texture stored before a knob existed behaved as, so that its id
+/// keeps serving the same bytes across upgrades.
+#[derive(Clone, Copy, Debug)]
+pub enum Before {
+    /// This value, as JSON text.
+    Value(&'static str),
+    /// The stored value of that other knob (its default when absent).
+    SameAs(&'static str),
 }
 
 impl Knob {
@@ -78,6 +93,65 @@ impl Knob {
         self.name.replace('_', "-")
     }
 }
+
+/// Declares a parameters struct and its knobs in one place: each field's
+/// type, default, values and user text, which is also its doc comment (a
+/// field's own `///` lines follow it as notes for developers). Expands to
+/// the struct, its `Default` and a table of its [`Knob`]s in field order.
+///
+/// ```text
+/// knobs! {
+///     /// Doc of the struct.
+///     #[derive(…)]
+///     pub struct Name(Part, TABLE) {
+///         #[serde(…)]                      // optional attributes
+///         field: Type = default, values, "user text" [, flag = false] [, before = Before::…];
+///     }
+/// }
+/// ```
+macro_rules! knobs {
+    (
+        $(#[$meta:meta])*
+        pub struct $name:ident($part:ident, $table:ident) {
+            $(
+                $(#[$fmeta:meta])*
+                $field:ident: $ty:ty = $default:expr, $values:expr, $about:literal
+                    $(, flag = $flag:literal)?
+                    $(, before = $before:expr)?;
+            )*
+        }
+    ) => {
+        $(#[$meta])*
+        pub struct $name {
+            $(
+                #[doc = $about]
+                $(#[$fmeta])*
+                pub $field: $ty,
+            )*
+        }
+
+        impl Default for $name {
+            fn default() -> Self {
+                $name { $($field: $default,)* }
+            }
+        }
+
+        /// The knobs of these parameters, in field order.
+        pub(crate) const $table: [$crate::params::knobs::Knob; [$(stringify!($field)),*].len()] = [$(
+            $crate::params::knobs::Knob {
+                name: stringify!($field),
+                part: $crate::params::knobs::Part::$part,
+                values: $values,
+                about: $about,
+                flag: true $(&& $flag)?,
+                before: $crate::params::knobs::knobs!(@before $($before)?),
+            },
+        )*];
+    };
+    (@before) => { None };
+    (@before $before:expr) => { Some($before) };
+}
+pub(crate) use knobs;
 
 /// The knob called `name`.
 pub fn knob(name: &str) -> Option<&'static Knob> {
@@ -89,7 +163,8 @@ pub fn knobs_of(part: Part) -> impl Iterator<Item = &'static Knob> {
     KNOBS.iter().filter(move |k| k.part == part)
 }
 
-const fn int(min: u64, max: u64) -> Values {
+/// An integer in `min..=max`.
+pub(crate) const fn int(min: u64, max: u64) -> Values {
     Values::Integer {
         min,
         max,
@@ -97,37 +172,9 @@ const fn int(min: u64, max: u64) -> Values {
     }
 }
 
-const fn number(min: f64, max: f64) -> Values {
+/// A number in `min..=max`.
+pub(crate) const fn number(min: f64, max: f64) -> Values {
     Values::Number { min, max }
-}
-
-const fn synth(name: &'static str, values: Values, about: &'static str) -> Knob {
-    Knob {
-        name,
-        part: Part::Synthesis,
-        values,
-        about,
-        flag: true,
-    }
-}
-
-const fn analysis(name: &'static str, values: Values, about: &'static str) -> Knob {
-    Knob {
-        name,
-        part: Part::Analysis,
-        values,
-        about,
-        flag: true,
-    }
-}
-
-/// A knob with one value left, kept so that texture ids do not change:
-/// accepted and documented, but no flag.
-const fn kept(knob: Knob) -> Knob {
-    Knob {
-        flag: false,
-        ..knob
-    }
 }
 
 /// A preset's name and the synthesis parameters it expands to.
@@ -177,229 +224,29 @@ pub fn strip_removed(
     Ok(())
 }
 
-/// Every knob, synthesis first, each part in the order of its struct.
-pub const KNOBS: &[Knob] = &[
-    synth(
-        "seed",
-        int(0, u64::MAX),
-        "Random seed of the synthesis, hashed with level and position for every random choice.",
-    ),
-    synth(
-        "passes",
-        int(0, 6),
-        "Correction passes per level, the fine levels excepted (see `fine_levels`).",
-    ),
-    synth(
-        "finest_passes",
-        int(0, 6),
-        "Correction passes at the fine levels (see `fine_levels`). A pass there costs far more \
-         than a coarse one (every pass widens a request's dependency set at full resolution); \
-         one pass keeps most of the quality of two for about half the work of a cold slice.",
-    ),
-    synth(
-        "fine_levels",
-        int(1, 16),
-        "How many levels, counted from the finest, are corrected with `finest_passes` passes \
-         instead of `passes`. Each pass at a level widens a request's dependency set there and \
-         at every coarser level.",
-    ),
-    synth(
-        "parity_levels",
-        int(0, 16),
-        "How many levels, counted from the finest, correct each pass in two parity subpasses \
-         (coordinate sums even, then odd) instead of s³ block subpasses (see `subpass_side`). \
-         A voxel's chain steps back once through parity subpasses, so a cold slice needs its \
-         own plane and half of each plane beside it at those levels, whatever its axis; block \
-         subpasses reach up to five planes but converge better at the coarser levels. Textures \
-         stored before it keep 0.",
-    ),
-    synth(
-        "subpass_side",
-        int(1, 3),
-        "Block side s of the block subpasses: s³ subpasses per pass (2 gives 8; 1 corrects \
-         every voxel of a pass at once).",
-    ),
-    synth(
-        "scheme",
-        Values::Choice(&["standard", "dual-grid"]),
-        "Correction scheme: `dual-grid` (Zhang et al.: passes alternate between a primary grid \
-         of cells and its dual, and a correction reads across a cell wall the version its step \
-         started from, which bounds a request's dependency set) or `standard` (Dong et al.: \
-         every correction reads the latest version of its neighbours).",
-    ),
-    synth(
-        "grid",
-        int(4, 64),
-        "Cell side M of the dual-grid scheme, in voxels of the level.",
-    ),
-    synth(
-        "jitter",
-        number(0.0, 4.0),
-        "Jitter strength (0 disables it).",
-    ),
-    synth(
-        "correct_init_level",
-        Values::Flag,
-        "Also correct the coarsest synthesized level after the jitter.",
-    ),
-    synth(
-        "contrast",
-        number(1.0, 4.0),
-        "Gain on each correction's query around its mean colour (1 disables it): on each \
-         appearance-space location around the flat neighbourhood of its mean colour.",
-    ),
-    kept(synth(
-        "slices",
-        Values::Choice(&["sparse"]),
-        "Voxels a correction reads: `sparse`, its direct neighbours (dependency radius 1), is \
-         the only value left; `full` went with the colour correction. Kept so that texture ids \
-         do not change.",
-    )),
-    synth(
-        "consistency",
-        number(0.0, 1024.0),
-        "Penalty on coherent triples whose three exemplar colours disagree (0 disables it). \
-         Without it, a feature that only one plane's exemplar has is extruded along that \
-         plane's normal into straight streaks on the other planes.",
-    ),
-    synth(
-        "slab_thickness",
-        int(1, 9),
-        "Thickness of the candidate slab's layers that initialise the coarsest synthesized \
-         level, in voxels of that level (Dong et al. use N). Thick layers extrude features \
-         along z into x and y slices.",
-    ),
-    synth(
-        "slab_tiling",
-        Values::Choice(&["cells", "blocks"]),
-        "How the candidate slab is cut into pieces, each tiled with its own hashed offset: \
-         `cells` (a jittered grid, borders at every angle) or `blocks` (axis-aligned squares, \
-         whose outlines stay visible as square blocks). Textures stored before `cells` keep \
-         `blocks`.",
-    ),
-    kept(synth(
-        "correction",
-        Values::Choice(&["appearance"]),
-        "What a correction matches: `appearance`, sparse appearance-space neighbourhoods (in \
-         each plane the appearance vectors at the 4 diagonal locations, each averaged over the \
-         3 direct neighbours that predict it; candidates by k-coherence), is the only value \
-         left: the colour correction was removed. Kept so that texture ids do not change.",
-    )),
-    synth(
-        "field",
-        Values::Text {
-            max_len: Some(4096),
-            pattern: None,
-            strict: false,
-        },
-        "A field of local frames that the texture follows (docs/fields.md): a preset in short, \
-         `slant:ANGLE`, `circular[:CX,CY]`, `emissive[:CX,CY]`, `zigzag:ANGLE,PERIOD` or \
-         `slant3d:DX,DY,DZ` (angles in degrees, positions and lengths in voxels of the finest \
-         level), or the JSON text of a `Field` object. Part of the texture's id. Omitted: no \
-         field. A request target is at most 8 KiB: a long sketch goes in the `params` form \
-         field instead.",
-    ),
-    synth(
-        "period",
-        Values::Text {
-            max_len: Some(40),
-            pattern: Some("^[0-9]+(,[0-9]+,[0-9]+)?$"),
-            strict: true,
-        },
-        "Makes the solid periodic: voxel(p) = voxel(p + period·eᵢ) exactly, at every level of \
-         detail, so a block of one period tiles space without a seam. One side for all three \
-         axes (`128`) or three (`128,128,64`: decimal digits and commas only, no brackets or \
-         spaces), in voxels of the finest level, each 1 to 4096 and a multiple of the coarsest \
-         level's spacing times the tile side 4 (32 with the default 4 levels; 96 with \
-         `subpass_side` 3). Part of the texture's id. Omitted: the solid has no period.",
-    ),
-    analysis(
-        "neighbourhood",
-        Values::Integer {
-            min: 3,
-            max: 9,
-            odd: true,
-        },
-        "Neighbourhood side N (odd) of the exemplar analysis (the papers use 5).",
-    ),
-    analysis(
-        "pca_dims",
-        int(2, 16),
-        "Appearance-space dimensions per exemplar pixel: the PCA of its N×N colour \
-         neighbourhood (the papers use 8).",
-    ),
-    analysis(
-        "strips",
-        int(4, 256),
-        "Most similar strips searched in each other exemplar for every pixel's 3D candidates \
-         (Dong et al.: 65).",
-    ),
-    analysis(
-        "triples",
-        int(4, 1000),
-        "Triples kept per pixel by crossbar error before the coherence filtering.",
-    ),
-    analysis(
-        "max_candidates",
-        int(1, 32),
-        "3D candidates kept per pixel after the coherence filtering (Dong et al.: 12).",
-    ),
-    analysis(
-        "levels",
-        int(1, 6),
-        "Pyramid levels analysed; the synthesis starts at the coarsest.",
-    ),
-    analysis(
-        "similar_coarse",
-        int(1, 8),
-        "2D candidates (most similar pixels) kept per exemplar pixel for the correction at the \
-         coarse levels.",
-    ),
-    analysis(
-        "similar_fine",
-        int(1, 8),
-        "2D candidates kept per exemplar pixel at the finest level.",
-    ),
-    analysis(
-        "orientation",
-        Values::Text {
-            max_len: None,
-            pattern: None,
-            strict: false,
-        },
-        "How the exemplar is laid on the three planes: `auto` (default) turns one plane a \
-         quarter and weights the plane that cuts along the grain down when one exemplar for \
-         all planes is square and strongly oriented along one of its axes, and leaves it as it \
-         is otherwise; `none` shows it as it is on every plane; an arrangement is given as the \
-         JSON text of an object (see `Arrangement`). The texture's `orientation` says what was \
-         chosen.",
-    ),
-    analysis(
-        "feature_weight",
-        number(0.0, 4.0),
-        "Weight of the feature-distance channel in the appearance vectors, relative to the \
-         exemplar's luminance: a signed distance to the edges of the exemplar's features: the \
-         uploaded feature mask, or else the smaller side of its Otsu luminance threshold, found \
-         automatically. 0 (default) matches colour alone. Not written into the texture's \
-         parameters when 0.",
-    ),
-    analysis(
-        "initialisation",
-        Values::Choice(&["reference", "slab"]),
-        "What the synthesis starts from: `slab` (default), the candidate slab of Dong et al.; \
-         `reference`, a periodic block of the global reference (texture optimisation over a \
-         whole block) optimised at precompute and tiled in cells at hashed offsets. Written \
-         into the texture's parameters only when `reference`.",
-    ),
-    analysis(
-        "reference_level",
-        int(0, 5),
-        "With `initialisation=reference`, the finest level that starts from its own block of \
-         the reference (at most `levels` − 1); every coarser level does too. Omitted: the \
-         coarsest level only. 0 is the quality preset (every level; minutes of precompute and \
-         larger stored candidates).",
-    ),
-];
+/// Every knob, synthesis first, each part in the order of its struct
+/// (declared with the structs in [`crate::params`]).
+pub const KNOBS: &[Knob] = &join::<SYNTH, ANALYSIS, { SYNTH + ANALYSIS }>(
+    crate::params::SYNTH_KNOBS,
+    crate::params::ANALYSIS_KNOBS,
+);
+const SYNTH: usize = crate::params::SYNTH_KNOBS.len();
+const ANALYSIS: usize = crate::params::ANALYSIS_KNOBS.len();
+
+/// `a` then `b` in one array (`N` = `A + B`).
+const fn join<const A: usize, const B: usize, const N: usize>(
+    a: [Knob; A],
+    b: [Knob; B],
+) -> [Knob; N] {
+    assert!(A > 0 && A + B == N);
+    let mut out = [a[0]; N];
+    let mut i = 0;
+    while i < N {
+        out[i] = if i < A { a[i] } else { b[i - A] };
+        i += 1;
+    }
+    out
+}
 
 /// The knob's default as JSON: its value in the default parameters, or,
 /// for a knob left out of their JSON at its default, the declared value
@@ -535,10 +382,44 @@ mod tests {
             for key in m.keys() {
                 assert!(
                     knob(key).is_some_and(|k| k.part == part),
-                    "field `{key}` has no knob in KNOBS (crates/core/src/params/knobs.rs)"
+                    "field `{key}` has no knob in KNOBS"
                 );
             }
         }
+    }
+
+    #[test]
+    fn what_textures_stored_before_a_knob_behaved_as_is_well_formed() {
+        let mut added = 0;
+        for k in KNOBS {
+            match k.before {
+                None => {}
+                Some(Before::Value(json)) => {
+                    let v: Value = serde_json::from_str(json)
+                        .unwrap_or_else(|e| panic!("{}: `{json}` is not JSON: {e}", k.name));
+                    assert!(v.is_number() || v.is_string(), "{}: {v}", k.name);
+                    added += 1;
+                }
+                Some(Before::SameAs(other)) => {
+                    let o = knob(other).unwrap_or_else(|| panic!("{}: no knob `{other}`", k.name));
+                    assert!(
+                        o.before.is_none(),
+                        "{}: `{other}` was added later too",
+                        k.name
+                    );
+                    assert!(
+                        matches!(
+                            (o.values, k.values),
+                            (Values::Integer { .. }, Values::Integer { .. })
+                        ),
+                        "{}: `{other}` takes other values",
+                        k.name
+                    );
+                    added += 1;
+                }
+            }
+        }
+        assert!(added > 0, "no knob declares the stored layout before it");
     }
 
     #[test]
