@@ -55,7 +55,7 @@ knobs! {
              JSON text of an object (see `Arrangement`). The texture's `orientation` says what was \
              chosen.",
             before = Before::Value(r#""none""#);
-        /// See [`crate::analysis::feature`]. Off by default, since the
+        /// See `analysis::feature`. Off by default, since the
         /// channel found automatically made the shared exemplars'
         /// statistics worse (docs/quality.md); not written when 0, so
         /// textures without the channel keep their ids.
@@ -207,7 +207,7 @@ impl AnalysisParams {
 pub enum Orientation {
     /// Measure the exemplar's orientation when the candidates are
     /// precomputed and, when it is strongly oriented along one of its axes,
-    /// choose the arrangement [`crate::analysis::orientation`] describes; otherwise
+    /// choose the arrangement `analysis::orientation` describes; otherwise
     /// as [`Orientation::None`].
     #[default]
     Auto,

@@ -7,7 +7,7 @@
 //! is made periodic with period P_k = P / 2^k at level k:
 //!
 //! - every random choice hashes a cell index, taken modulo the number of
-//!   cells per period ([`Intervals`]): the slab's pieces, the jitter's
+//!   cells per period (`Intervals`): the slab's pieces, the jitter's
 //!   Gaussian cells;
 //! - what a piece of the slab or the jitter computes from a position, it
 //!   computes from the position moved into the period of the piece's own

@@ -11,7 +11,7 @@ pub const MIN_SIDE: u32 = 16;
 /// Largest accepted exemplar side in pixels.
 pub const MAX_SIDE: u32 = 512;
 /// Largest photo side that [`Exemplar::decode_fitting`] downscales to
-/// [`MAX_SIDE`] (a 24-megapixel camera image, 6000×4000, fits).
+/// `MAX_SIDE` (a 24-megapixel camera image, 6000×4000, fits).
 pub const MAX_PHOTO_SIDE: u32 = 6000;
 
 /// An RGB8 image, row-major, toroidally addressed by the synthesis, with
@@ -131,10 +131,10 @@ impl Exemplar {
         Self::from_decoded(decode::decode(bytes, &header, None)?)
     }
 
-    /// Like [`Exemplar::decode`], but a photo larger than [`MAX_SIDE`] (up to
-    /// [`MAX_PHOTO_SIDE`] per side) is downscaled to fit, keeping its aspect
+    /// Like [`Exemplar::decode`], but a photo larger than `MAX_SIDE` (up to
+    /// `MAX_PHOTO_SIDE` per side) is downscaled to fit, keeping its aspect
     /// ratio, without holding it at full size where its format allows
-    /// (see [`decode`]). Returns the original size when it was downscaled,
+    /// (see `decode`). Returns the original size when it was downscaled,
     /// so that the caller can say so.
     pub fn decode_fitting(bytes: &[u8]) -> Result<(Self, Option<(u32, u32)>)> {
         let header = Header::read(bytes)?;
@@ -250,9 +250,9 @@ fn grid<T>(width: usize, height: usize, f: impl Fn(usize, usize) -> T) -> Vec<T>
         .collect()
 }
 
-/// The size a photo larger than [`MAX_SIDE`] is downscaled to (its longer
-/// side [`MAX_SIDE`], the aspect ratio kept), `None` for an image that fits
-/// already; an error for one over [`MAX_PHOTO_SIDE`], or too thin to keep
+/// The size a photo larger than `MAX_SIDE` is downscaled to (its longer
+/// side `MAX_SIDE`, the aspect ratio kept), `None` for an image that fits
+/// already; an error for one over `MAX_PHOTO_SIDE`, or too thin to keep
 /// [`MIN_SIDE`] once downscaled.
 fn fitted_size(header: &Header) -> Result<Option<(u32, u32)>> {
     let (w, h) = (header.width, header.height);

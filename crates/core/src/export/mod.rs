@@ -424,7 +424,7 @@ impl Export {
     }
 
     /// The export's bytes. `progress` hears (voxels synthesized, total)
-    /// after each step of [`STEP_VOXELS`] or so.
+    /// after each step of `STEP_VOXELS` or so.
     pub fn run(
         &self,
         t: &Texture,
@@ -459,7 +459,7 @@ impl Export {
 }
 
 /// RGB8 voxels of `r` at `lod`, synthesized in slabs along z of about
-/// [`STEP_VOXELS`]; `step` hears each slab's voxels and costs.
+/// `STEP_VOXELS`; `step` hears each slab's voxels and costs.
 fn synthesize(
     t: &Texture,
     r: &Region,

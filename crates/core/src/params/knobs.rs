@@ -1,7 +1,7 @@
 //! Every texture-definition knob as users see it: its name, the values it
 //! takes, what it does and what textures stored before it behaved as. Each
-//! is declared once, beside its field, by the [`knobs!`] blocks in
-//! [`crate::params`], which expand to the structs, their defaults and the
+//! is declared once, beside its field, by the `knobs!` blocks in
+//! `params.rs`, which expand to the structs, their defaults and the
 //! table here. Validation reads the ranges here, the server reads the
 //! names here to sort a flat object of parameters and to upgrade stored
 //! ones, the command line builds its flags from here, and openapi.yaml's
@@ -225,7 +225,7 @@ pub fn strip_removed(
 }
 
 /// Every knob, synthesis first, each part in the order of its struct
-/// (declared with the structs in [`crate::params`]).
+/// (declared with the structs in `params.rs`).
 pub const KNOBS: &[Knob] = &join::<SYNTH, ANALYSIS, { SYNTH + ANALYSIS }>(
     crate::params::SYNTH_KNOBS,
     crate::params::ANALYSIS_KNOBS,
