@@ -348,6 +348,17 @@ impl Texture {
     /// the memory small; each block counts at least its own voxels, so
     /// that count stops once there are more blocks than the limit pays for.
     fn estimate_bake(&self, b: &Bake, lod: u32, limit: u64) -> WorkEstimate {
+        self.estimate_bake_within(b, lod, limit, MAX_ESTIMATE_TILES)
+    }
+
+    /// [`Texture::estimate_bake`] with the blocks' bound past `max_tiles`.
+    fn estimate_bake_within(
+        &self,
+        b: &Bake,
+        lod: u32,
+        limit: u64,
+        max_tiles: usize,
+    ) -> WorkEstimate {
         let side = i64::from(ESTIMATE_BLOCK);
         let most_blocks = limit / u64::from(ESTIMATE_BLOCK).pow(3) + 1;
         let over = || WorkEstimate {
@@ -367,7 +378,7 @@ impl Texture {
             }
             match &masks {
                 Some(m) if m.len() as u64 > limit => too_many = true,
-                Some(m) if m.len() > MAX_ESTIMATE_TILES => masks = None,
+                Some(m) if m.len() > max_tiles => masks = None,
                 None if blocks.len() as u64 > most_blocks => too_many = true,
                 _ => {}
             }
@@ -701,4 +712,52 @@ fn slice_rows(s: &Slice, rgb: Vec<u8>) -> Vec<u8> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bundled;
+    use crate::mesh::{BakeOptions, Mesh};
+
+    /// A unit cube, two triangles per face.
+    fn cube() -> Arc<Mesh> {
+        let p = (0..8)
+            .map(|k| [0, 1, 2].map(|a| ((k >> a) & 1) as f32))
+            .collect();
+        let quads: [[u32; 4]; 6] = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let t = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        Arc::new(Mesh::new(p, t, None).unwrap())
+    }
+
+    /// Past the tile cap a bake is bounded block by block: still at least
+    /// what a cold cache synthesizes, and stopped once over the limit.
+    #[test]
+    fn a_bake_past_the_tile_cap_is_still_bounded_and_stops_over_the_limit() {
+        let set = crate::ExemplarSet::single(bundled::exemplar());
+        let candidates = bundled::candidates_for(&set, &Default::default()).expect("bundled");
+        let cache = Arc::new(TileCache::new(64 << 20));
+        let tex = Texture::new(Arc::new(candidates), SynthParams::default(), cache).unwrap();
+        let bake = Bake::new(cube(), BakeOptions::new(48)).unwrap();
+        let request = Request::bake(bake.clone()).unwrap();
+        let exact: u64 = tex.plan(&request, 0).unwrap().voxels_per_level.iter().sum();
+        let grouped = tex.estimate_bake_within(&bake, 0, u64::MAX, MAX_ESTIMATE_TILES);
+        let blocks = tex.estimate_bake_within(&bake, 0, u64::MAX, 0);
+        assert!(grouped.complete && blocks.complete);
+        assert!(grouped.total >= exact, "{} under {exact}", grouped.total);
+        assert!(blocks.total >= exact, "{} under {exact}", blocks.total);
+        assert!(blocks.per_level.iter().sum::<u64>() == blocks.total);
+        let small = tex.estimate_bake_within(&bake, 0, exact / 4, 0);
+        assert!(!small.complete && small.total > exact / 4, "{small:?}");
+    }
 }
