@@ -1,7 +1,7 @@
 // Baked meshes read by Khronos' glTF validator (npm `gltf-validator`):
 // every bake the server answers (the mesh's own UVs, a generated atlas,
 // vertex colours, trilinear reads, a cut and a fracture into pieces, a
-// PLY, a GLB sent back in) and one
+// PLY, a GLB sent back in, a bake run as a background job) and one
 // `solidtex bake` writes report no errors; the command line's file is the
 // server's byte for byte. The files are left in ARTEFACTS.
 //
@@ -57,6 +57,37 @@ try {
     ...vs, ...fs.map((f) => `${f.length} ${f.join(" ")}`), "",
   ].join("\n");
   await validate("torus-ply-cut", await bake("resolution=48&cut=1,0,0,0.1", ply));
+  // The same bake as a background job: 202 with its status and Location,
+  // progress that never goes back, then the very same file.
+  const started = await fetch(`${server.base}/v1/textures/default/bake?resolution=64&uvs=mesh`, {
+    method: "POST",
+    body: torus,
+    headers: { Prefer: "respond-async" },
+  });
+  assert.equal(started.status, 202, await started.clone().text());
+  const job = started.headers.get("location");
+  assert.match(job, /^\/v1\/bakes\/[0-9a-f]+$/);
+  let status = await started.json();
+  let progress = 0;
+  for (let tries = 0; status.state !== "done"; tries++) {
+    assert.ok(["queued", "running"].includes(status.state), JSON.stringify(status));
+    assert.ok(status.progress >= progress, `progress went back: ${JSON.stringify(status)}`);
+    progress = status.progress;
+    assert.ok(tries < 600, "the bake job did not finish in a minute");
+    await new Promise((r) => setTimeout(r, 100));
+    status = await (await fetch(`${server.base}${job}`)).json();
+  }
+  assert.equal(status.progress, 1);
+  const file = await fetch(`${server.base}${job}/file`);
+  assert.equal(file.status, 200);
+  assert.equal(file.headers.get("content-type"), "model/gltf-binary");
+  const background = new Uint8Array(await file.arrayBuffer());
+  assert.ok(Buffer.from(background).equals(Buffer.from(own)), "the background bake differs from the direct one");
+  await validate("torus-background", background);
+  // Deleting it frees the file.
+  assert.equal((await fetch(`${server.base}${job}`, { method: "DELETE" })).status, 200);
+  const gone = (await fetch(`${server.base}${job}/file`)).status;
+  assert.ok(gone === 404 || gone === 410, `the deleted bake's file answered ${gone}`);
   // A baked GLB sent back in, on its own UVs.
   await validate("torus-rebaked", await bake("resolution=64&uvs=mesh&format=glb", own));
   const out = join(ARTEFACTS, "torus-cli.glb");
