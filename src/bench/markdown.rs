@@ -229,7 +229,9 @@ pub const MESHES: Section = Section {
          texels sample and their dependency chains are synthesized. The shares are of R³, \
          the cube the mesh's longest side spans (Dong et al. 2008: 0.42 % of 1024³ for a \
          gargoyle). The load average in each row is the machine's when the bake started: \
-         above 2 on two cores, other processes had part of the cores.",
+         above 2 on two cores, other processes had part of the cores. Then the knot is \
+         fractured by two planes (`solidtex bake --cut`): the cut alone (welding, splitting, \
+         chaining the crossings into loops and capping them), and its pieces baked cold.",
     prefix: meshes::ROW_PREFIX,
 };
 

@@ -3,10 +3,11 @@
 //! chains are synthesized (Dong et al. 2008: a gargoyle at the equivalent
 //! of 1024³ with 0.42 % of the voxels); the rows give that share of R³
 //! at the finest level and over all levels, the wall time and the peak
-//! memory.
+//! memory. Then the knot fractured by two planes: the cut alone (welding,
+//! splitting, chaining and capping), and its pieces baked cold.
 
 use super::{Row, load_average, measure, texture};
-use solidtex_core::mesh::{Bake, BakeOptions, Mesh};
+use solidtex_core::mesh::{Bake, BakeOptions, Mesh, Plane};
 use solidtex_core::{Candidates, Request, Scheme};
 use std::f64::consts::TAU;
 use std::sync::Arc;
@@ -94,5 +95,55 @@ pub fn rows(c: &Arc<Candidates>, resolutions: &[u32], rows: &mut Vec<Row>) -> an
             ),
         });
     }
+    if let Some(&r) = resolutions.iter().find(|&&r| r == CUT_RESOLUTION) {
+        cut_rows(c, &mesh, r, rows)?;
+    }
+    Ok(())
+}
+
+/// The resolution the fractured knot is baked at, when the run has it.
+const CUT_RESOLUTION: u32 = 512;
+
+/// Two planes through the knot, one across its hole and one slanted
+/// through its ring, in the mesh's coordinates.
+const CUT_PLANES: &str = "0,0,1,0.05;1,0.3,0,-0.1";
+
+/// The knot cut into pieces (timed alone), then the pieces baked cold.
+fn cut_rows(c: &Arc<Candidates>, mesh: &Mesh, r: u32, rows: &mut Vec<Row>) -> anyhow::Result<()> {
+    let triangles = mesh.triangles().len();
+    let planes = Plane::parse_list(CUT_PLANES)?;
+    let load = load_average();
+    let m = measure(1, || mesh.cut(&planes));
+    let pieces = Arc::new(m.value?);
+    rows.push(Row {
+        name: format!("{ROW_PREFIX}: cut of {triangles} triangles by 2 planes"),
+        seconds: Some(m.seconds),
+        runs: 1,
+        peak_bytes: Some(m.peak_bytes),
+        target: None,
+        paper: None,
+        detail: format!(
+            "planes {CUT_PLANES}; {} triangles out, caps included; load average {load} at the start",
+            pieces.triangles().len()
+        ),
+    });
+    let load = load_average();
+    let request = Request::bake(Bake::new(pieces.clone(), BakeOptions::new(r))?)?;
+    let tex = texture(c, Scheme::DualGrid);
+    let m = measure(1, || tex.render(&request, 0));
+    let (_, stats) = m.value?;
+    rows.push(Row {
+        name: format!("{ROW_PREFIX}: the cut pieces at resolution {r}, cold"),
+        seconds: Some(m.seconds),
+        runs: 1,
+        peak_bytes: Some(m.peak_bytes),
+        target: None,
+        paper: None,
+        detail: format!(
+            "{} voxels over all levels, {} tiles; load average {load} at the start",
+            stats.voxels_per_level.iter().sum::<u64>(),
+            stats.tiles_computed
+        ),
+    });
     Ok(())
 }
