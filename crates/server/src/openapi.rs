@@ -287,11 +287,22 @@ fn parameter_object(p: &QueryParam, location: &'static str) -> Node {
                 Node::Flow(names.iter().map(|n| quoted(n)).collect()),
             ),
         ],
-        ValueSchema::Text => vec![("type", text("string"))],
+        ValueSchema::Number { min, max } => vec![
+            ("type", text("number")),
+            ("minimum", Node::Scalar(min.to_string())),
+            ("maximum", Node::Scalar(max.to_string())),
+        ],
+        ValueSchema::Text { max_len } => {
+            let mut s = vec![("type", text("string"))];
+            if let Some(n) = max_len {
+                s.push(("maxLength", Node::Scalar(n.to_string())));
+            }
+            s
+        }
     };
     if let Some(d) = &p.default {
         let written = match p.schema {
-            ValueSchema::Integer { .. } => d.clone(),
+            ValueSchema::Integer { .. } | ValueSchema::Number { .. } => d.clone(),
             _ => quoted(d),
         };
         schema.push(("default", Node::Scalar(written)));

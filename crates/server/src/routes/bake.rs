@@ -17,7 +17,7 @@
 use super::AppState;
 use super::answer::{Encoding, admit, answer, texture};
 use super::background::{answer_job, respond_async};
-use super::params::{Int, TypedQuery, Vec3};
+use super::params::{Int, QueryValue, TypedQuery, ValueSchema, Vec3, document_query, named_value};
 use super::voxels::Lod;
 use crate::background::{BakeDetail, Detail, Kind, Progress, Spec};
 use crate::error::ApiError;
@@ -29,7 +29,7 @@ use axum::response::Response;
 use serde::Deserialize;
 use sha2::{Digest, Sha256};
 use solidtex_core::mesh::{
-    Bake, BakeOptions, Colours, MAX_RESOLUTION, Mesh, MeshFormat, Plane, Uvs,
+    Bake, BakeOptions, Colours, MAX_RESOLUTION, MAX_SPREAD, Mesh, MeshFormat, Plane, Uvs,
 };
 use solidtex_core::{Filter, MAX_SLICE_SIDE, Request, RequestKind, Texture};
 use std::sync::Arc;
@@ -50,12 +50,143 @@ pub(super) struct BakeQuery {
     uvs: Uvs,
     colours: Colours,
     filter: Filter,
-    format: Option<String>,
+    format: Option<FormatName>,
     lod: Lod,
-    /// Planes `nx,ny,nz,d` separated by `;`, in the mesh's coordinates.
-    cut: Option<String>,
-    /// A number; its range is checked with the rest of the bake.
-    spread: Option<String>,
+    cut: Option<Cut>,
+    spread: Spread,
+}
+
+document_query!(BakeQuery {
+    resolution: "Voxels of `lod` spanned by the longest side of the mesh's bounding box.",
+    rotation: "Degrees about x, then y, then z, around the bounding box's centre (default \
+               `0,0,0`).",
+    offset: "Where the bounding box's lowest corner lies, `x,y,z` in voxels of `lod` (default \
+             `0,0,0`).",
+    texture_size: "Side of the baked texture; about one texel per voxel of surface (256 to 4096) \
+                   when omitted.",
+    uvs: "Whose texture coordinates the texture follows: the mesh's own (`mesh`; `auto` when \
+          every vertex has one within [0, 1]) or a generated atlas of one chart per triangle \
+          with a gutter around each (`atlas`).",
+    colours: "`texture`: a base-colour texture; `vertex`: one colour per vertex (`COLOR_0`, \
+              linear) and no texture.",
+    filter: "How a surface point reads the solid: the nearest voxel, or a trilinear blend of \
+             the eight around it.",
+    format: "The mesh's format, when its first bytes should not decide (any case; `gltf` reads \
+             as `glb`).",
+    lod: super::voxels::LOD,
+    cut: "Planes that cut the mesh into pieces before baking, each `nx,ny,nz,d` (the points p \
+          with n·p = d, in the mesh file's own coordinates), several separated by `;` for a \
+          fracture (at most 8). Each piece, one side of every plane, is closed by caps textured \
+          from the inside of the solid, and is a node and mesh of its own in the answer. \
+          Refused (400 `invalid_parameter`): a plane that is not four finite numbers, a zero \
+          normal, a plane that misses the mesh, more than 8 planes, and `colours=vertex` or \
+          `uvs=mesh` with a cut (the caps need a generated atlas).",
+    spread: "How far the pieces of a cut are pulled apart in the answer, each away from the \
+             planes, as a share of the mesh's longest side (the texture is baked where they \
+             were).",
+});
+
+named_value!(Uvs, Colours);
+
+/// A mesh format by its name: `obj`, `glb` (or `gltf`), `ply`, any case.
+#[derive(Clone, Copy, Debug)]
+struct FormatName(MeshFormat);
+
+impl<'de> Deserialize<'de> for FormatName {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        MeshFormat::from_name(&name)
+            .map(FormatName)
+            .map_err(|e| serde::de::Error::custom(reason(e)))
+    }
+}
+
+impl QueryValue for FormatName {
+    fn schema() -> ValueSchema {
+        ValueSchema::Choice(&["obj", "glb", "ply"])
+    }
+
+    fn written(&self) -> Option<String> {
+        Some(
+            match self.0 {
+                MeshFormat::Obj => "obj",
+                MeshFormat::Glb => "glb",
+                MeshFormat::Ply => "ply",
+            }
+            .into(),
+        )
+    }
+}
+
+/// The cutting planes, written `nx,ny,nz,d;…` (see [`Plane::parse_list`]).
+#[derive(Clone, Debug)]
+struct Cut(Vec<Plane>);
+
+/// Longest `cut` accepted: eight planes of four long numbers fit.
+const MAX_CUT_TEXT: u32 = 1024;
+
+impl<'de> Deserialize<'de> for Cut {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        if text.len() > MAX_CUT_TEXT as usize {
+            return Err(serde::de::Error::custom(format_args!(
+                "{} bytes (at most {MAX_CUT_TEXT})",
+                text.len()
+            )));
+        }
+        Plane::parse_list(&text)
+            .map(Cut)
+            .map_err(|e| serde::de::Error::custom(reason(e)))
+    }
+}
+
+impl QueryValue for Cut {
+    fn schema() -> ValueSchema {
+        ValueSchema::Text {
+            max_len: Some(MAX_CUT_TEXT),
+        }
+    }
+
+    fn written(&self) -> Option<String> {
+        None
+    }
+}
+
+/// A number; its range (0 to [`MAX_SPREAD`]) is checked with the rest of
+/// the bake, as `out_of_range`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Spread(f32);
+
+impl<'de> Deserialize<'de> for Spread {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        text.trim()
+            .parse()
+            .map(Spread)
+            .map_err(|_| serde::de::Error::custom(format_args!("`{text}` is not a number")))
+    }
+}
+
+impl QueryValue for Spread {
+    fn schema() -> ValueSchema {
+        ValueSchema::Number {
+            min: 0.0,
+            max: f64::from(MAX_SPREAD),
+        }
+    }
+
+    fn written(&self) -> Option<String> {
+        Some(self.0.to_string())
+    }
+}
+
+/// What a core error says about a parameter, without its name (the
+/// query's error names it).
+fn reason(e: solidtex_core::Error) -> String {
+    match e {
+        solidtex_core::Error::InvalidParameter { reason, .. } => reason,
+        other => other.to_string(),
+    }
 }
 
 /// A bake as the query asks for it, the mesh not yet read.
@@ -67,29 +198,19 @@ struct Asked {
 }
 
 impl Asked {
-    fn new(q: &BakeQuery) -> Result<Asked, ApiError> {
-        let format = q.format.as_deref().map(MeshFormat::from_name).transpose()?;
+    fn new(q: &BakeQuery) -> Asked {
         let mut options = BakeOptions::new(q.resolution.get_u32());
         options.placement.rotation = q.rotation.map_or([0.0; 3], |v| v.0);
         options.placement.offset = q.offset.map_or([0.0; 3], |v| v.0);
         options.texture_size = q.texture_size.map(Int::get_u32);
         (options.uvs, options.colours, options.filter) = (q.uvs, q.colours, q.filter);
-        if let Some(v) = &q.spread {
-            options.spread =
-                v.trim()
-                    .parse()
-                    .map_err(|_| solidtex_core::Error::InvalidParameter {
-                        name: "spread",
-                        reason: format!("`{v}` is not a number"),
-                    })?;
-        }
-        let planes = q.cut.as_deref().map(Plane::parse_list).transpose()?;
-        Ok(Asked {
-            format,
+        options.spread = q.spread.0;
+        Asked {
+            format: q.format.map(|f| f.0),
             options,
-            planes: planes.filter(|p| !p.is_empty()),
+            planes: q.cut.clone().map(|c| c.0).filter(|p| !p.is_empty()),
             lod: q.lod.get_u32(),
-        })
+        }
     }
 
     /// The bake of the mesh `body`: read, cut and laid out.
@@ -125,7 +246,7 @@ pub(super) async fn bake(
     body: Bytes,
 ) -> Result<Response, ApiError> {
     let t = texture(&s, &id).await?;
-    let asked = Asked::new(&q)?;
+    let asked = Asked::new(&q);
     if respond_async(&headers) {
         return bake_async(&s, t, asked, body, &headers).await;
     }
@@ -193,4 +314,40 @@ async fn bake_async(
     };
     let job = s.background.start(spec, Box::new(work))?;
     answer_job(s, &job, headers).await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::params::from_pairs;
+    use super::*;
+
+    fn parse(q: &str) -> Result<BakeQuery, ApiError> {
+        from_pairs(form_urlencoded::parse(q.as_bytes()))
+    }
+
+    #[test]
+    fn format_cut_and_spread_read_as_their_values() {
+        let q = parse("format=GLTF&cut=0,0,1,0;1,0,0,0.5&spread=0.25").unwrap();
+        assert!(matches!(q.format, Some(FormatName(MeshFormat::Glb))));
+        assert_eq!(q.cut.map(|c| c.0.len()), Some(2));
+        assert_eq!(q.spread.0, 0.25);
+        let q = parse("").unwrap();
+        assert!(q.format.is_none() && q.cut.is_none() && q.spread.0 == 0.0);
+        let long = format!("cut={}", "0,0,1,0;".repeat(130));
+        for (query, message) in [
+            (
+                "format=stl",
+                "parameter `format`: unknown mesh format `stl` (expected obj, glb or ply)",
+            ),
+            (
+                "cut=0,0,1",
+                "parameter `cut`: `0,0,1` is not four numbers nx,ny,nz,d",
+            ),
+            ("spread=x", "parameter `spread`: `x` is not a number"),
+            (&long, "parameter `cut`: 1040 bytes (at most 1024)"),
+        ] {
+            let e = parse(query).unwrap_err();
+            assert_eq!((e.code, e.message.as_str()), ("invalid_parameter", message));
+        }
+    }
 }

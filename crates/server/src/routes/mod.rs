@@ -88,6 +88,7 @@ pub fn documented_queries() -> Vec<(&'static str, Vec<QueryParam>)> {
         ("getRegion", voxels::RegionQuery::params()),
         ("getExport", exports::ExportQuery::params()),
         ("describeExport", exports::ExportQuery::params()),
+        ("bakeMesh", bake::BakeQuery::params()),
     ]
 }
 
@@ -513,6 +514,7 @@ mod tests {
             fields_of::<voxels::RegionQuery>(),
             fields_of::<exports::ExportQuery>(),
             fields_of::<exports::ExportQuery>(),
+            fields_of::<bake::BakeQuery>(),
         ];
         let documented = documented_queries();
         assert_eq!(documented.len(), fields.len());

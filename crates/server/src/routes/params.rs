@@ -489,12 +489,22 @@ pub enum ValueSchema {
         /// The greatest accepted.
         max: i64,
     },
+    /// A number in `min..=max`.
+    Number {
+        /// The least accepted.
+        min: f64,
+        /// The greatest accepted.
+        max: f64,
+    },
     /// Three numbers written `x,y,z`.
     Vector,
     /// One of these names.
     Choice(&'static [&'static str]),
-    /// Any string.
-    Text,
+    /// A string, of at most `max_len` bytes when given.
+    Text {
+        /// The longest accepted.
+        max_len: Option<u32>,
+    },
 }
 
 /// One query parameter as the API document describes it: declared beside
@@ -564,7 +574,7 @@ impl QueryValue for Vec3 {
 
 impl QueryValue for String {
     fn schema() -> ValueSchema {
-        ValueSchema::Text
+        ValueSchema::Text { max_len: None }
     }
 
     fn written(&self) -> Option<String> {
