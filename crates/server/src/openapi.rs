@@ -292,10 +292,20 @@ fn parameter_object(p: &QueryParam, location: &'static str) -> Node {
             ("minimum", Node::Scalar(min.to_string())),
             ("maximum", Node::Scalar(max.to_string())),
         ],
-        ValueSchema::Text { max_len } => {
+        ValueSchema::Text {
+            max_len,
+            pattern,
+            example,
+        } => {
             let mut s = vec![("type", text("string"))];
             if let Some(n) = max_len {
                 s.push(("maxLength", Node::Scalar(n.to_string())));
+            }
+            if let Some(p) = pattern {
+                s.push(("pattern", text(p)));
+            }
+            if let Some(e) = example {
+                s.push(("example", text(e)));
             }
             s
         }

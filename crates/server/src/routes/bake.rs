@@ -17,13 +17,16 @@
 use super::AppState;
 use super::answer::{Encoding, admit, answer, texture};
 use super::background::{answer_job, respond_async};
-use super::params::{Int, QueryValue, TypedQuery, ValueSchema, Vec3, document_query, named_value};
+use super::params::{
+    Int, QueryValue, TextureId, TexturePath, TypedPath, TypedQuery, ValueSchema, Vec3,
+    document_query, named_value,
+};
 use super::voxels::Lod;
 use crate::background::{BakeDetail, Detail, Kind, Progress, Spec};
 use crate::error::ApiError;
 use crate::registry::Entry;
 use axum::body::Bytes;
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
@@ -144,6 +147,8 @@ impl QueryValue for Cut {
     fn schema() -> ValueSchema {
         ValueSchema::Text {
             max_len: Some(MAX_CUT_TEXT),
+            pattern: None,
+            example: None,
         }
     }
 
@@ -240,7 +245,7 @@ impl Asked {
 /// `POST /v1/textures/{id}/bake`
 pub(super) async fn bake(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(q): TypedQuery<BakeQuery>,
     headers: HeaderMap,
     body: Bytes,

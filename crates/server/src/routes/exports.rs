@@ -17,13 +17,15 @@
 
 use super::answer::{ETag, texture};
 use super::background::answer_job;
-use super::params::{Int, TypedQuery, document_query, named_value};
+use super::params::{
+    Int, TextureId, TexturePath, TypedPath, TypedQuery, document_query, named_value,
+};
 use super::voxels::{Coord, Lod};
 use super::{AppState, IMMUTABLE};
 use crate::background::{Detail, Kind, Progress, Spec};
 use crate::error::ApiError;
 use axum::body::{Body, Bytes};
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::Response;
 use serde::{Deserialize, Serialize};
@@ -206,7 +208,7 @@ fn parse_export(s: &AppState, q: &ExportQuery, tex: &Texture) -> Result<(Export,
 /// `GET /v1/textures/{id}/export`
 pub(super) async fn export(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(q): TypedQuery<ExportQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
@@ -246,7 +248,7 @@ pub(super) async fn export(
 /// `X-Solidtex-Predicted-Voxels`.
 pub(super) async fn describe(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(q): TypedQuery<ExportQuery>,
 ) -> Result<Response, ApiError> {
     let (_, tex) = texture(&s, &id).await?;

@@ -98,6 +98,7 @@ pub fn documented_queries() -> Vec<(&'static str, Vec<QueryParam>)> {
 pub fn documented_paths() -> Vec<(&'static str, Vec<QueryParam>)> {
     use params::DocumentedQuery;
     vec![
+        ("TextureId", params::TexturePath::params()),
         ("ExportId", background::ExportPath::params()),
         ("BakeId", background::BakePath::params()),
     ]

@@ -500,10 +500,15 @@ pub enum ValueSchema {
     Vector,
     /// One of these names.
     Choice(&'static [&'static str]),
-    /// A string, of at most `max_len` bytes when given.
+    /// A string, of at most `max_len` bytes and matching `pattern` when
+    /// given.
     Text {
         /// The longest accepted.
         max_len: Option<u32>,
+        /// A regular expression every accepted value matches.
+        pattern: Option<&'static str>,
+        /// A value to show.
+        example: Option<&'static str>,
     },
 }
 
@@ -572,9 +577,43 @@ impl QueryValue for Vec3 {
     }
 }
 
+/// A texture's id as a path gives it. Any text reads; one that no texture
+/// can have is answered as unknown (404 `unknown_texture`) where it is
+/// looked up, like an id that is not stored.
+#[derive(Clone, Debug, Default, Deserialize)]
+pub(super) struct TextureId(pub String);
+
+impl QueryValue for TextureId {
+    fn schema() -> ValueSchema {
+        ValueSchema::Text {
+            max_len: None,
+            pattern: Some("^[A-Za-z0-9_-]{1,64}$"),
+            example: Some(crate::DEFAULT_ID),
+        }
+    }
+
+    fn written(&self) -> Option<String> {
+        None
+    }
+}
+
+/// The path of a route about one texture: `/v1/textures/{id}…`.
+#[derive(Deserialize, Default)]
+pub(super) struct TexturePath {
+    pub id: TextureId,
+}
+
+document_query!(TexturePath {
+    id: "Texture id (a content hash, or `default` for the bundled exemplar).",
+});
+
 impl QueryValue for String {
     fn schema() -> ValueSchema {
-        ValueSchema::Text { max_len: None }
+        ValueSchema::Text {
+            max_len: None,
+            pattern: None,
+            example: None,
+        }
     }
 
     fn written(&self) -> Option<String> {

@@ -3,7 +3,7 @@
 use super::AppState;
 use super::IMMUTABLE;
 use super::answer::{ETag, body};
-use super::params::{NoQuery, TypedQuery};
+use super::params::{NoQuery, TextureId, TexturePath, TypedPath, TypedQuery};
 use crate::error::ApiError;
 use crate::query::Query;
 use crate::regions::{ID_PREFIX, RegionDef, Stored};
@@ -11,7 +11,7 @@ use crate::registry::{Entry, RegistryError, Status, Submitted};
 use crate::spec::{ExemplarInfo, Planes, TextureParams, TextureSpec, params_object, valid_id};
 use axum::Json;
 use axum::body::Bytes;
-use axum::extract::{FromRequest, Multipart, Path, Request, State};
+use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use schemars::JsonSchema;
@@ -296,7 +296,7 @@ async fn known(s: &AppState, id: &str) -> Result<Arc<Entry>, ApiError> {
 /// `GET /v1/textures/{id}`.
 pub(super) async fn show(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
 ) -> Result<Response, ApiError> {
     checked_id(&id)?;
@@ -314,7 +314,7 @@ pub(super) async fn show(
 /// `DELETE /v1/textures/{id}`.
 pub(super) async fn remove(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
 ) -> Result<StatusCode, ApiError> {
     checked_id(&id)?;
@@ -727,7 +727,7 @@ pub const MAX_VARIANT_BYTES: usize = 512 << 10;
 /// twice finds the same texture, and it shares the source's candidates.
 pub(super) async fn variant(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     req: Request,
 ) -> Result<Response, ApiError> {
@@ -777,7 +777,7 @@ pub(super) async fn variant(
 /// thumbnail beside its slices.
 pub(super) async fn exemplar(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {

@@ -30,7 +30,7 @@
 
 use super::AppState;
 use super::answer::{ETag, Encoding, ZSTD_LEVEL, accepts_gzip, answer, body, texture};
-use super::params::{NoQuery, TypedPath, TypedQuery};
+use super::params::{NoQuery, TextureId, TexturePath, TypedPath, TypedQuery};
 use crate::error::ApiError;
 use crate::registry::Entry;
 use axum::extract::State;
@@ -114,16 +114,10 @@ fn precomputed_info(max_lod: u32, chunk: u32) -> Value {
     })
 }
 
-/// The path of a texture's metadata document.
-#[derive(Deserialize)]
-pub(super) struct TexturePath {
-    id: String,
-}
-
 /// `GET /v1/textures/{id}/precomputed/info`
 pub(super) async fn precomputed_info_route(
     State(s): State<AppState>,
-    TypedPath(TexturePath { id }): TypedPath<TexturePath>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
@@ -347,7 +341,7 @@ fn zarr_array(lod: u32, chunk: u32, zstd: bool) -> Value {
 /// `GET /v1/textures/{id}/zarr/zarr.json`
 pub(super) async fn zarr_group_route(
     State(s): State<AppState>,
-    TypedPath(TexturePath { id }): TypedPath<TexturePath>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(NoQuery {}): TypedQuery<NoQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {

@@ -5,10 +5,11 @@
 use super::AppState;
 use super::answer::{Encoding, answer, texture};
 use super::params::{
-    Int, NoQuery, Png, Raw, Stem, Triple, TypedPath, TypedQuery, Vec3, document_query,
+    Int, NoQuery, Png, Raw, Stem, TextureId, TexturePath, Triple, TypedPath, TypedQuery, Vec3,
+    document_query,
 };
 use crate::error::ApiError;
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::http::HeaderMap;
 use axum::response::Response;
 use serde::Deserialize;
@@ -111,7 +112,7 @@ impl Default for CutQuery {
 /// `GET /v1/textures/{id}/cut.png`
 pub(super) async fn cut(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(q): TypedQuery<CutQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
@@ -153,7 +154,7 @@ document_query!(RegionQuery {
 /// `GET /v1/textures/{id}/region.raw`
 pub(super) async fn region(
     State(s): State<AppState>,
-    Path(id): Path<String>,
+    TypedPath(TexturePath { id: TextureId(id) }): TypedPath<TexturePath>,
     TypedQuery(q): TypedQuery<RegionQuery>,
     headers: HeaderMap,
 ) -> Result<Response, ApiError> {
