@@ -96,6 +96,14 @@ fn write_entries<'a>(
 ) {
     let pad = " ".repeat(indent);
     for (k, v) in entries {
+        // `@` and `` ` `` are reserved at the start of a plain YAML scalar.
+        let quoted_key;
+        let k = if k.starts_with(['@', '`']) {
+            quoted_key = quoted(k);
+            quoted_key.as_str()
+        } else {
+            k
+        };
         match v {
             Node::Scalar(s) => out.push_str(&format!("{pad}{k}: {s}\n")),
             Node::Flow(items) => out.push_str(&format!("{pad}{k}: [{}]\n", items.join(", "))),

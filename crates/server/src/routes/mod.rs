@@ -113,6 +113,8 @@ pub fn documented_responses(generator: &mut schemars::SchemaGenerator) {
     generator.subschema_for::<ops::Health>();
     generator.subschema_for::<frames::Frames>();
     generator.subschema_for::<crate::background::JobStatus>();
+    generator.subschema_for::<volumes::PrecomputedInfo>();
+    generator.subschema_for::<volumes::ZarrArray>();
 }
 
 /// The `lod` query parameter every voxel route takes.

@@ -36,7 +36,8 @@ use crate::registry::Entry;
 use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::Response;
-use serde::Deserialize;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 use solidtex_core::{Region, Request};
 
@@ -54,12 +55,18 @@ pub fn window(lod: u32) -> (i64, i64) {
 const REVALIDATE: &str = "no-cache";
 
 /// A JSON metadata document with its ETag, or 304.
-fn metadata_response(entry: &Entry, key: &str, headers: &HeaderMap, doc: &Value) -> Response {
+fn metadata_response(
+    entry: &Entry,
+    key: &str,
+    headers: &HeaderMap,
+    doc: &impl Serialize,
+) -> Response {
     let tag = ETag::new(entry, key);
     if tag.matches(headers) {
         return tag.not_modified(REVALIDATE);
     }
-    let json = body(doc.to_string().into_bytes(), "application/json");
+    let text = serde_json::to_vec(doc).expect("metadata serialise");
+    let json = body(text, "application/json");
     tag.stamp(json, REVALIDATE)
 }
 
@@ -89,29 +96,63 @@ fn chunk(origin: [i64; 3], edge: u32) -> Result<Request, ApiError> {
 // ---------------------------------------------------------------------
 // Neuroglancer precomputed
 
+/// Neuroglancer's precomputed `info`: a multiscale volume. Fields are in
+/// alphabetical order, the order its bytes have always had.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct PrecomputedInfo {
+    /// `neuroglancer_multiscale_volume`.
+    #[serde(rename = "@type")]
+    at_type: &'static str,
+    /// `uint8`.
+    data_type: &'static str,
+    /// 3: red, green, blue.
+    num_channels: u32,
+    /// One scale per level of detail, finest first.
+    scales: Vec<PrecomputedScale>,
+    /// `image`.
+    #[serde(rename = "type")]
+    volume_type: &'static str,
+}
+
+/// One scale of [`PrecomputedInfo`]: a level of detail's window.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct PrecomputedScale {
+    /// The chunk shape, one.
+    chunk_sizes: Vec<[u32; 3]>,
+    /// `raw`.
+    encoding: &'static str,
+    /// The level of detail, as the chunks' path names it.
+    key: String,
+    /// Finest voxels per voxel along x, y and z: 2^lod.
+    resolution: [u64; 3],
+    /// The window's side in voxels of the level, along x, y and z.
+    size: [i64; 3],
+    /// The texture coordinate of the window's first voxel.
+    voxel_offset: [i64; 3],
+}
+
 /// The `info` document: one scale per level of detail, finest first.
-fn precomputed_info(max_lod: u32, chunk: u32) -> Value {
-    let scales: Vec<Value> = (0..=max_lod)
-        .map(|lod| {
-            let (side, offset) = window(lod);
-            let res = 1u64 << lod;
-            json!({
-                "key": lod.to_string(),
-                "size": [side, side, side],
-                "voxel_offset": [offset, offset, offset],
-                "resolution": [res, res, res],
-                "chunk_sizes": [[chunk, chunk, chunk]],
-                "encoding": "raw",
+fn precomputed_info(max_lod: u32, chunk: u32) -> PrecomputedInfo {
+    PrecomputedInfo {
+        at_type: "neuroglancer_multiscale_volume",
+        data_type: "uint8",
+        num_channels: 3,
+        scales: (0..=max_lod)
+            .map(|lod| {
+                let (side, offset) = window(lod);
+                let res = 1u64 << lod;
+                PrecomputedScale {
+                    chunk_sizes: vec![[chunk; 3]],
+                    encoding: "raw",
+                    key: lod.to_string(),
+                    resolution: [res; 3],
+                    size: [side; 3],
+                    voxel_offset: [offset; 3],
+                }
             })
-        })
-        .collect();
-    json!({
-        "@type": "neuroglancer_multiscale_volume",
-        "type": "image",
-        "data_type": "uint8",
-        "num_channels": 3,
-        "scales": scales,
-    })
+            .collect(),
+        volume_type: "image",
+    }
 }
 
 /// `GET /v1/textures/{id}/precomputed/info`
@@ -297,45 +338,147 @@ fn zarr_group(max_lod: u32, chunk: u32) -> Value {
     })
 }
 
+/// Zarr v3 metadata of one level of detail's array. Fields are in
+/// alphabetical order, the order its bytes have always had.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct ZarrArray {
+    /// Where the array lies in the texture (`solidtex`).
+    attributes: ZarrArrayAttributes,
+    /// `regular` chunks of shape (3, E, E, E).
+    chunk_grid: ChunkGrid,
+    /// `default` keys, separated by `/`.
+    chunk_key_encoding: ChunkKeyEncoding,
+    /// `transpose` (stored z, y, x, c), `bytes`, and `zstd` when on.
+    codecs: Vec<Codec>,
+    /// `uint8`.
+    data_type: &'static str,
+    /// `c`, `z`, `y`, `x`.
+    dimension_names: [&'static str; 4],
+    /// 0.
+    fill_value: u8,
+    /// `array`.
+    node_type: &'static str,
+    /// (3, side, side, side).
+    shape: [i64; 4],
+    /// 3.
+    zarr_format: u32,
+}
+
+/// The chunk grid: its name and configuration.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct ChunkGrid {
+    configuration: ChunkShape,
+    name: &'static str,
+}
+
+/// How chunk keys are made: the encoding's name and configuration.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct ChunkKeyEncoding {
+    configuration: KeySeparator,
+    name: &'static str,
+}
+
+/// A codec: its name and configuration.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct Codec {
+    configuration: CodecConfiguration,
+    name: &'static str,
+}
+
+/// The regular chunk grid's configuration.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct ChunkShape {
+    chunk_shape: [u32; 4],
+}
+
+/// The default chunk key encoding's configuration.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct KeySeparator {
+    separator: &'static str,
+}
+
+/// A codec's configuration.
+#[derive(Debug, Serialize, JsonSchema)]
+#[serde(untagged)]
+pub(crate) enum CodecConfiguration {
+    /// `transpose`: the order the dimensions are stored in.
+    Transpose { order: [u32; 4] },
+    /// `bytes`: the byte order.
+    Bytes { endian: &'static str },
+    /// `zstd`: its level and whether a checksum is kept.
+    Zstd { checksum: bool, level: i32 },
+}
+
+/// An array's own attributes.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct ZarrArrayAttributes {
+    solidtex: ArrayPlacement,
+}
+
+/// Where an array lies in the texture.
+#[derive(Debug, Serialize, JsonSchema)]
+pub(crate) struct ArrayPlacement {
+    /// The level of detail.
+    lod: u32,
+    /// The texture coordinate (z, y, x) of index 0, at that level.
+    origin_zyx: [i64; 3],
+    /// Finest voxels per voxel: 2^lod.
+    voxel_size: u64,
+}
+
 /// The array of one level of detail: (c, z, y, x) uint8, regular chunks
 /// of all three channels, stored (z, y, x, c) by a transpose codec, and
 /// compressed with zstd when `zstd`.
-fn zarr_array(lod: u32, chunk: u32, zstd: bool) -> Value {
+fn zarr_array(lod: u32, chunk: u32, zstd: bool) -> ZarrArray {
     let (side, offset) = window(lod);
+    let named = |name, configuration| Codec {
+        configuration,
+        name,
+    };
     let mut codecs = vec![
-        json!({ "name": "transpose", "configuration": { "order": [1, 2, 3, 0] } }),
-        json!({ "name": "bytes", "configuration": { "endian": "little" } }),
+        named(
+            "transpose",
+            CodecConfiguration::Transpose {
+                order: [1, 2, 3, 0],
+            },
+        ),
+        named("bytes", CodecConfiguration::Bytes { endian: "little" }),
     ];
     if zstd {
-        codecs.push(json!({
-            "name": "zstd",
-            "configuration": { "level": ZSTD_LEVEL, "checksum": false }
-        }));
+        codecs.push(named(
+            "zstd",
+            CodecConfiguration::Zstd {
+                checksum: false,
+                level: ZSTD_LEVEL,
+            },
+        ));
     }
-    json!({
-        "zarr_format": 3,
-        "node_type": "array",
-        "shape": [3, side, side, side],
-        "data_type": "uint8",
-        "chunk_grid": {
-            "name": "regular",
-            "configuration": { "chunk_shape": [3, chunk, chunk, chunk] }
+    ZarrArray {
+        attributes: ZarrArrayAttributes {
+            solidtex: ArrayPlacement {
+                lod,
+                origin_zyx: [offset; 3],
+                voxel_size: 1u64 << lod,
+            },
         },
-        "chunk_key_encoding": {
-            "name": "default",
-            "configuration": { "separator": "/" }
+        chunk_grid: ChunkGrid {
+            configuration: ChunkShape {
+                chunk_shape: [3, chunk, chunk, chunk],
+            },
+            name: "regular",
         },
-        "fill_value": 0,
-        "codecs": codecs,
-        "dimension_names": ["c", "z", "y", "x"],
-        "attributes": {
-            "solidtex": {
-                "lod": lod,
-                "voxel_size": 1u64 << lod,
-                "origin_zyx": [offset, offset, offset],
-            }
-        }
-    })
+        chunk_key_encoding: ChunkKeyEncoding {
+            configuration: KeySeparator { separator: "/" },
+            name: "default",
+        },
+        codecs,
+        data_type: "uint8",
+        dimension_names: ["c", "z", "y", "x"],
+        fill_value: 0,
+        node_type: "array",
+        shape: [3, side, side, side],
+        zarr_format: 3,
+    }
 }
 
 /// `GET /v1/textures/{id}/zarr/zarr.json`
@@ -490,18 +633,88 @@ mod tests {
         assert!(chunk_index("05", 6).is_err());
     }
 
+    /// The typed documents write the very bytes the `json!` maps they
+    /// replaced wrote.
+    #[test]
+    fn typed_documents_keep_their_bytes() {
+        let (side, offset) = window(1);
+        let scale = |lod: u32| {
+            let (side, offset) = window(lod);
+            let res = 1u64 << lod;
+            json!({
+                "key": lod.to_string(),
+                "size": [side, side, side],
+                "voxel_offset": [offset, offset, offset],
+                "resolution": [res, res, res],
+                "chunk_sizes": [[32, 32, 32]],
+                "encoding": "raw",
+            })
+        };
+        let info = json!({
+            "@type": "neuroglancer_multiscale_volume",
+            "type": "image",
+            "data_type": "uint8",
+            "num_channels": 3,
+            "scales": [scale(0), scale(1), scale(2)],
+        });
+        fn text(v: &impl serde::Serialize) -> String {
+            serde_json::to_string(v).unwrap()
+        }
+        assert_eq!(text(&precomputed_info(2, 32)), info.to_string());
+        for zstd in [false, true] {
+            let mut codecs = vec![
+                json!({ "name": "transpose", "configuration": { "order": [1, 2, 3, 0] } }),
+                json!({ "name": "bytes", "configuration": { "endian": "little" } }),
+            ];
+            if zstd {
+                codecs.push(json!({
+                    "name": "zstd",
+                    "configuration": { "level": ZSTD_LEVEL, "checksum": false }
+                }));
+            }
+            let array = json!({
+                "zarr_format": 3,
+                "node_type": "array",
+                "shape": [3, side, side, side],
+                "data_type": "uint8",
+                "chunk_grid": {
+                    "name": "regular",
+                    "configuration": { "chunk_shape": [3, 16, 16, 16] }
+                },
+                "chunk_key_encoding": {
+                    "name": "default",
+                    "configuration": { "separator": "/" }
+                },
+                "fill_value": 0,
+                "codecs": codecs,
+                "dimension_names": ["c", "z", "y", "x"],
+                "attributes": {
+                    "solidtex": {
+                        "lod": 1,
+                        "voxel_size": 2,
+                        "origin_zyx": [offset, offset, offset],
+                    }
+                }
+            });
+            assert_eq!(text(&zarr_array(1, 16, zstd)), array.to_string());
+        }
+    }
+
     #[test]
     fn documents_describe_every_level() {
-        let info = precomputed_info(2, 32);
+        let info = serde_json::to_value(precomputed_info(2, 32)).unwrap();
         assert_eq!(info["scales"].as_array().unwrap().len(), 3);
         assert_eq!(info["scales"][2]["resolution"], json!([4, 4, 4]));
         assert_eq!(info["scales"][2]["voxel_offset"][0], -(1i64 << 17));
-        let a = zarr_array(1, 16, true);
+        let a = serde_json::to_value(zarr_array(1, 16, true)).unwrap();
         assert_eq!(a["shape"], json!([3, 1 << 19, 1 << 19, 1 << 19]));
         assert_eq!(a["chunk_grid"]["configuration"]["chunk_shape"][1], 16);
         assert_eq!(a["codecs"][2]["name"], "zstd");
         assert_eq!(
-            zarr_array(1, 16, false)["codecs"].as_array().unwrap().len(),
+            serde_json::to_value(zarr_array(1, 16, false)).unwrap()["codecs"]
+                .as_array()
+                .unwrap()
+                .len(),
             2
         );
         let g = zarr_group(2, 16);
