@@ -1,18 +1,16 @@
 //! The `.stx` file: magic, format version, payload length, CRC-32 of the
-//! payload, then the payload (parameters as JSON, exemplar pixels as given,
-//! the layout of the planes (since version 2), and per level the PCA bases,
-//! similarity sets and candidate triples of the planes as analysed).
-//! Version 1 files, written before the layout, are read with every plane
-//! as given. Versions 1 and 2 also stored per level the joint PCA of a
-//! triple's three appearance vectors, which only the colour correction
-//! read; it is skipped. Since version 4 each exemplar is followed by its
-//! feature mask, if it has one. Since version 5 the levels are followed
-//! by the reference's blocks of triples (level, side, then every voxel's
-//! triple); earlier files started from the slab, and read so. Since
-//! version 6 the blocks are followed by a count of levels of usage
-//! penalties, which histogram matching wrote; it was removed, so the count
-//! is written 0 and a file with penalties is refused, as is one whose
-//! parameters use a removed knob (`histogram_matching`, `glcp_weight`). Derived data
+//! payload, then the payload: parameters as JSON; exemplar pixels as given,
+//! each followed by its feature mask if it has one; the layout of the
+//! planes; per level the PCA bases, similarity sets and candidate triples
+//! of the planes as analysed; the reference's blocks of triples (level,
+//! side, then every voxel's triple); and, since version 6, a count of
+//! levels of usage penalties, which histogram matching wrote. It was
+//! removed, so the count is written 0 and a file with penalties is
+//! refused, as is one whose parameters use a removed knob
+//! (`histogram_matching`, `glcp_weight`). Versions 1 to 4 (without the
+//! blocks, the masks or the layout) are no longer read: such a file is
+//! refused with a request to precompute again, and the server does so on
+//! its own for a stored texture, from its stored exemplar. Derived data
 //! (stacks, appearance vectors, quantised neighbourhoods) is recomputed on
 //! load, deterministically. Every read is bounds-checked: a truncated or
 //! corrupt file is an error, never a panic or a wrong result.
@@ -26,6 +24,8 @@ use crate::params::{AnalysisParams, Arrangement, Orientation};
 
 const MAGIC: &[u8; 8] = b"SOLIDTEX";
 const VERSION: u32 = 6;
+/// The oldest version read.
+const OLDEST: u32 = 5;
 const HEADER: usize = 8 + 4 + 8 + 4;
 
 struct Writer(Vec<u8>);
@@ -135,54 +135,40 @@ pub(super) fn encode(c: &Candidates) -> Vec<u8> {
     encode_version(c, VERSION)
 }
 
-/// [`encode`] in the layout of `version` (older ones for the tests of
-/// reading them: their joint PCA, which is skipped, is written as zeros).
+/// [`encode`] in the layout of `version` ([`OLDEST`] or later; older
+/// ones for the tests of reading them).
 fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
     let single = c.exemplars.is_single();
     let planes = if c.analysed.is_single() { 1 } else { 3 };
     let npx = c.dims.len() as u32;
     let wide = npx > u16::MAX as u32 + 1;
     let mut w = Writer(Vec::new());
-    let params = if version < 5 {
-        // Written before the reference's blocks, which had no such keys.
-        let mut value = serde_json::to_value(&c.params).expect("params serialise");
-        let map = value.as_object_mut().expect("an object");
-        map.remove("initialisation");
-        map.remove("reference_level");
-        serde_json::to_vec(&value)
-    } else {
-        // The struct's own field order, whatever map serde_json keeps.
-        serde_json::to_vec(&c.params)
-    };
-    w.bytes(&params.expect("params serialise"));
+    // The struct's own field order, whatever map serde_json keeps.
+    w.bytes(&serde_json::to_vec(&c.params).expect("params serialise"));
     w.u8(single as u8);
     w.u32(c.dims.w);
     w.u32(c.dims.h);
     for p in 0..if single { 1 } else { 3 } {
         let e = c.exemplars.plane(p);
         w.0.extend_from_slice(&e.to_rgb_bytes());
-        if version >= 4 {
-            match e.feature_mask() {
-                Some(mask) => {
-                    w.u8(1);
-                    w.0.extend(mask.iter().map(|&f| f as u8));
-                }
-                None => w.u8(0),
+        match e.feature_mask() {
+            Some(mask) => {
+                w.u8(1);
+                w.0.extend(mask.iter().map(|&f| f as u8));
             }
+            None => w.u8(0),
         }
     }
     let layout = &c.layout;
-    if version >= 2 {
-        for r in layout.arrangement.rotate {
-            w.u8((r / 90) as u8);
-        }
-        for v in layout.arrangement.weights {
-            w.f32(v);
-        }
-        w.u8(layout.detected as u8);
-        w.f32(layout.grain.coherence);
-        w.f32(layout.grain.degrees);
+    for r in layout.arrangement.rotate {
+        w.u8((r / 90) as u8);
     }
+    for v in layout.arrangement.weights {
+        w.f32(v);
+    }
+    w.u8(layout.detected as u8);
+    w.f32(layout.grain.coherence);
+    w.f32(layout.grain.degrees);
     for l in c.stored_levels() {
         for p in 0..planes {
             w.pca(&l.appearance_pca[p]);
@@ -192,17 +178,6 @@ fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
             for &s in &l.similar[p] {
                 w.coord(s, wide);
             }
-        }
-        if version < 3 {
-            let input = (0..planes).map(|p| l.appearance_pca[p].dims).sum::<usize>()
-                * if planes == 1 { 3 } else { 1 };
-            w.pca(&Pca {
-                input,
-                dims: 8,
-                mean: vec![0.0; input],
-                basis: vec![0.0; 8 * input],
-            });
-            w.f32(1.0);
         }
         for p in 0..planes {
             let cand = &l.candidates[p];
@@ -219,15 +194,13 @@ fn encode_version(c: &Candidates, version: u32) -> Vec<u8> {
             }
         }
     }
-    if version >= 5 {
-        w.u32(c.blocks().len() as u32);
-        for b in c.blocks() {
-            w.u32(b.level);
-            w.u32(b.side);
-            for t in &b.triples {
-                for &coord in t {
-                    w.coord(coord, wide);
-                }
+    w.u32(c.blocks().len() as u32);
+    for b in c.blocks() {
+        w.u32(b.level);
+        w.u32(b.side);
+        for t in &b.triples {
+            for &coord in t {
+                w.coord(coord, wide);
             }
         }
     }
@@ -253,7 +226,13 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
         return Err(Error::CorruptFile(CorruptKind::Truncated));
     }
     let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
-    if !(1..=VERSION).contains(&version) {
+    if (1..OLDEST).contains(&version) {
+        return Err(invalid(&format!(
+            "format version {version} is no longer read (the oldest read is {OLDEST}): \
+             precompute the texture again"
+        )));
+    }
+    if !(OLDEST..=VERSION).contains(&version) {
         return Err(Error::CorruptFile(CorruptKind::Version(version)));
     }
     let len = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
@@ -274,21 +253,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     };
     let mut params: serde_json::Map<String, serde_json::Value> =
         serde_json::from_slice(r.bytes()?).map_err(|e| invalid(&format!("params: {e}")))?;
-    // Written before orientations: every plane as given.
-    params
-        .entry("orientation")
-        .or_insert_with(|| serde_json::json!("none"));
-    // Written before the feature-distance channel: colour alone.
-    params
-        .entry("feature_weight")
-        .or_insert_with(|| serde_json::json!(0));
     crate::params::knobs::strip_removed(&mut params).map_err(|e| invalid(&e))?;
-    // Written before the reference's blocks: started from the slab.
-    if version < 5 {
-        params
-            .entry("initialisation")
-            .or_insert_with(|| serde_json::json!("slab"));
-    }
     let params: AnalysisParams =
         serde_json::from_value(params.into()).map_err(|e| invalid(&format!("params: {e}")))?;
     params.validate().map_err(|e| invalid(&e.to_string()))?;
@@ -307,26 +272,24 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
             .ok_or_else(|| invalid("size"))?;
         let mut e =
             Exemplar::from_rgb(width, height, r.take(n)?).map_err(|e| invalid(&e.to_string()))?;
-        if version >= 4 {
-            let masked = match r.u8()? {
-                0 => false,
-                1 => true,
-                _ => return Err(invalid("feature mask flag")),
-            };
-            if masked {
-                let mask = r
-                    .take(n / 3)?
-                    .iter()
-                    .map(|&b| match b {
-                        0 => Ok(false),
-                        1 => Ok(true),
-                        _ => Err(invalid("feature mask")),
-                    })
-                    .collect::<Result<Vec<bool>>>()?;
-                e = e
-                    .with_feature_mask(mask)
-                    .map_err(|e| invalid(&e.to_string()))?;
-            }
+        let masked = match r.u8()? {
+            0 => false,
+            1 => true,
+            _ => return Err(invalid("feature mask flag")),
+        };
+        if masked {
+            let mask = r
+                .take(n / 3)?
+                .iter()
+                .map(|&b| match b {
+                    0 => Ok(false),
+                    1 => Ok(true),
+                    _ => Err(invalid("feature mask")),
+                })
+                .collect::<Result<Vec<bool>>>()?;
+            e = e
+                .with_feature_mask(mask)
+                .map_err(|e| invalid(&e.to_string()))?;
         }
         exemplars.push(e);
     }
@@ -341,11 +304,7 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
     if !single && set.is_single() {
         return Err(invalid("plane flag"));
     }
-    let layout = if version == 1 {
-        Layout::resolve(&set, &Orientation::None).map_err(|e| invalid(&e.to_string()))?
-    } else {
-        read_layout(&mut r, &params)?
-    };
+    let layout = read_layout(&mut r, &params)?;
     let analysed = layout.apply(&set).map_err(|_| invalid("layout"))?;
     let single = analysed.is_single();
     let planes = if single { 1 } else { 3 };
@@ -369,12 +328,6 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
                 .map(|_| r.coord(wide, npx))
                 .collect::<Result<Vec<_>>>()?;
             similar.push(s);
-        }
-        if version < 3 {
-            let joint_input: usize =
-                pcas.iter().map(|p| p.dims).sum::<usize>() * if single { 3 } else { 1 };
-            r.pca(joint_input, 16)?;
-            r.f32()?;
         }
         let mut cands = Vec::new();
         for p in 0..planes {
@@ -431,37 +384,35 @@ pub(super) fn decode(bytes: &[u8]) -> Result<Candidates> {
         });
     }
     let mut blocks = Vec::new();
-    if version >= 5 {
-        let count = r.u32()?;
-        if count > params.levels {
-            return Err(invalid("block count"));
+    let count = r.u32()?;
+    if count > params.levels {
+        return Err(invalid("block count"));
+    }
+    for _ in 0..count {
+        let level = r.u32()?;
+        let side = r.u32()?;
+        if side == 0 || side > crate::reference::MAX_REFERENCE_SIZE {
+            return Err(invalid("block side"));
         }
-        for _ in 0..count {
-            let level = r.u32()?;
-            let side = r.u32()?;
-            if side == 0 || side > crate::reference::MAX_REFERENCE_SIZE {
-                return Err(invalid("block side"));
-            }
-            let voxels = (side as usize).pow(3);
-            // Bounded before allocating: each triple takes at least six
-            // bytes of what is left.
-            if voxels.saturating_mul(6) > payload.len() - r.pos {
-                return Err(Error::CorruptFile(CorruptKind::Truncated));
-            }
-            let mut triples = Vec::with_capacity(voxels);
-            for _ in 0..voxels {
-                triples.push([
-                    r.coord(wide, npx)?,
-                    r.coord(wide, npx)?,
-                    r.coord(wide, npx)?,
-                ]);
-            }
-            blocks.push(crate::reference::TripleBlock {
-                side,
-                level,
-                triples,
-            });
+        let voxels = (side as usize).pow(3);
+        // Bounded before allocating: each triple takes at least six
+        // bytes of what is left.
+        if voxels.saturating_mul(6) > payload.len() - r.pos {
+            return Err(Error::CorruptFile(CorruptKind::Truncated));
         }
+        let mut triples = Vec::with_capacity(voxels);
+        for _ in 0..voxels {
+            triples.push([
+                r.coord(wide, npx)?,
+                r.coord(wide, npx)?,
+                r.coord(wide, npx)?,
+            ]);
+        }
+        blocks.push(crate::reference::TripleBlock {
+            side,
+            level,
+            triples,
+        });
     }
     if version >= 6 && r.u32()? != 0 {
         return Err(invalid(
@@ -526,7 +477,6 @@ fn read_layout(r: &mut Reader, params: &AnalysisParams) -> Result<Layout> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::Initialisation;
 
     /// Horizontal stripes with a little noise: strongly oriented along u.
     fn grain(side: u32) -> Exemplar {
@@ -646,47 +596,27 @@ mod tests {
     }
 
     #[test]
-    fn files_of_earlier_versions_load() {
-        // Files before version 5 started from the slab, and read so.
+    fn version_5_loads_and_older_or_newer_versions_are_refused() {
         let params = AnalysisParams {
             levels: 2,
-            orientation: Orientation::None,
-            initialisation: Initialisation::Slab,
             ..AnalysisParams::default()
         };
         let c = Candidates::compute(&ExemplarSet::single(grain(16)), &params, &|_, _| {}).unwrap();
         let now = encode(&c);
-        let v4 = encode_version(&c, 4);
-        let loaded = decode(&v4).unwrap();
-        assert_eq!(loaded.params().initialisation, Initialisation::Slab);
-        assert_eq!(encode(&loaded), now);
-        // Version 3: no feature-mask flags.
-        let v3 = encode_version(&c, 3);
-        assert_eq!(v3.len() + 1, v4.len());
-        assert_eq!(encode(&decode(&v3).unwrap()), now);
-        // Version 2: a joint PCA per level besides, which is skipped.
-        let v2 = encode_version(&c, 2);
-        assert!(v2.len() > now.len());
-        assert_eq!(encode(&decode(&v2).unwrap()), now);
-        // Version 1 had no orientation among the parameters and no layout
-        // record: every plane as given.
-        let v1 = encode_version(&c, 1);
-        let payload = &v1[HEADER..];
-        let json_len = u32::from_le_bytes(payload[..4].try_into().unwrap()) as usize;
-        let json = std::str::from_utf8(&payload[4..4 + json_len]).unwrap();
-        let old_json = json.replace(r#","orientation":"none""#, "");
-        assert!(!json.contains("initialisation"), "{json}");
-        assert_ne!(old_json, json);
-        let mut old = (old_json.len() as u32).to_le_bytes().to_vec();
-        old.extend_from_slice(old_json.as_bytes());
-        old.extend_from_slice(&payload[4 + json_len..]);
-        let loaded = decode(&with_header(1, &old)).unwrap();
-        // Oriented as it is, although `auto` would turn this exemplar.
-        assert_eq!(loaded.params().orientation, Orientation::None);
-        assert!(loaded.layout().detected);
-        assert_eq!(loaded.layout().arrangement, Arrangement::default());
-        assert_eq!(encode(&loaded), now);
-        // A version from the future is refused.
+        // Version 5 lacks the penalty count only.
+        let v5 = encode_version(&c, 5);
+        assert_eq!(v5.len() + 4, now.len());
+        assert_eq!(encode(&decode(&v5).unwrap()), now);
+        for old in 1..OLDEST {
+            let e = decode(&with_header(old, &now[HEADER..])).unwrap_err();
+            assert!(
+                e.to_string().contains(&format!(
+                    "format version {old} is no longer read (the oldest read is 5): \
+                     precompute the texture again"
+                )),
+                "{e}"
+            );
+        }
         assert!(matches!(
             decode(&with_header(VERSION + 1, &now[HEADER..])),
             Err(Error::CorruptFile(CorruptKind::Version(_)))
