@@ -30,6 +30,17 @@ try {
   await page.goto(`${server.base}/`);
   await page.waitForSelector("#drop");
   assert.equal(await page.locator("#textures li").count(), 0, "a fresh server lists no texture");
+  // The upload form's parameter controls come from the server's knob table.
+  const control = (id) => page.evaluate((i) => {
+    const e = document.getElementById(i);
+    return e && { min: e.min, max: e.max, placeholder: e.placeholder, title: e.title };
+  }, id);
+  const passes = await control("p-passes");
+  assert.deepEqual([passes.min, passes.max, passes.placeholder], ["0", "6", "2"], JSON.stringify(passes));
+  assert.ok(passes.title.startsWith("Correction passes"), passes.title);
+  assert.equal((await control("p-seed")).placeholder, "1");
+  const presets = await page.evaluate(() => [...document.querySelectorAll("#p-preset option")].map((o) => o.value));
+  assert.deepEqual(presets, ["", "preview", "structured"]);
 
   // Drop the exemplar on the drop zone, as a user would.
   const png = readFileSync(join(HERE, "exemplar32.png")).toString("base64");
