@@ -10,18 +10,18 @@
 //!
 //! - [`config`]: flags and `SOLIDTEX_*` variables ([`ServeArgs`]).
 //! - [`spec`]: what a texture is made of and its content id.
-//! - [`store`]: where textures are kept: the data directory, written
+//! - `store`: where textures are kept: the data directory, written
 //!   atomically and durably, or an S3-compatible object store.
 //! - [`registry`]: textures, their status and background precomputes;
-//!   [`regions`]: region textures, two of them sharing space.
-//! - [`jobs`]: the bounded synthesis queue (backpressure → 503);
-//!   [`decodes`]: the bound on decoding uploaded images.
-//! - [`listen`]: connections: header and idle timeouts, a connection cap;
-//!   [`conn_io`]: their sockets as hyper sees them.
+//!   `regions`: region textures, two of them sharing space.
+//! - `jobs`: the bounded synthesis queue (backpressure → 503);
+//!   `decodes`: the bound on decoding uploaded images.
+//! - `listen`: connections: header and idle timeouts, a connection cap;
+//!   `conn_io`: their sockets as hyper sees them.
 //! - [`routes`]: the router, handlers and middleware.
-//! - [`host`]: the `Host` allow-list.
+//! - `host`: the `Host` allow-list.
 //! - [`memory`]: the server's own bound on its resident memory.
-//! - [`metrics`], [`process`], [`error`], [`query`], [`peak_alloc`]: the supporting
+//! - [`metrics`], `process`, `error`, `query`, `peak_alloc`: the supporting
 //!   pieces.
 //!
 //! [`Server::bind`] lists the data directory and listens; its textures are

@@ -5,7 +5,7 @@
 //! precomputed in the background — at most `max_precomputes` at once, on
 //! a blocking thread driving a rayon pool of its own, so uploads never
 //! starve voxel requests of synthesis threads — and becomes `ready` once
-//! its candidates are durable in the [`Storage`], or `failed` with a reason.
+//! its candidates are durable in the `Storage`, or `failed` with a reason.
 //! Uploading content that is already known returns the existing texture;
 //! uploading a failed one tries again.
 

@@ -175,7 +175,7 @@ pub const MAX_HEADERS: usize = 100;
 /// `: ` and CRLF); larger: 431.
 pub const MAX_HEADER_BYTES: usize = 32 << 10;
 /// Largest request head hyper buffers, bytes, and most header fields it
-/// parses: above the limits [`head_limits`] enforces, so that requests
+/// parses: above the limits `head_limits` enforces, so that requests
 /// between the two get a JSON answer instead of hyper's empty one.
 pub const MAX_HEAD_BYTES: usize = 64 << 10;
 /// See [`MAX_HEAD_BYTES`].

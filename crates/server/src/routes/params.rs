@@ -513,7 +513,7 @@ pub enum ValueSchema {
 }
 
 /// One query parameter as the API document describes it: declared beside
-/// the route's query struct ([`document_query!`]), its values and default
+/// the route's query struct (`document_query!`), its values and default
 /// read from the field's type and the struct's `Default`.
 #[derive(Clone, Debug)]
 pub struct QueryParam {
