@@ -115,35 +115,37 @@ fn cut_rows(c: &Arc<Candidates>, mesh: &Mesh, r: u32, rows: &mut Vec<Row>) -> an
     let load = load_average();
     let m = measure(1, || mesh.cut(&planes));
     let pieces = Arc::new(m.value?);
-    rows.push(Row {
-        name: format!("{ROW_PREFIX}: cut of {triangles} triangles by 2 planes"),
-        seconds: Some(m.seconds),
+    let once = |name: String, seconds: f64, peak_bytes: u64, detail: String| Row {
+        name: format!("{ROW_PREFIX}: {name}"),
+        seconds: Some(seconds),
         runs: 1,
-        peak_bytes: Some(m.peak_bytes),
+        peak_bytes: Some(peak_bytes),
         target: None,
         paper: None,
-        detail: format!(
-            "planes {CUT_PLANES}; {} triangles out, caps included; load average {load} at the start",
+        detail: format!("{detail}; load average {load} at the start"),
+    };
+    rows.push(once(
+        format!("cut of {triangles} triangles by 2 planes"),
+        m.seconds,
+        m.peak_bytes,
+        format!(
+            "planes {CUT_PLANES}; {} triangles out, caps included",
             pieces.triangles().len()
         ),
-    });
-    let load = load_average();
+    ));
     let request = Request::bake(Bake::new(pieces.clone(), BakeOptions::new(r))?)?;
     let tex = texture(c, Scheme::DualGrid);
     let m = measure(1, || tex.render(&request, 0));
     let (_, stats) = m.value?;
-    rows.push(Row {
-        name: format!("{ROW_PREFIX}: the cut pieces at resolution {r}, cold"),
-        seconds: Some(m.seconds),
-        runs: 1,
-        peak_bytes: Some(m.peak_bytes),
-        target: None,
-        paper: None,
-        detail: format!(
-            "{} voxels over all levels, {} tiles; load average {load} at the start",
+    rows.push(once(
+        format!("the cut pieces at resolution {r}, cold"),
+        m.seconds,
+        m.peak_bytes,
+        format!(
+            "{} voxels over all levels, {} tiles",
             stats.voxels_per_level.iter().sum::<u64>(),
             stats.tiles_computed
         ),
-    });
+    ));
     Ok(())
 }

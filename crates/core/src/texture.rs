@@ -720,26 +720,6 @@ mod tests {
     use crate::bundled;
     use crate::mesh::{BakeOptions, Mesh};
 
-    /// A unit cube, two triangles per face.
-    fn cube() -> Arc<Mesh> {
-        let p = (0..8)
-            .map(|k| [0, 1, 2].map(|a| ((k >> a) & 1) as f32))
-            .collect();
-        let quads: [[u32; 4]; 6] = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
-        let t = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        Arc::new(Mesh::new(p, t, None).unwrap())
-    }
-
     /// Past the tile cap a bake is bounded block by block: still at least
     /// what a cold cache synthesizes, and stopped once over the limit.
     #[test]
@@ -748,7 +728,7 @@ mod tests {
         let candidates = bundled::candidates_for(&set, &Default::default()).expect("bundled");
         let cache = Arc::new(TileCache::new(64 << 20));
         let tex = Texture::new(Arc::new(candidates), SynthParams::default(), cache).unwrap();
-        let bake = Bake::new(cube(), BakeOptions::new(48)).unwrap();
+        let bake = Bake::new(Arc::new(Mesh::unit_cube()), BakeOptions::new(48)).unwrap();
         let request = Request::bake(bake.clone()).unwrap();
         let exact: u64 = tex.plan(&request, 0).unwrap().voxels_per_level.iter().sum();
         let grouped = tex.estimate_bake_within(&bake, 0, u64::MAX, MAX_ESTIMATE_TILES);

@@ -573,26 +573,6 @@ mod tests {
         Mesh::new(p, t, None).unwrap()
     }
 
-    fn cube() -> Mesh {
-        let p = (0..8)
-            .map(|k| [0, 1, 2].map(|a| ((k >> a) & 1) as f32))
-            .collect();
-        // Outward winding, two triangles per face.
-        let quads = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
-        let t = quads
-            .iter()
-            .flat_map(|q: &[u32; 4]| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        Mesh::new(p, t, None).unwrap()
-    }
-
     /// Every directed edge of the piece is matched by its reverse exactly
     /// once: closed, and consistently wound.
     fn assert_closed(m: &Mesh, piece: &Piece) {
@@ -672,7 +652,7 @@ mod tests {
     fn a_fracture_of_three_planes_leaves_closed_pieces_and_collinear_points_kept() {
         // A cube cut across its faces' diagonals: the crossings on the
         // diagonals are collinear with the corners' and must stay cap corners.
-        let c = cube();
+        let c = Mesh::unit_cube();
         let cut = c
             .cut(&[
                 Plane::new([0.0, 0.0, 1.0], 0.5).unwrap(),

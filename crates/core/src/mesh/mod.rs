@@ -310,6 +310,29 @@ fn degenerate(p: [[f32; 3]; 3]) -> bool {
 }
 
 #[cfg(test)]
+impl Mesh {
+    /// The unit cube, two outward-wound triangles per face (for tests).
+    pub(crate) fn unit_cube() -> Mesh {
+        let p = (0..8)
+            .map(|k| [0, 1, 2].map(|a| ((k >> a) & 1) as f32))
+            .collect();
+        let quads: [[u32; 4]; 6] = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let t = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        Mesh::new(p, t, None).unwrap()
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
 
