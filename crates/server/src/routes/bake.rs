@@ -338,6 +338,17 @@ mod tests {
         assert_eq!(q.spread.0, 0.25);
         let q = parse("").unwrap();
         assert!(q.format.is_none() && q.cut.is_none() && q.spread.0 == 0.0);
+        // Eight planes padded to exactly the limit read; one byte more does not.
+        let planes = |len: usize| {
+            let mut text = ["0,0,1,0"; 8].join(";");
+            let pad = len - text.len();
+            text.insert_str(7, &format!(".{}", "0".repeat(pad - 1)));
+            assert_eq!(text.len(), len);
+            text
+        };
+        let at = parse(&format!("cut={}", planes(MAX_CUT_TEXT as usize))).unwrap();
+        assert_eq!(at.cut.map(|c| c.0.len()), Some(8));
+        let past = format!("cut={}", planes(MAX_CUT_TEXT as usize + 1));
         let long = format!("cut={}", "0,0,1,0;".repeat(130));
         for (query, message) in [
             (
@@ -350,6 +361,7 @@ mod tests {
             ),
             ("spread=x", "parameter `spread`: `x` is not a number"),
             (&long, "parameter `cut`: 1040 bytes (at most 1024)"),
+            (&past, "parameter `cut`: 1025 bytes (at most 1024)"),
         ] {
             let e = parse(query).unwrap_err();
             assert_eq!((e.code, e.message.as_str()), ("invalid_parameter", message));
